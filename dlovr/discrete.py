@@ -1,0 +1,579 @@
+"""Discrete contact state model (paper §IV, MODEL.md §3).
+
+Pure Python + numpy. The classifier turns one topological contact into its discrete state from plain
+geometric facts (:class:`FaceFact`, :class:`PairFact`) that the geometry module computes from a scene
+(or a test writes by hand). All vectors are unit vectors in the world frame; angles are in degrees.
+
+Notation of a discrete situation (MODEL.md §3.2, §4.1), ASCII and Unicode::
+
+    V/G & E/N & E/F[block.F1] & E/E^P[block.F1,block.F2] & V/N
+    V/G ∧ E/N ∧ E/F[block.F1] ∧ E/E^P[block.F1,block.F2] ∧ V/N
+
+The face list in brackets is an annotation of which faces are touched; it is optional in the notation
+(``V/F`` alone is a valid discrete contact of a hand-written sequence) but, when present, part of the
+value.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Literal
+
+import numpy as np
+
+from dlovr.topology import (
+    Contact,
+    NotationError,
+    Situation,
+    Vec3,
+    check_face_name,
+    face_object,
+    normalise_notation,
+    parse_situation,
+    sort_faces,
+    successional_runs,
+)
+
+# --------------------------------------------------------------------------------------------------
+# States
+# --------------------------------------------------------------------------------------------------
+
+
+class Stability(Enum):
+    """Stability class (§IV.B): stable ``S``, semi-stable ``T``, instable ``I``."""
+
+    STABLE = "S"
+    SEMI = "T"
+    INSTABLE = "I"
+
+
+EnvType = Literal["F", "E^P", "E^L", "V", "G", "N"]
+
+
+@dataclass(frozen=True, order=True)
+class DiscreteState:
+    """A discrete contact state such as ``E/E^LS`` or ``V/VI``.
+
+    ``dlo`` is ``"V"`` or ``"E"``; ``env`` the environment type; ``stability`` ``"S"``, ``"T"``,
+    ``"I"`` for edge and vertex types, ``""`` for ``F``, ``E^P`` (always stable), ``G`` and ``N``.
+    """
+
+    dlo: Literal["V", "E"]
+    env: EnvType
+    stability: Literal["", "S", "T", "I"] = ""
+
+    def __post_init__(self) -> None:
+        if self.env in ("E^L", "V"):
+            if self.stability not in ("S", "T", "I"):
+                raise ValueError(f"{self.dlo}/{self.env} needs a stability class S, T or I")
+        elif self.stability:
+            raise ValueError(f"{self.dlo}/{self.env} has no stability class")
+        if self.dlo == "V" and self.env == "E^P":
+            raise ValueError("V/E^P does not exist: tip contacts on an edge are written V/E^L…")
+
+    @property
+    def name(self) -> str:
+        return f"{self.dlo}/{self.env}{self.stability}"
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def dim_dlo(self) -> int:
+        """dim_DLO of eq. 3: 0 for the DLO vertex, 1 for a DLO edge."""
+        return 0 if self.dlo == "V" else 1
+
+    @property
+    def stability_class(self) -> Stability | None:
+        """Stability class; ``F`` and ``E^P`` are stable; ``None`` for ``N`` and ``G``."""
+        if self.env in ("N", "G"):
+            return None
+        if self.env in ("F", "E^P"):
+            return Stability.STABLE
+        return Stability(self.stability)
+
+    @property
+    def is_principal_kind(self) -> bool:
+        """True for the 15 states of Fig. 8 (``V/G``, ``E/G``, ``V/N``, ``E/N`` are not principal)."""
+        return self.env not in ("N", "G")
+
+    @property
+    def dof_trans(self) -> int:
+        """Translatory degrees of freedom possible without losing the contact (eq. 3)."""
+        if self.env in ("N", "G"):
+            return 0
+        if self.env == "F":
+            return 2
+        if self.env in ("E^P", "E^L"):
+            return 1
+        return 0  # V
+
+    @property
+    def dof_blocked(self) -> int:
+        """Translatory degrees of freedom blocked by the contact (eq. 3).
+
+        A face, a convex edge or corner, and a point crossing of an edge block only the motion into
+        the surface (1). A concave groove blocks two directions; a concave corner blocks all three at
+        the DLO vertex and the two across the DLO edge passing through it. The gripper holds all three.
+        """
+        if self.env == "N":
+            return 0
+        if self.env == "G":
+            return 3
+        if self.env in ("F", "E^P"):
+            return 1
+        if self.stability == "I":
+            return 1
+        if self.env == "E^L":
+            return 2
+        return 3 - self.dim_dlo  # concave corner V
+
+    @property
+    def card(self) -> int:
+        """card = dim_DLO + 2·DoF_trans + 3·DoF_blocked (eq. 3)."""
+        return self.dim_dlo + 2 * self.dof_trans + 3 * self.dof_blocked
+
+    @property
+    def contact_kind(self) -> Literal["point", "line", "none"]:
+        """Point or line contact (§IV.C): ``E/F`` and ``E/E^L…`` are line contacts."""
+        if self.env in ("N", "G"):
+            return "none"
+        if self.dlo == "E" and self.env in ("F", "E^L"):
+            return "line"
+        return "point"
+
+
+def _state(name: str) -> DiscreteState:
+    m = re.fullmatch(r"([VE])/(F|E\^P|E\^L|V|G|N)([STI]?)", name)
+    if not m:
+        raise ValueError(f"unknown discrete state {name!r}")
+    return DiscreteState(m.group(1), m.group(2), m.group(3))  # type: ignore[arg-type]
+
+
+STATES: dict[str, DiscreteState] = {
+    n: _state(n)
+    for n in (
+        "E/F", "E/E^P", "E/E^LS", "E/VS", "V/F", "V/E^LS", "V/VS",
+        "E/E^LT", "E/VT", "V/E^LT", "V/VT",
+        "E/E^LI", "E/VI", "V/E^LI", "V/VI",
+    )
+}  # fmt: skip
+"""The 15 discrete contact states of Fig. 8, by name."""
+
+AUX_STATES: dict[str, DiscreteState] = {n: _state(n) for n in ("V/G", "E/G", "V/N", "E/N")}
+"""Gripper and free-space states: they appear in situations but are never principal contacts."""
+
+
+def state(name: str) -> DiscreteState:
+    """Look up a discrete state by name (``"E/E^LS"``, ``"V/N"``, ...)."""
+    try:
+        return STATES.get(name) or AUX_STATES[name]
+    except KeyError:
+        raise ValueError(f"unknown discrete state {name!r}; known: {', '.join([*STATES, *AUX_STATES])}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# Geometric facts and parameters (inputs of the classifier)
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FaceFact:
+    """One face: its name (``obj.F3``), owning object, outward unit normal (world frame).
+
+    ``internal`` marks a face that a convex decomposition introduced inside a solid: it never counts.
+    """
+
+    name: str
+    obj: str
+    normal: Vec3
+    internal: bool = False
+
+
+@dataclass(frozen=True)
+class PairFact:
+    """How two faces meet: concave or convex, and the free-space opening angle in degrees.
+
+    The opening angle is 180 - α for a concave pair and 180 + α for a convex one, α being the angle
+    between the normals. ``crease`` is the unit direction of their common line (world frame), if known.
+    """
+
+    a: str
+    b: str
+    concave: bool
+    opening_deg: float
+    crease: Vec3 | None = None
+
+    @property
+    def key(self) -> frozenset[str]:
+        return frozenset((self.a, self.b))
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """Parameters of the model (MODEL.md). Angles in degrees.
+
+    ``critical_angle_deg``: a concave opening at or above it is semi-stable (§3.3).
+    ``parallel_tol_deg``: a DLO edge within this angle of an environment edge is a line contact.
+    ``tip_angle_deg``: the end-vertex rule (§2): the tip touches only when pointing into the surface
+    by more than this.
+    ``normal_merge_deg``: normals closer than this count as one direction when ranking (§3.3 step 1).
+    """
+
+    critical_angle_deg: float = 170.0
+    parallel_tol_deg: float = 10.0
+    tip_angle_deg: float = 15.0
+    normal_merge_deg: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 90.0 < self.critical_angle_deg <= 180.0:
+            raise ValueError(f"critical_angle_deg must be in (90, 180], got {self.critical_angle_deg}")
+        if not 0.0 <= self.parallel_tol_deg < 90.0:
+            raise ValueError(f"parallel_tol_deg must be in [0, 90), got {self.parallel_tol_deg}")
+        if not 0.0 <= self.tip_angle_deg < 90.0:
+            raise ValueError(f"tip_angle_deg must be in [0, 90), got {self.tip_angle_deg}")
+        if not 0.0 <= self.normal_merge_deg < 45.0:
+            raise ValueError(f"normal_merge_deg must be in [0, 45), got {self.normal_merge_deg}")
+
+
+@dataclass(frozen=True)
+class ContactFacts:
+    """The geometric facts about one (single or multiple) contact that the classifier needs.
+
+    ``faces``: every face of the contact's primitives. ``pairs``: how each pair of its real faces
+    with distinct normals meets. ``dlo_vector``: the DLO vector at the contact (any length, world
+    frame), needed for edge contacts. ``crease``: direction of the environment edge, if the caller
+    knows it (else taken from the normals). ``gripper_z``: the gripper's z axis for ``G`` contacts.
+    """
+
+    faces: tuple[FaceFact, ...]
+    pairs: tuple[PairFact, ...] = ()
+    dlo_vector: Vec3 | None = None
+    crease: Vec3 | None = None
+    gripper_z: Vec3 | None = None
+
+
+class FactBook:
+    """Geometric facts about a whole scene, keyed by face name; builds :class:`ContactFacts`.
+
+    ``faces`` maps face names to :class:`FaceFact`; ``pairs`` lists :class:`PairFact` for face pairs
+    (in either order).
+    """
+
+    def __init__(self, faces: Mapping[str, FaceFact], pairs: list[PairFact] | tuple[PairFact, ...] = ()):
+        self.faces = dict(faces)
+        self.pairs = {p.key: p for p in pairs}
+
+    def for_contact(self, contact: Contact, dlo_vector: Vec3 | None = None) -> ContactFacts:
+        """Facts for one topological contact; raises ``KeyError`` naming a face or pair not known."""
+        names = contact.faces
+        missing = [f for f in names if f not in self.faces]
+        if missing:
+            raise KeyError(f"no facts for face {missing[0]}")
+        facts = tuple(self.faces[f] for f in names)
+        pairs = tuple(
+            self.pairs[frozenset((a, b))]
+            for i, a in enumerate(names)
+            for b in names[i + 1 :]
+            if frozenset((a, b)) in self.pairs
+        )
+        z = next((e.z for e in contact.env if e.kind == "G"), None)
+        vec = dlo_vector if dlo_vector is not None else contact.dlo.vector
+        return ContactFacts(facts, pairs, vec, None, z)
+
+
+# --------------------------------------------------------------------------------------------------
+# Contact vector (eq. 2)
+# --------------------------------------------------------------------------------------------------
+
+
+def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
+    """Contact vector C of eq. 2 as a unit 3-vector (world frame).
+
+    Sum of ``-N(F)`` over the distinct real faces (internal ones excluded), normalised. The gripper
+    contact gives its z axis; free space gives the zero vector (the only contact that may).
+    """
+    if gripper:
+        if facts.gripper_z is None:
+            raise ValueError("a gripper contact needs the gripper's z axis")
+        z = np.asarray(facts.gripper_z, dtype=float)
+        return z / np.linalg.norm(z)
+    real = {f.name: f for f in facts.faces if not f.internal}
+    if not real:
+        return np.zeros(3)
+    c = -np.sum([np.asarray(f.normal, dtype=float) for f in real.values()], axis=0)
+    norm = float(np.linalg.norm(c))
+    if norm < 1e-9:
+        raise ValueError(
+            f"contact vector of faces {sorted(real)} is zero: opposite parallel faces cannot both touch an ideal DLO"
+        )
+    return c / norm
+
+
+# --------------------------------------------------------------------------------------------------
+# The classifier (MODEL.md §3.3)
+# --------------------------------------------------------------------------------------------------
+
+
+def _unit(v: Vec3 | np.ndarray) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    n = float(np.linalg.norm(a))
+    if n == 0.0:
+        raise ValueError("zero-length vector")
+    return a / n
+
+
+def normal_clusters(normals: np.ndarray, merge_deg: float) -> list[int]:
+    """Cluster label for each normal: normals within ``merge_deg`` of a cluster's first one join it."""
+    cos_tol = np.cos(np.radians(merge_deg))
+    reps: list[np.ndarray] = []
+    labels: list[int] = []
+    for n in normals:
+        for k, r in enumerate(reps):
+            if float(n @ r) >= cos_tol:
+                labels.append(k)
+                break
+        else:
+            reps.append(n)
+            labels.append(len(reps) - 1)
+    return labels
+
+
+def _rank(normals: np.ndarray, merge_deg: float) -> int:
+    """Rank of a set of unit normals, with directions closer than ``merge_deg`` merged."""
+    if len(normals) == 0:
+        return 0
+    s = np.linalg.svd(normals, compute_uv=False)
+    tol = np.sin(np.radians(max(merge_deg, 1e-6)))
+    return int(np.sum(s > tol * s[0]))
+
+
+def _null_direction(normals: np.ndarray) -> np.ndarray:
+    """Unit direction orthogonal to every normal as far as possible (the crease of an edge)."""
+    _, _, vt = np.linalg.svd(normals)
+    return vt[-1]
+
+
+def classify_contact(
+    dlo: Literal["V", "E"],
+    facts: ContactFacts,
+    params: ModelParams = ModelParams(),
+    gripper: bool = False,
+) -> DiscreteState:
+    """Discrete state of one (single or multiple) contact at a DLO point (MODEL.md §3.3).
+
+    1. Environment type from the rank of the real faces' normals (1 -> F, 2 -> E, 3 -> V).
+    2. Concave or convex per pair of faces with distinct normals, from ``facts.pairs``.
+    3. Stability: F and E^P stable; E^L and V instable if any pair is convex, semi-stable if all are
+       concave but some opening angle is at or above the critical angle, else stable.
+    4. Point or line for an E contact on an edge: line when the DLO vector is within the parallel
+       tolerance of the crease.
+    """
+    if gripper:
+        return DiscreteState(dlo, "G")
+    real: dict[str, FaceFact] = {}
+    for f in facts.faces:
+        if not f.internal:
+            real.setdefault(f.name, f)
+    if not real:
+        return DiscreteState(dlo, "N")
+    names = list(real)
+    normals = np.array([_unit(real[n].normal) for n in names])
+    rank = _rank(normals, params.normal_merge_deg)
+    if rank == 1:
+        return DiscreteState(dlo, "F")
+
+    labels = normal_clusters(normals, params.normal_merge_deg)
+    pair_by_key = {p.key: p for p in facts.pairs}
+    relevant: list[PairFact] = []
+    for i, a in enumerate(names):
+        for j in range(i + 1, len(names)):
+            b = names[j]
+            if labels[i] == labels[j]:
+                continue  # same direction (e.g. one face split across pieces): not a crease
+            p = pair_by_key.get(frozenset((a, b)))
+            if p is None:
+                raise ValueError(f"no pair fact for faces {a} and {b} (concave or convex?)")
+            relevant.append(p)
+
+    if any(not p.concave for p in relevant):
+        stab = "I"
+    elif any(p.opening_deg >= params.critical_angle_deg for p in relevant):
+        stab = "T"
+    else:
+        stab = "S"
+
+    if rank >= 3:
+        return DiscreteState(dlo, "V", stab)  # type: ignore[arg-type]
+    if dlo == "V":
+        return DiscreteState("V", "E^L", stab)  # type: ignore[arg-type]
+    if facts.dlo_vector is None:
+        raise ValueError("an E contact on an edge needs the DLO vector (point or line contact?)")
+    crease = _unit(facts.crease) if facts.crease is not None else _null_direction(normals)
+    d = _unit(facts.dlo_vector)
+    angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
+    if angle <= params.parallel_tol_deg:
+        return DiscreteState("E", "E^L", stab)  # type: ignore[arg-type]
+    return DiscreteState("E", "E^P")
+
+
+# --------------------------------------------------------------------------------------------------
+# Discrete contacts and situations
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DiscreteContact:
+    """A discrete contact: its state and (annotation, part of the value) the faces it touches.
+
+    ``vector`` is the contact vector of eq. 2 (unit, world frame; annotation, not compared).
+    """
+
+    state: DiscreteState
+    faces: tuple[str, ...] = ()
+    vector: Vec3 | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "faces", sort_faces(self.faces))
+
+    @property
+    def card(self) -> int:
+        return self.state.card
+
+    @property
+    def objects(self) -> frozenset[str]:
+        return frozenset(face_object(f) for f in self.faces)
+
+    def format(self, unicode: bool = False) -> str:
+        if not self.faces:
+            return self.state.name
+        return f"{self.state.name}[{','.join(self.faces)}]"
+
+    def __str__(self) -> str:
+        return self.format()
+
+
+@dataclass(frozen=True)
+class DiscreteSituation:
+    """A discrete contact situation: discrete contacts from ``V_S`` to ``V_E`` (joined by ∧)."""
+
+    contacts: tuple[DiscreteContact, ...]
+
+    def __post_init__(self) -> None:
+        c = self.contacts
+        if len(c) < 2:
+            raise ValueError("a discrete situation has at least the V_S and the V_E contact")
+        if c[0].state.dlo != "V" or c[-1].state.dlo != "V":
+            raise ValueError("a discrete situation starts and ends with a V contact")
+        if any(x.state.dlo != "E" for x in c[1:-1]):
+            raise ValueError("interior contacts of a discrete situation are E contacts")
+
+    def format(self, unicode: bool = False) -> str:
+        return (" ∧ " if unicode else " & ").join(x.format(unicode) for x in self.contacts)
+
+    def __str__(self) -> str:
+        return self.format()
+
+    def successional(self) -> list[tuple[int, ...]]:
+        """Runs of environment contacts between free / gripper contacts (indices into contacts)."""
+        return successional_runs([x.state.is_principal_kind for x in self.contacts])
+
+
+def discretize_contact(
+    contact: Contact, book: FactBook, params: ModelParams = ModelParams()
+) -> DiscreteContact:
+    """Discrete contact of one topological contact, using the scene facts in ``book``."""
+    dlo: Literal["V", "E"] = "E" if contact.dlo.kind == "E" else "V"
+    gripper = any(e.kind == "G" for e in contact.env)
+    if contact.is_free:
+        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0))
+    facts = book.for_contact(contact)
+    st = classify_contact(dlo, facts, params, gripper=gripper)
+    try:
+        c = contact_vector(facts, gripper=gripper)
+        vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
+    except ValueError:
+        vec = None
+    real = tuple(f.name for f in facts.faces if not f.internal)
+    return DiscreteContact(st, real, vec)
+
+
+def discretize(situation: Situation, book: FactBook, params: ModelParams = ModelParams()) -> DiscreteSituation:
+    """Discrete situation of a topological one (MODEL.md §3.3 for every contact)."""
+    return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
+
+
+# --------------------------------------------------------------------------------------------------
+# Parsing
+# --------------------------------------------------------------------------------------------------
+
+_DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$")
+
+
+def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact:
+    t = text.strip()
+    m = _DC_RE.match(t)
+    if not m:
+        raise NotationError(f"{where}: {t!r} is not a discrete contact (e.g. E/F[box.F1], V/E^LS, E/N)")
+    st = state(m.group(1))
+    names: tuple[str, ...] = ()
+    if m.group(2) is not None:
+        parts = [s.strip() for s in m.group(2).split(",")]
+        if any(not s for s in parts):
+            raise NotationError(f"{where}: empty face name in {t!r}")
+        try:
+            names = tuple(check_face_name(s) for s in parts)
+        except NotationError as e:
+            raise NotationError(f"{where}: {e}") from None
+        if st.env in ("N", "G"):
+            raise NotationError(f"{where}: {st.name} touches no faces")
+    return DiscreteContact(st, names)
+
+
+def parse_discrete_situation(text: str) -> DiscreteSituation:
+    """Parse a discrete situation in ASCII (or Unicode) notation."""
+    t = normalise_notation(text).strip()
+    if not t:
+        raise NotationError("empty situation")
+    contacts = [parse_discrete_contact(p, f"contact {k + 1}") for k, p in enumerate(t.split("&"))]
+    try:
+        return DiscreteSituation(tuple(contacts))
+    except ValueError as err:
+        raise NotationError(str(err)) from None
+
+
+def is_discrete_notation(text: str) -> bool:
+    """True when ``text`` looks like a discrete situation (``V/…`` first), False for topological (``VS/…``)."""
+    return normalise_notation(text).lstrip().startswith("V/")
+
+
+def parse_any(text: str) -> Situation | DiscreteSituation:
+    """Parse a discrete or a topological situation, telling them apart by the first contact."""
+    return parse_discrete_situation(text) if is_discrete_notation(text) else parse_situation(text)
+
+
+__all__ = [
+    "AUX_STATES",
+    "STATES",
+    "ContactFacts",
+    "DiscreteContact",
+    "DiscreteSituation",
+    "DiscreteState",
+    "FaceFact",
+    "FactBook",
+    "ModelParams",
+    "PairFact",
+    "Stability",
+    "classify_contact",
+    "contact_vector",
+    "discretize",
+    "discretize_contact",
+    "face_object",
+    "parse_any",
+    "parse_discrete_contact",
+    "parse_discrete_situation",
+    "state",
+]

@@ -1,0 +1,369 @@
+"""Topological contact model (paper §III, MODEL.md §2).
+
+Pure values: no simulator, no geometry. A *contact situation* is the ordered sequence of single or
+multiple contacts from the gripped start vertex ``V_S`` to the end vertex ``V_E``.
+
+Identity of a value is its topology: the DLO primitive's kind (``VS``, ``VE``, ``E``) and the
+environment primitives. The point index, the index range and the DLO vector of a DLO primitive are
+annotations (they do not take part in ``==`` or ``hash``), so that a contact zone sliding along the
+cable is still the same contact situation.
+
+Notation (MODEL.md §2), ASCII for files and terminals and Unicode for people::
+
+    VS/G & E3/N & E9/box.F1 + E9/table.F1 & E14/N & VE/N
+    V_S/G_z ∧ E_3/N ∧ E_9/box.F1 + E_9/table.F1 ∧ E_14/N ∧ V_E/N
+
+An edge or vertex of one convex piece is written as its faces in parentheses:
+``(box.F1,box.F2)`` in ASCII, ``(box.F1∩box.F2)`` in Unicode.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+Vec3 = tuple[float, float, float]
+
+DloKind = Literal["VS", "VE", "E"]
+
+FACE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*(\.[A-Za-z_][A-Za-z0-9_\-]*)*\.F[0-9]+$")
+
+
+class NotationError(ValueError):
+    """A string is not valid contact notation; the message says what is wrong and where."""
+
+
+def face_object(face: str) -> str:
+    """Name of the environment object that owns face ``face`` (``"box.F3"`` -> ``"box"``)."""
+    obj, sep, _ = face.rpartition(".")
+    if not sep:
+        raise ValueError(f"face name {face!r} has no object part (expected OBJECT.F<k>)")
+    return obj
+
+
+def _face_sort_key(face: str) -> tuple[str, int]:
+    obj, _, local = face.rpartition(".")
+    return (obj, int(local[1:]) if local[1:].isdigit() else -1)
+
+
+def sort_faces(faces: Iterable[str]) -> tuple[str, ...]:
+    """Distinct face names in canonical (object, number) order."""
+    return tuple(sorted(set(faces), key=_face_sort_key))
+
+
+def check_face_name(face: str) -> str:
+    if not FACE_NAME_RE.match(face):
+        raise NotationError(f"bad face name {face!r}: expected OBJECT.F<number>, e.g. box.F3")
+    return face
+
+
+# --------------------------------------------------------------------------------------------------
+# Environment primitives
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, order=True)
+class EnvPrimitive:
+    """An environment primitive ``N``, ``G_z``, ``F_i``, ``E_ij`` or ``V_ij…k`` (paper §III).
+
+    ``kind`` is ``"N"`` (empty space), ``"G"`` (the gripper), or ``"faces"``: a face, an edge or a
+    vertex of **one** convex piece, given as the set of its face names (1, 2, or >= 3 faces).
+    ``z`` is the gripper's z axis in the world frame (annotation, only for ``G``).
+    """
+
+    kind: Literal["N", "G", "faces"]
+    faces: tuple[str, ...] = ()
+    z: Vec3 | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.kind == "faces":
+            if not self.faces:
+                raise ValueError("a face primitive needs at least one face")
+            object.__setattr__(self, "faces", sort_faces(check_face_name(f) for f in self.faces))
+        elif self.faces:
+            raise ValueError(f"primitive {self.kind} has no faces")
+
+    @property
+    def type(self) -> Literal["N", "G", "F", "E", "V"]:
+        """Primitive type by face count: 1 -> ``F``, 2 -> ``E`` (edge), >= 3 -> ``V`` (vertex)."""
+        if self.kind != "faces":
+            return self.kind
+        return ("F", "E", "V")[min(len(self.faces), 3) - 1]
+
+    @property
+    def objects(self) -> frozenset[str]:
+        return frozenset(face_object(f) for f in self.faces)
+
+    def format(self, unicode: bool = False) -> str:
+        if self.kind == "N":
+            return "N"
+        if self.kind == "G":
+            return "G_z" if unicode else "G"
+        if len(self.faces) == 1:
+            return self.faces[0]
+        return "(" + ("∩" if unicode else ",").join(self.faces) + ")"
+
+    def __str__(self) -> str:
+        return self.format()
+
+
+N = EnvPrimitive("N")
+G = EnvPrimitive("G")
+
+
+def faces(*names: str) -> EnvPrimitive:
+    """Convenience constructor: ``faces("box.F1", "box.F2")`` is the edge F1 ∩ F2 of ``box``."""
+    return EnvPrimitive("faces", tuple(names))
+
+
+# --------------------------------------------------------------------------------------------------
+# DLO primitives and contacts
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DloPrimitive:
+    """A DLO primitive: ``VS`` (point 0), ``VE`` (point n) or ``E`` (an interior point or run).
+
+    Annotations (not compared): ``index`` is the representative point (the middle of a contracted
+    run, printed as ``E9``), ``span`` the inclusive range of point indices covered, ``vector`` the
+    DLO vector D_i = p_{i+1} - p_i at ``index`` (world frame, metres).
+    """
+
+    kind: DloKind
+    index: int | None = field(default=None, compare=False)
+    span: tuple[int, int] | None = field(default=None, compare=False)
+    vector: Vec3 | None = field(default=None, compare=False)
+
+    @property
+    def dim(self) -> int:
+        """dim_DLO of eq. 3: 0 for a vertex, 1 for an edge."""
+        return 0 if self.kind in ("VS", "VE") else 1
+
+    def format(self, unicode: bool = False) -> str:
+        if self.kind == "E":
+            if self.index is None:
+                return "E"
+            return f"E_{self.index}" if unicode else f"E{self.index}"
+        return ("V_S" if self.kind == "VS" else "V_E") if unicode else self.kind
+
+    def __str__(self) -> str:
+        return self.format()
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A single contact (one primitive) or a multiple contact (several, joined by ``+``).
+
+    All basic contacts of a multiple contact share one DLO point. ``env`` is kept in canonical order.
+    ``N`` never appears together with another primitive.
+    """
+
+    dlo: DloPrimitive
+    env: tuple[EnvPrimitive, ...]
+
+    def __post_init__(self) -> None:
+        if not self.env:
+            raise ValueError("a contact needs at least one environment primitive")
+        env = tuple(sorted(set(self.env)))
+        if len(env) > 1 and N in env:
+            raise ValueError("N (free space) cannot be part of a multiple contact")
+        object.__setattr__(self, "env", env)
+
+    @property
+    def is_free(self) -> bool:
+        return self.env == (N,)
+
+    @property
+    def is_multiple(self) -> bool:
+        return len(self.env) > 1
+
+    @property
+    def faces(self) -> tuple[str, ...]:
+        """All face names of all primitives of this contact."""
+        return sort_faces(f for e in self.env for f in e.faces)
+
+    @property
+    def objects(self) -> frozenset[str]:
+        return frozenset(face_object(f) for f in self.faces)
+
+    @property
+    def touches_environment(self) -> bool:
+        """True when the contact involves at least one face (not only N or the gripper)."""
+        return any(e.kind == "faces" for e in self.env)
+
+    def format(self, unicode: bool = False) -> str:
+        d = self.dlo.format(unicode)
+        return " + ".join(f"{d}/{e.format(unicode)}" for e in self.env)
+
+    def __str__(self) -> str:
+        return self.format()
+
+
+@dataclass(frozen=True)
+class Situation:
+    """A topological contact situation: contacts ordered from ``V_S`` to ``V_E`` (joined by ∧)."""
+
+    contacts: tuple[Contact, ...]
+
+    def __post_init__(self) -> None:
+        c = self.contacts
+        if len(c) < 2:
+            raise ValueError("a situation has at least the V_S and the V_E contact")
+        if c[0].dlo.kind != "VS":
+            raise ValueError(f"a situation starts with the V_S contact, not {c[0]}")
+        if c[-1].dlo.kind != "VE":
+            raise ValueError(f"a situation ends with the V_E contact, not {c[-1]}")
+        for x in c[1:-1]:
+            if x.dlo.kind != "E":
+                raise ValueError(f"interior contacts are E contacts, not {x}")
+
+    def format(self, unicode: bool = False) -> str:
+        return (" ∧ " if unicode else " & ").join(x.format(unicode) for x in self.contacts)
+
+    def __str__(self) -> str:
+        return self.format()
+
+    def successional(self) -> list[tuple[int, ...]]:
+        """Successional contacts: maximal runs of environment contacts between free ones (§III).
+
+        Returns the runs as tuples of indices into ``contacts``. Contacts with ``N`` and contacts
+        with only the gripper delimit runs (the gripper is not an environment object).
+        """
+        return successional_runs([x.touches_environment for x in self.contacts])
+
+
+def successional_runs(touching: Sequence[bool]) -> list[tuple[int, ...]]:
+    """Maximal runs of ``True`` in ``touching`` as tuples of indices."""
+    runs: list[tuple[int, ...]] = []
+    cur: list[int] = []
+    for i, t in enumerate(touching):
+        if t:
+            cur.append(i)
+        elif cur:
+            runs.append(tuple(cur))
+            cur = []
+    if cur:
+        runs.append(tuple(cur))
+    return runs
+
+
+# --------------------------------------------------------------------------------------------------
+# Contraction: per-point contacts -> situation
+# --------------------------------------------------------------------------------------------------
+
+
+def contract(
+    point_env: Sequence[Iterable[EnvPrimitive]],
+    vectors: Sequence[Vec3] | None = None,
+) -> Situation:
+    """Build a contact situation from the contacts of every DLO point ``P_0 … P_n`` (§III).
+
+    ``point_env[i]`` holds the environment primitives that point ``i`` touches (empty = ``N``).
+    Adjacent interior points with the same contact become one ``E`` contact indexed by the middle
+    point of the run; ``V_S`` (point 0) and ``V_E`` (point n) are never contracted into it.
+    ``vectors[i]`` is the DLO vector D_i (for the last point, the last segment's vector).
+    """
+    n_points = len(point_env)
+    if n_points < 2:
+        raise ValueError("a DLO has at least two points")
+    envs = [tuple(sorted(set(e))) or (N,) for e in point_env]
+
+    def vec(i: int) -> Vec3 | None:
+        if vectors is None:
+            return None
+        v = vectors[i]
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+    out = [Contact(DloPrimitive("VS", 0, (0, 0), vec(0)), envs[0])]
+    i = 1
+    last = n_points - 1
+    while i < last:
+        j = i
+        while j + 1 < last and envs[j + 1] == envs[i]:
+            j += 1
+        mid = (i + j) // 2
+        out.append(Contact(DloPrimitive("E", mid, (i, j), vec(mid)), envs[i]))
+        i = j + 1
+    out.append(Contact(DloPrimitive("VE", last, (last, last), vec(last)), envs[last]))
+    return Situation(tuple(out))
+
+
+# --------------------------------------------------------------------------------------------------
+# Parsing
+# --------------------------------------------------------------------------------------------------
+
+_UNICODE_TO_ASCII = {"∧": "&", "∩": ",", "V_S": "VS", "V_E": "VE", "G_z": "G"}
+
+
+def normalise_notation(text: str) -> str:
+    """Map the Unicode notation onto the ASCII one (the parser reads both)."""
+    for u, a in _UNICODE_TO_ASCII.items():
+        text = text.replace(u, a)
+    return re.sub(r"\bE_(\d+)", r"E\1", text)
+
+
+_DLO_RE = re.compile(r"^(VS|VE|E)(\d*)$")
+
+
+def _parse_env(text: str, where: str) -> EnvPrimitive:
+    t = text.strip()
+    if t == "N":
+        return N
+    if t == "G":
+        return G
+    if t.startswith("("):
+        if not t.endswith(")"):
+            raise NotationError(f"{where}: unclosed parenthesis in {t!r}")
+        names = [s.strip() for s in t[1:-1].split(",")]
+        if len(names) < 2 or any(not s for s in names):
+            raise NotationError(f"{where}: an edge or vertex lists two or more faces, got {t!r}")
+        return EnvPrimitive("faces", tuple(check_face_name(s) for s in names))
+    if not t:
+        raise NotationError(f"{where}: missing environment primitive after '/'")
+    try:
+        return EnvPrimitive("faces", (check_face_name(t),))
+    except NotationError as e:
+        raise NotationError(f"{where}: {e}") from None
+
+
+def parse_contact(text: str, where: str = "contact") -> Contact:
+    """Parse one single or multiple contact, e.g. ``E9/box.F1 + E9/table.F1``."""
+    parts = [p.strip() for p in normalise_notation(text).split("+")]
+    dlo: DloPrimitive | None = None
+    env: list[EnvPrimitive] = []
+    for p in parts:
+        if "/" not in p:
+            raise NotationError(f"{where}: {p!r} is not a basic contact DLO/ENV")
+        d, _, e = p.partition("/")
+        m = _DLO_RE.match(d.strip())
+        if not m:
+            raise NotationError(f"{where}: {d.strip()!r} is not a DLO primitive (VS, VE, E or E<index>)")
+        kind, idx = m.group(1), m.group(2)
+        if kind != "E" and idx:
+            raise NotationError(f"{where}: vertex {kind} takes no index")
+        this = DloPrimitive(kind, int(idx) if idx else None)  # type: ignore[arg-type]
+        if dlo is None:
+            dlo = this
+        elif this.kind != dlo.kind or this.index != dlo.index:
+            raise NotationError(f"{where}: the parts of a multiple contact name one DLO point, got {text!r}")
+        env.append(_parse_env(e, where))
+    assert dlo is not None
+    try:
+        return Contact(dlo, tuple(env))
+    except ValueError as err:
+        raise NotationError(f"{where}: {err}") from None
+
+
+def parse_situation(text: str) -> Situation:
+    """Parse a topological contact situation in ASCII (or Unicode) notation."""
+    t = normalise_notation(text).strip()
+    if not t:
+        raise NotationError("empty situation")
+    contacts = [parse_contact(p, f"contact {k + 1}") for k, p in enumerate(t.split("&"))]
+    try:
+        return Situation(tuple(contacts))
+    except ValueError as err:
+        raise NotationError(str(err)) from None
