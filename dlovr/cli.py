@@ -43,11 +43,14 @@ def _load_facts(path: str) -> tuple[object, dict[int, tuple[float, float, float]
         raise UserError(f"{path}: not valid JSON: {e.msg} at line {e.lineno}") from None
     try:
         faces = {
-            name: FaceFact(name, name.rpartition(".")[0], tuple(map(float, f["normal"])), bool(f.get("internal")))
+            name: FaceFact(
+                name, name.rpartition(".")[0], tuple(map(float, f["normal"])), bool(f.get("internal"))
+            )
             for name, f in raw.get("faces", {}).items()
         }
         pairs = [
-            PairFact(p["a"], p["b"], bool(p["concave"]), float(p["opening_deg"]), None) for p in raw.get("pairs", [])
+            PairFact(p["a"], p["b"], bool(p["concave"]), float(p["opening_deg"]), None)
+            for p in raw.get("pairs", [])
         ]
         vectors = {int(k): tuple(map(float, v)) for k, v in raw.get("dlo_vectors", {}).items()}
     except (KeyError, TypeError, ValueError, AttributeError) as e:
@@ -99,7 +102,7 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
             continue
         if book_vectors is None:
             raise UserError(
-                f"{file}:{lineno}: a topological situation needs geometric facts to classify: give --facts FILE"
+                f"{file}:{lineno}: a topological situation needs geometric facts: give --facts FILE"
             )
         book, vectors = book_vectors
         contacts = tuple(
@@ -134,4 +137,3 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
     click.echo(f"{'step':>4}  {'class':<5}  situation")
     for s in steps:
         click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
-

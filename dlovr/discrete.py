@@ -172,7 +172,9 @@ def state(name: str) -> DiscreteState:
     try:
         return STATES.get(name) or AUX_STATES[name]
     except KeyError:
-        raise ValueError(f"unknown discrete state {name!r}; known: {', '.join([*STATES, *AUX_STATES])}") from None
+        raise ValueError(
+            f"unknown discrete state {name!r}; known: {', '.join([*STATES, *AUX_STATES])}"
+        ) from None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -226,7 +228,7 @@ class ModelParams:
     critical_angle_deg: float = 170.0
     parallel_tol_deg: float = 10.0
     tip_angle_deg: float = 15.0
-    normal_merge_deg: float = 1.0
+    normal_merge_deg: float = 0.01
 
     def __post_init__(self) -> None:
         if not 90.0 < self.critical_angle_deg <= 180.0:
@@ -308,7 +310,7 @@ def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
     norm = float(np.linalg.norm(c))
     if norm < 1e-9:
         raise ValueError(
-            f"contact vector of faces {sorted(real)} is zero: opposite parallel faces cannot both touch an ideal DLO"
+            f"contact vector of faces {sorted(real)} is zero: an ideal DLO cannot touch opposite faces"
         )
     return c / norm
 
@@ -501,7 +503,9 @@ def discretize_contact(
     return DiscreteContact(st, real, vec)
 
 
-def discretize(situation: Situation, book: FactBook, params: ModelParams = ModelParams()) -> DiscreteSituation:
+def discretize(
+    situation: Situation, book: FactBook, params: ModelParams = ModelParams()
+) -> DiscreteSituation:
     """Discrete situation of a topological one (MODEL.md §3.3 for every contact)."""
     return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
 
@@ -546,7 +550,7 @@ def parse_discrete_situation(text: str) -> DiscreteSituation:
 
 
 def is_discrete_notation(text: str) -> bool:
-    """True when ``text`` looks like a discrete situation (``V/…`` first), False for topological (``VS/…``)."""
+    """True for a discrete situation (``V/…`` first), False for a topological one (``VS/…``)."""
     return normalise_notation(text).lstrip().startswith("V/")
 
 

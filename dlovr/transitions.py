@@ -167,14 +167,18 @@ def _const(c: str) -> Callable[[Change], str]:
 
 
 RULES: tuple[Rule, ...] = (
-    Rule("E-free", lambda ch: (not ch.x or not ch.y) and not (ch.x and is_instable(ch.x)), _const("E")),
     Rule("S", lambda ch: bool(ch.x) and is_instable(ch.x), lambda ch: "S,E" if _lands_elsewhere(ch) else "S"),
+    Rule("E-free", lambda ch: not ch.x or not ch.y, _const("E")),
     Rule("I", lambda ch: is_instable(ch.y), _const("I")),
     Rule("T", lambda ch: is_semi_stable(ch.x) or is_semi_stable(ch.y), _const("T")),
     Rule("E-object", new_obstacle, _const("E")),
     Rule("C", lambda ch: True, _const("C")),
 )
-"""The class rules in order; the first that applies to a change gives its class."""
+"""The class rules in order; the first that applies to a change gives its class.
+
+MODEL.md lists ``E`` (a successional contact appears or disappears) first "unless rule ``S``
+applies"; putting ``S`` first is the same rule without the exception clause.
+"""
 
 
 def classify_change(ch: Change, rules: Sequence[Rule] = RULES) -> tuple[str, ...]:
@@ -314,6 +318,4 @@ def is_transient(situation: DiscreteSituation) -> bool:
     Such a situation is kept by :class:`Debouncer` however brief: it tells whether a transition was
     transient or spontaneous (§IV.C).
     """
-    return any(
-        is_instable(p) or is_semi_stable(p) for p in map(principal, successional_contacts(situation))
-    )
+    return any(is_instable(p) or is_semi_stable(p) for p in map(principal, successional_contacts(situation)))

@@ -1,0 +1,3 @@
+from dlovr.cli import main
+
+main()

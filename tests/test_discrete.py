@@ -1,0 +1,364 @@
+"""Discrete contact states (MODEL.md §3): card (eq. 3), stability, contact vector (eq. 2), classifier."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from dlovr.discrete import (
+    AUX_STATES,
+    STATES,
+    ContactFacts,
+    DiscreteContact,
+    DiscreteSituation,
+    DiscreteState,
+    FaceFact,
+    FactBook,
+    ModelParams,
+    PairFact,
+    Stability,
+    classify_contact,
+    contact_vector,
+    discretize,
+    parse_discrete_situation,
+    state,
+)
+from dlovr.topology import NotationError, parse_situation
+
+# Fig. 8 as printed in the paper: state -> (card, stability)
+FIG8 = {
+    "E/F": (8, "S"), "E/E^P": (6, "S"), "E/E^LS": (9, "S"), "E/VS": (7, "S"),
+    "V/F": (7, "S"), "V/E^LS": (8, "S"), "V/VS": (9, "S"),
+    "E/E^LT": (9, "T"), "E/VT": (7, "T"), "V/E^LT": (8, "T"), "V/VT": (9, "T"),
+    "E/E^LI": (6, "I"), "E/VI": (4, "I"), "V/E^LI": (5, "I"), "V/VI": (3, "I"),
+}  # fmt: skip
+
+
+def test_there_are_exactly_the_15_states_of_fig8():
+    assert set(STATES) == set(FIG8)
+
+
+@pytest.mark.parametrize("name", list(FIG8))
+def test_card_of_every_state_matches_fig8(name):
+    assert STATES[name].card == FIG8[name][0]
+
+
+@pytest.mark.parametrize("name", list(FIG8))
+def test_card_is_eq3_from_dim_and_dofs(name):
+    s = STATES[name]
+    assert s.card == s.dim_dlo + 2 * s.dof_trans + 3 * s.dof_blocked
+    assert s.dim_dlo == (0 if name.startswith("V") else 1)
+
+
+def test_eq3_worked_example_of_the_paper():
+    s = STATES["E/E^LS"]  # card(E/E^LS) = 1 + 2·1 + 3·2 = 9
+    assert (s.dim_dlo, s.dof_trans, s.dof_blocked, s.card) == (1, 1, 2, 9)
+
+
+@pytest.mark.parametrize("name", list(FIG8))
+def test_stability_class_of_every_state_matches_fig8(name):
+    assert STATES[name].stability_class == Stability(FIG8[name][1])
+
+
+def test_point_and_line_kinds():
+    line = {n for n, s in STATES.items() if s.contact_kind == "line"}
+    assert line == {"E/F", "E/E^LS", "E/E^LT", "E/E^LI"}  # vertex states and E^P are point contacts
+
+
+def test_aux_states_are_not_principal_kinds():
+    assert set(AUX_STATES) == {"V/G", "E/G", "V/N", "E/N"}
+    assert all(not s.is_principal_kind and s.stability_class is None for s in AUX_STATES.values())
+    assert all(s.is_principal_kind for s in STATES.values())
+    assert AUX_STATES["V/N"].card < min(s.card for s in STATES.values())
+
+
+def test_invalid_states_are_rejected():
+    with pytest.raises(ValueError, match="stability"):
+        DiscreteState("E", "V")
+    with pytest.raises(ValueError, match="no stability"):
+        DiscreteState("E", "F", "S")  # face contacts are always stable: E/FS does not exist
+    with pytest.raises(ValueError, match="V/E\\^P"):
+        DiscreteState("V", "E^P")
+    with pytest.raises(ValueError, match="unknown"):
+        state("E/X")
+
+
+# --------------------------------------------------------------------------------------------------
+# Contact vector, eq. 2
+# --------------------------------------------------------------------------------------------------
+
+
+def ff(name, normal, internal=False):
+    n = np.asarray(normal, float)
+    n = n / np.linalg.norm(n)
+    return FaceFact(name, name.rpartition(".")[0], tuple(n), internal)
+
+
+UP, X, Y = (0, 0, 1), (1, 0, 0), (0, 1, 0)
+
+
+def test_contact_vector_face():
+    np.testing.assert_allclose(contact_vector(ContactFacts((ff("t.F1", UP),))), [0, 0, -1])
+
+
+def test_contact_vector_edge_sums_and_normalises():
+    c = contact_vector(ContactFacts((ff("b.F1", UP), ff("b.F2", X))))
+    np.testing.assert_allclose(c, np.array([-1, 0, -1]) / math.sqrt(2))
+
+
+def test_contact_vector_vertex():
+    c = contact_vector(ContactFacts((ff("b.F1", UP), ff("b.F2", X), ff("b.F3", Y))))
+    np.testing.assert_allclose(c, -np.ones(3) / math.sqrt(3))
+
+
+def test_contact_vector_multiple_contact_counts_each_face_once_and_drops_internal():
+    # E/(b.F1 ∩ b.F2) + E/(b.F1 ∩ c.F4): b.F1 appears twice, c.F9 is an internal cut face
+    facts = ContactFacts(
+        (ff("b.F1", UP), ff("b.F2", X), ff("b.F1", UP), ff("c.F4", Y), ff("c.F9", (0, 0, -1), True))
+    )
+    np.testing.assert_allclose(contact_vector(facts), -np.ones(3) / math.sqrt(3))
+
+
+def test_contact_vector_gripper_is_its_z_axis():
+    np.testing.assert_allclose(contact_vector(ContactFacts((), gripper_z=(0, 0, 2)), gripper=True), [0, 0, 1])
+
+
+def test_contact_vector_free_space_is_zero_and_only_it():
+    np.testing.assert_array_equal(contact_vector(ContactFacts(())), np.zeros(3))
+    with pytest.raises(ValueError, match="opposite faces"):
+        contact_vector(ContactFacts((ff("a.F1", UP), ff("b.F1", (0, 0, -1)))))
+
+
+@given(
+    st.lists(
+        st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1), min_size=1, max_size=4
+    )
+)
+def test_contact_vector_is_unit(normals):
+    facts = ContactFacts(tuple(ff(f"o.F{i}", n) for i, n in enumerate(normals)))
+    try:
+        c = contact_vector(facts)
+    except ValueError:
+        return  # faces whose normals cancel: rejected, never a zero vector
+    assert abs(np.linalg.norm(c) - 1) < 1e-9
+
+
+# --------------------------------------------------------------------------------------------------
+# The §3.3 classifier, built from plain geometric facts
+# --------------------------------------------------------------------------------------------------
+
+
+def rot_x(deg):
+    """Unit normal of a face tilted from the floor (+z) about the x axis by deg."""
+    a = math.radians(deg)
+    return (0.0, -math.sin(a), math.cos(a))
+
+
+def pair(a, b, concave, opening):
+    return PairFact(a, b, concave, opening)
+
+
+# Grooves along x (crease direction x): floor t.F1 (+z) and a wall at the given opening angle.
+def groove(opening_deg, concave=True):
+    """Floor + wall meeting along the x axis with the given free-space opening angle."""
+    alpha = 180.0 - opening_deg if concave else opening_deg - 180.0
+    # concave: the wall rises on +y side facing -y-ish; convex: the second face bends down
+    wall = ff("w.F2", rot_x(alpha if concave else -alpha))
+    if not concave:
+        wall = ff("w.F2", (0.0, math.sin(math.radians(alpha)), math.cos(math.radians(alpha))))
+    return (ff("t.F1", UP), wall), (pair("t.F1", "w.F2", concave, opening_deg),)
+
+
+def groove_facts(opening, concave=True, vec=X):
+    fs, ps = groove(opening, concave)
+    return ContactFacts(fs, ps, vec)
+
+
+def corner_facts(concave=True, vec=(1, 1, 1), third_opening=90.0):
+    """Three faces around a corner: concave (inside a box-shaped pocket) or convex (a box corner)."""
+    if concave:
+        fs = (ff("t.F1", UP), ff("w.F2", (-1, 0, 0)), ff("w.F3", rot_x(180 - third_opening)))
+        ps = (
+            pair("t.F1", "w.F2", True, 90),
+            pair("t.F1", "w.F3", True, third_opening),
+            pair("w.F2", "w.F3", True, 90),
+        )
+    else:
+        fs = (ff("b.F1", UP), ff("b.F2", X), ff("b.F3", Y))
+        ps = tuple(pair(a, b, False, 270) for a, b in (("b.F1", "b.F2"), ("b.F1", "b.F3"), ("b.F2", "b.F3")))
+    return ContactFacts(fs, ps, vec)
+
+
+CASES = {
+    # 90° groove (table top + box side), DLO along it
+    "E/E^LS": ("E", groove_facts(90)),
+    "V/E^LS": ("V", groove_facts(90)),
+    # 175° groove: concave but nearly flat
+    "E/E^LT": ("E", groove_facts(175)),
+    "V/E^LT": ("V", groove_facts(175)),
+    # 270° ridge (box edge), DLO along it; crossing it is E/E^P
+    "E/E^LI": ("E", groove_facts(270, concave=False)),
+    "V/E^LI": ("V", groove_facts(270, concave=False)),
+    "E/E^P": ("E", groove_facts(270, concave=False, vec=Y)),
+    # face
+    "E/F": ("E", ContactFacts((ff("t.F1", UP),), (), X)),
+    "V/F": ("V", ContactFacts((ff("t.F1", UP),), (), X)),
+    # corners
+    "E/VS": ("E", corner_facts(True)),
+    "V/VS": ("V", corner_facts(True)),
+    "E/VT": ("E", corner_facts(True, third_opening=175)),
+    "V/VT": ("V", corner_facts(True, third_opening=175)),
+    "E/VI": ("E", corner_facts(False)),
+    "V/VI": ("V", corner_facts(False)),
+}
+
+
+def test_every_state_has_a_geometric_case():
+    assert set(CASES) == set(STATES)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_classifier_reaches_each_of_the_15_states(name):
+    dlo, facts = CASES[name]
+    assert classify_contact(dlo, facts).name == name
+
+
+def test_crossing_a_concave_groove_at_a_point_is_EP_and_stable():
+    assert classify_contact("E", groove_facts(90, vec=Y)).name == "E/E^P"
+
+
+def test_critical_angle_boundary():
+    p = ModelParams(critical_angle_deg=170)
+    assert classify_contact("E", groove_facts(169.9), p).name == "E/E^LS"
+    assert classify_contact("E", groove_facts(170.0), p).name == "E/E^LT"  # at the angle: semi-stable
+    assert classify_contact("E", groove_facts(175), ModelParams(critical_angle_deg=176)).name == "E/E^LS"
+    assert classify_contact("E", groove_facts(179.9)).name == "E/E^LT"
+
+
+def test_semi_stable_needs_concavity_convex_stays_instable():
+    assert classify_contact("V", groove_facts(185, concave=False)).name == "V/E^LI"
+    assert classify_contact("E", groove_facts(185, concave=False)).name == "E/E^LI"
+
+
+def _tilted(deg):
+    a = math.radians(deg)
+    return (math.cos(a), math.sin(a), 0.0)  # a DLO vector deg away from the crease (x) in the floor
+
+
+def test_parallel_tolerance_boundary():
+    p = ModelParams(parallel_tol_deg=10)
+    assert classify_contact("E", groove_facts(90, vec=_tilted(9.99)), p).name == "E/E^LS"
+    assert classify_contact("E", groove_facts(90, vec=_tilted(10.01)), p).name == "E/E^P"
+    assert classify_contact("E", groove_facts(90, vec=_tilted(-170)), p).name == "E/E^LS"  # sign-free
+    assert classify_contact(
+        "E", groove_facts(270, False, vec=_tilted(15)), ModelParams(parallel_tol_deg=20)
+    ).name == ("E/E^LI")
+
+
+def test_given_crease_direction_is_used():
+    fs, ps = groove(90)
+    facts = ContactFacts(fs, ps, X, crease=Y)  # the caller says the edge runs along y
+    assert classify_contact("E", facts).name == "E/E^P"
+
+
+def test_rank_merges_nearly_equal_normals_and_drops_internal_faces():
+    split = ContactFacts((ff("a.F1", UP), ff("a.F2", rot_x(0.005))), (), X)  # one face over two pieces
+    assert classify_contact("E", split).name == "E/F"
+    half_degree = ContactFacts((ff("a.F1", UP), ff("a.F2", rot_x(0.5))), (), X)
+    assert classify_contact("E", half_degree, ModelParams(normal_merge_deg=1.0)).name == "E/F"
+    with pytest.raises(ValueError, match="no pair fact"):  # with the default merge angle they are two faces
+        classify_contact("E", half_degree)
+    internal = ContactFacts((ff("a.F1", UP), ff("a.F7", X, internal=True)), (), X)
+    assert classify_contact("E", internal).name == "E/F"
+    only_internal = ContactFacts((ff("a.F7", X, internal=True),), (), X)
+    assert classify_contact("E", only_internal).name == "E/N"
+
+
+def test_four_faces_in_a_corner_are_still_a_vertex():
+    fs = (*corner_facts(True).faces, ff("w.F4", (-0.70710678, 0, 0.70710678)))
+    ps = (*corner_facts(True).pairs, pair("w.F4", "t.F1", True, 135), pair("w.F4", "w.F2", True, 135),
+          pair("w.F4", "w.F3", True, 90))  # fmt: skip
+    assert classify_contact("V", ContactFacts(fs, ps, X)).name == "V/VS"
+
+
+def test_missing_facts_are_errors():
+    fs, _ = groove(90)
+    with pytest.raises(ValueError, match="no pair fact"):
+        classify_contact("E", ContactFacts(fs, (), X))
+    with pytest.raises(ValueError, match="DLO vector"):
+        classify_contact("E", ContactFacts(*groove(90)))
+
+
+def test_params_are_validated():
+    with pytest.raises(ValueError, match="critical_angle"):
+        ModelParams(critical_angle_deg=200)
+    with pytest.raises(ValueError, match="parallel_tol"):
+        ModelParams(parallel_tol_deg=-1)
+
+
+# --------------------------------------------------------------------------------------------------
+# Topological -> discrete situation, notation
+# --------------------------------------------------------------------------------------------------
+
+
+def test_discretize_a_whole_situation():
+    book = FactBook(
+        {
+            "box.F1": ff("box.F1", UP),
+            "box.F2": ff("box.F2", X),
+            "table.F1": ff("table.F1", UP),
+        },
+        [PairFact("box.F1", "box.F2", False, 270)],
+    )
+    topo = parse_situation("VS/G & E3/N & E9/(box.F1,box.F2) & E12/box.F1 & VE/table.F1")
+    import dataclasses
+
+    c = list(topo.contacts)
+    c[2] = dataclasses.replace(
+        c[2], dlo=dataclasses.replace(c[2].dlo, vector=(1.0, 0.0, 0.0))
+    )  # across the edge (along y)
+    d = discretize(type(topo)(tuple(c)), book)
+    assert d.format() == "V/G & E/N & E/E^P[box.F1,box.F2] & E/F[box.F1] & V/F[table.F1]"
+    np.testing.assert_allclose(d.contacts[2].vector, np.array([-1, 0, -1]) / math.sqrt(2))
+    assert d.contacts[1].vector == (0.0, 0.0, 0.0)
+
+
+def test_discrete_notation_roundtrip_and_errors():
+    text = "V/G & E/N & E/E^P[block.F1,block.F2] & V/N"
+    s = parse_discrete_situation(text)
+    assert s.format() == text
+    assert s.format(unicode=True) == "V/G ∧ E/N ∧ E/E^P[block.F1,block.F2] ∧ V/N"
+    assert parse_discrete_situation(s.format(unicode=True)) == s
+    with pytest.raises(NotationError, match="not a discrete contact"):
+        parse_discrete_situation("V/G & E/FS & V/N")
+    with pytest.raises(NotationError, match="touches no faces"):
+        parse_discrete_situation("V/G & E/N[a.F1] & V/N")
+    with pytest.raises(NotationError, match="start"):
+        parse_discrete_situation("E/N & V/N")
+
+
+all_names = st.sampled_from([*STATES, *AUX_STATES])
+
+
+@st.composite
+def discrete_situations(draw):
+    def contact(dlo):
+        name = draw(all_names.filter(lambda n: n.startswith(dlo)))
+        fs = () if name.endswith(("/N", "/G")) else tuple(draw(st.lists(
+            st.builds(lambda o, k: f"{o}.F{k}", st.sampled_from(["a", "box", "hole_b"]), st.integers(0, 20)),
+            max_size=3, unique=True)))  # fmt: skip
+        return DiscreteContact(state(name), fs)
+
+    return DiscreteSituation(
+        (contact("V"), *[contact("E") for _ in range(draw(st.integers(0, 5)))], contact("V"))
+    )
+
+
+@given(discrete_situations())
+def test_discrete_parse_format_roundtrip(s):
+    assert parse_discrete_situation(s.format()) == s
+    assert parse_discrete_situation(s.format(unicode=True)) == s

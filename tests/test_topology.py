@@ -1,0 +1,160 @@
+"""Topological contact model (MODEL.md §2): values, notation, parser, contraction, successional contacts."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from dlovr.topology import (
+    Contact,
+    DloPrimitive,
+    EnvPrimitive,
+    G,
+    N,
+    NotationError,
+    Situation,
+    contract,
+    face_object,
+    faces,
+    parse_contact,
+    parse_situation,
+)
+
+EXAMPLE = Situation(
+    (
+        Contact(DloPrimitive("VS", 0), (G,)),
+        Contact(DloPrimitive("E", 3), (N,)),
+        Contact(DloPrimitive("E", 9), (faces("box.F1"), faces("table.F1"))),
+        Contact(DloPrimitive("E", 14), (N,)),
+        Contact(DloPrimitive("VE", 20), (N,)),
+    )
+)
+
+
+def test_example_notation_both_forms_exactly_as_model_md():
+    assert EXAMPLE.format() == "VS/G & E3/N & E9/box.F1 + E9/table.F1 & E14/N & VE/N"
+    assert EXAMPLE.format(unicode=True) == "V_S/G_z ∧ E_3/N ∧ E_9/box.F1 + E_9/table.F1 ∧ E_14/N ∧ V_E/N"
+
+
+def test_parse_both_forms_give_the_same_value():
+    a = parse_situation("VS/G & E3/N & E9/box.F1 + E9/table.F1 & E14/N & VE/N")
+    b = parse_situation("V_S/G_z ∧ E_3/N ∧ E_9/box.F1 + E_9/table.F1 ∧ E_14/N ∧ V_E/N")
+    assert a == b == EXAMPLE
+    assert a.contacts[2].dlo.index == 9  # the index survives the round trip
+
+
+def test_edges_and_vertices_are_face_sets_of_one_piece():
+    e = faces("box.F2", "box.F1")
+    assert e.type == "E" and e.faces == ("box.F1", "box.F2")
+    assert faces("b.F1", "b.F2", "b.F10").type == "V"
+    assert faces("b.F10", "b.F2", "b.F1").faces == ("b.F1", "b.F2", "b.F10")  # numeric order
+    assert e.format() == "(box.F1,box.F2)" and e.format(unicode=True) == "(box.F1∩box.F2)"
+    assert parse_contact("E4/(box.F2,box.F1)").env == (e,)
+    assert parse_contact("E_4/(box.F1∩box.F2)").env == (e,)
+    assert e.objects == frozenset({"box"})
+    assert face_object("peg.hole.F3") == "peg.hole"
+
+
+def test_values_are_hashable_and_compare_by_topology():
+    a = Contact(DloPrimitive("E", 3, (2, 4), (1.0, 0.0, 0.0)), (faces("box.F1"),))
+    b = Contact(DloPrimitive("E", 5, (4, 6), (0.0, 1.0, 0.0)), (faces("box.F1"),))
+    assert a == b and hash(a) == hash(b)  # index, span and DLO vector are annotations
+    assert len({EXAMPLE, parse_situation(EXAMPLE.format())}) == 1
+    m1 = Contact(DloPrimitive("E"), (faces("b.F1"), faces("a.F2")))
+    m2 = Contact(DloPrimitive("E"), (faces("a.F2"), faces("b.F1")))
+    assert m1 == m2 and m1.is_multiple
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "empty"),
+        ("E3/N & VE/N", "starts with the V_S"),
+        ("VS/G & E3/N", "ends with the V_E"),
+        ("VS/G & VS/N & VE/N", "interior contacts"),
+        ("VS/G & E3 & VE/N", "not a basic contact"),
+        ("VS/G & X3/N & VE/N", "not a DLO primitive"),
+        ("VS/G & E3/box & VE/N", "bad face name"),
+        ("VS/G & E3/(box.F1) & VE/N", "two or more faces"),
+        ("VS/G & E3/(box.F1,box.F2 & VE/N", "unclosed"),
+        ("VS/G & E3/box.F1 + E4/box.F2 & VE/N", "one DLO point"),
+        ("VS/G & E3/N + E3/box.F1 & VE/N", "N (free space)"),
+        ("VS3/G & VE/N", "takes no index"),
+        ("VS/G & E3/ & VE/N", "missing environment primitive"),
+    ],
+)
+def test_parse_errors_say_what_is_wrong(text, message):
+    with pytest.raises(NotationError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        parse_situation(text)
+
+
+def test_contraction_merges_equal_interior_points_indexed_by_the_middle():
+    f1, f2 = faces("table.F1"), faces("box.F1", "box.F2")
+    point_env = [[G], [], [], [f1], [f1], [f1], [f1], [f1], [f2], [], [f1]]
+    vecs = [(float(i), 0.0, 0.0) for i in range(len(point_env))]
+    s = contract(point_env, vecs)
+    assert s.format() == "VS/G & E1/N & E5/table.F1 & E8/(box.F1,box.F2) & E9/N & VE/table.F1"
+    run = s.contacts[2].dlo
+    assert run.span == (3, 7) and run.index == 5 and run.vector == (5.0, 0.0, 0.0)
+
+
+def test_end_vertices_are_never_contracted_into_edge_contacts():
+    f1 = faces("table.F1")
+    s = contract([[f1], [f1], [f1], [f1]])
+    assert [c.dlo.kind for c in s.contacts] == ["VS", "E", "VE"]
+    assert s.contacts[1].dlo.span == (1, 2)
+
+
+def test_successional_contacts_are_runs_between_free_contacts():
+    s = parse_situation("VS/G & E1/N & E3/a.F1 & E5/(a.F1,a.F2) & E7/N & E9/b.F1 & VE/N")
+    assert s.successional() == [(2, 3), (5,)]
+    s2 = parse_situation("VS/G & E2/a.F1 & VE/b.F2")
+    assert s2.successional() == [(1, 2)]  # the gripper contact is not part of one
+
+
+# --------------------------------------------------------------------------------------------------
+# parse(format(x)) == x for every value (hypothesis)
+# --------------------------------------------------------------------------------------------------
+
+obj_names = st.sampled_from(["box", "table", "hole_block", "peg.hole", "a-1"])
+face_names = st.builds(lambda o, k: f"{o}.F{k}", obj_names, st.integers(0, 40))
+face_prims = st.lists(face_names, min_size=1, max_size=4, unique=True).map(
+    lambda fs: EnvPrimitive("faces", tuple(fs))
+)
+env_lists = st.one_of(
+    st.just((N,)),
+    st.just((G,)),
+    st.lists(st.one_of(face_prims, st.just(G)), min_size=1, max_size=3, unique=True).map(tuple),
+)
+
+
+@st.composite
+def situations(draw):
+    n = draw(st.integers(0, 6))
+    idx = draw(st.one_of(st.none(), st.integers(1, 200)))
+    interior = [Contact(DloPrimitive("E", idx), draw(env_lists)) for _ in range(n)]
+    return Situation(
+        (
+            Contact(DloPrimitive("VS"), draw(env_lists)),
+            *interior,
+            Contact(DloPrimitive("VE"), draw(env_lists)),
+        )
+    )
+
+
+@given(situations())
+def test_parse_format_roundtrip_ascii(s):
+    back = parse_situation(s.format())
+    assert back == s
+    assert [c.dlo.index for c in back.contacts] == [c.dlo.index for c in s.contacts]
+
+
+@given(situations())
+def test_parse_format_roundtrip_unicode(s):
+    assert parse_situation(s.format(unicode=True)) == s
+
+
+@given(situations())
+def test_format_is_canonical(s):
+    assert parse_situation(s.format()).format() == s.format()
