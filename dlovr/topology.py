@@ -19,6 +19,7 @@ An edge or vertex of one convex piece is written as its faces in parentheses:
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -289,6 +290,29 @@ def contract(
         i = j + 1
     out.append(Contact(DloPrimitive("VE", last, (last, last), vec(last)), envs[last]))
     return Situation(tuple(out))
+
+
+def tip_touches(
+    last_vector: Sequence[float], normals: Sequence[Sequence[float]], tip_angle_deg: float = 15.0
+) -> bool:
+    """End-vertex rule (MODEL.md §2): is the tip itself the contact?
+
+    ``last_vector`` is the DLO vector of the last segment pointing towards the tip (for ``V_S``: the
+    first segment reversed), ``normals`` the outward unit normals of the faces at the tip's contact
+    (world frame). The tip touches when it points into one of the surfaces at more than
+    ``tip_angle_deg`` from that surface; a last segment lying on a face is an ``E`` contact instead,
+    with ``V_E/N`` after it. (The caller checks that the contact lies at the end cap.)
+    """
+    d = [float(x) for x in last_vector]
+    norm = sum(x * x for x in d) ** 0.5
+    if norm == 0.0:
+        raise ValueError("zero-length DLO vector at the tip")
+    sin_tip = math.sin(math.radians(tip_angle_deg))
+    for n in normals:
+        nn = sum(float(x) * float(x) for x in n) ** 0.5
+        if -sum(a * float(b) for a, b in zip(d, n, strict=True)) / (norm * nn) > sin_tip:
+            return True
+    return False
 
 
 # --------------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ from dlovr.topology import (
     faces,
     parse_contact,
     parse_situation,
+    tip_touches,
 )
 
 EXAMPLE = Situation(
@@ -158,3 +159,36 @@ def test_parse_format_roundtrip_unicode(s):
 @given(situations())
 def test_format_is_canonical(s):
     assert parse_situation(s.format()).format() == s.format()
+
+
+# --------------------------------------------------------------------------------------------------
+# End-vertex rule (MODEL.md §2)
+# --------------------------------------------------------------------------------------------------
+
+
+def _down(deg):
+    """A DLO vector pointing into the floor (normal +z) at ``deg`` below the horizontal."""
+    import math
+
+    a = math.radians(deg)
+    return (math.cos(a), 0.0, -math.sin(a))
+
+
+def test_tip_pointing_into_a_face_touches():
+    assert tip_touches(_down(45), [(0, 0, 1)])
+    assert tip_touches(_down(15.5), [(0, 0, 1)], tip_angle_deg=15)
+
+
+def test_last_segment_lying_on_a_face_is_not_a_tip_contact():
+    assert not tip_touches(_down(0), [(0, 0, 1)])
+    assert not tip_touches(_down(14.5), [(0, 0, 1)], tip_angle_deg=15)
+    assert not tip_touches(_down(-30), [(0, 0, 1)])  # pointing away
+
+
+def test_tip_into_one_face_of_a_groove_touches():
+    # lying flat on the floor but pushing into the wall (normal -x) at 20°
+    import math
+
+    a = math.radians(20)
+    assert tip_touches((math.sin(a), math.cos(a), 0.0), [(0, 0, 1), (-1, 0, 0)])
+    assert not tip_touches((0.0, 1.0, 0.0), [(0, 0, 1), (-1, 0, 0)])  # along the groove: an E contact
