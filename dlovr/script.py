@@ -1,0 +1,201 @@
+"""Scripted demonstrations: gripper waypoints in a TOML file (pure Python + numpy).
+
+Format::
+
+    scene = "peg_in_hole"         # default scene for this script
+    [[waypoints]]
+    pos = [0.1, 0.0, 0.75]        # m, world
+    quat = [1, 0, 0, 0]           # optional, wxyz (default: keep the previous orientation)
+    duration = 1.5                # s to get here from the previous waypoint (> 0)
+    hold = 0.2                    # optional s to wait here (>= 0)
+
+The first waypoint is reached from the gripper's start pose (the scene's gripper pose, or whatever
+pose the simulator is in) over its ``duration``. Between waypoints the position is interpolated
+linearly and the orientation by slerp. Bad files raise :class:`ScriptError` with a one-line message
+naming the file, the waypoint and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_TOP_KEYS = {"scene", "waypoints", "description"}
+_WP_KEYS = {"pos", "quat", "duration", "hold", "note"}
+
+
+class ScriptError(ValueError):
+    """A script file is invalid; the message is one line: ``file: waypoints[i].key: what is wrong``."""
+
+
+# -- quaternions (wxyz) ---------------------------------------------------------------------------
+
+
+def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    return q / np.linalg.norm(q)
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vector ``v`` by unit quaternion ``q`` (wxyz)."""
+    w, x, y, z = q
+    u = np.array([x, y, z])
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz."""
+    q0 = quat_normalize(q0)
+    q1 = quat_normalize(q1)
+    dot = float(np.dot(q0, q1))
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:
+        return quat_normalize(q0 + s * (q1 - q0))
+    th = math.acos(min(1.0, dot))
+    sin = math.sin(th)
+    return (math.sin((1 - s) * th) / sin) * q0 + (math.sin(s * th) / sin) * q1
+
+
+# -- scripts ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    pos: tuple[float, float, float]
+    quat: tuple[float, float, float, float] | None
+    duration: float
+    hold: float = 0.0
+
+
+@dataclass(frozen=True)
+class Script:
+    """A demonstration script. ``scene``: the default scene name (or None)."""
+
+    waypoints: tuple[Waypoint, ...]
+    scene: str | None = None
+    source: str = "<script>"
+
+    @property
+    def total_duration(self) -> float:
+        return float(sum(w.duration + w.hold for w in self.waypoints))
+
+    def target_at(
+        self,
+        t: float,
+        start_pos: Sequence[float] | None = None,
+        start_quat: Sequence[float] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Gripper target (pos, quat wxyz) at time ``t`` s after the script starts.
+
+        Without a start pose the first waypoint is the start (held until it is "reached").
+        Before 0 the start pose, after the end the last waypoint.
+        """
+        w0 = self.waypoints[0]
+        p_prev = np.asarray(start_pos if start_pos is not None else w0.pos, dtype=float)
+        if start_quat is not None:
+            q_prev = quat_normalize(start_quat)
+        else:
+            q_prev = quat_normalize(w0.quat if w0.quat is not None else (1.0, 0.0, 0.0, 0.0))
+        if t <= 0.0:
+            return p_prev.copy(), q_prev
+        tc = 0.0
+        for w in self.waypoints:
+            p = np.asarray(w.pos, dtype=float)
+            q = q_prev if w.quat is None else quat_normalize(w.quat)
+            if t < tc + w.duration:
+                s = (t - tc) / w.duration
+                return p_prev + s * (p - p_prev), slerp(q_prev, q, s)
+            tc += w.duration
+            if t < tc + w.hold:
+                return p.copy(), q
+            tc += w.hold
+            p_prev, q_prev = p, q
+        return p_prev.copy(), q_prev
+
+
+def _num(value: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ScriptError(f"{where}: expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise ScriptError(f"{where}: must be > 0, got {value!r}")
+    if nonneg and value < 0:
+        raise ScriptError(f"{where}: must be >= 0, got {value!r}")
+    return float(value)
+
+
+def _vec(value: Any, n: int, where: str) -> tuple[float, ...]:
+    if not isinstance(value, list) or len(value) != n:
+        raise ScriptError(f"{where}: expected a list of {n} numbers, got {value!r}")
+    return tuple(_num(v, where) for v in value)
+
+
+def parse_script(data: dict[str, Any], source: str = "<script>") -> Script:
+    """Validate a parsed TOML table as a script."""
+    for key in data:
+        if key not in _TOP_KEYS:
+            raise ScriptError(f"{source}: unknown key {key!r} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    scene = data.get("scene")
+    if scene is not None and (not isinstance(scene, str) or not scene):
+        raise ScriptError(f"{source}: scene: expected a scene name (string), got {scene!r}")
+    wps = data.get("waypoints")
+    if wps is None:
+        raise ScriptError(f"{source}: missing [[waypoints]]")
+    if not isinstance(wps, list) or not wps:
+        raise ScriptError(f"{source}: waypoints: expected at least one [[waypoints]] table")
+    out = []
+    for i, w in enumerate(wps):
+        at = f"{source}: waypoints[{i}]"
+        if not isinstance(w, dict):
+            raise ScriptError(f"{at}: expected a table, got {w!r}")
+        for key in w:
+            if key not in _WP_KEYS:
+                raise ScriptError(f"{at}.{key}: unknown key (allowed: {', '.join(sorted(_WP_KEYS))})")
+        for key in ("pos", "duration"):
+            if key not in w:
+                raise ScriptError(f"{at}.{key}: missing")
+        pos = _vec(w["pos"], 3, f"{at}.pos")
+        quat = None
+        if "quat" in w:
+            quat = _vec(w["quat"], 4, f"{at}.quat")
+            if math.sqrt(sum(c * c for c in quat)) < 1e-9:
+                raise ScriptError(f"{at}.quat: must not be all zeros")
+            quat = tuple(float(c) for c in quat_normalize(quat))
+        duration = _num(w["duration"], f"{at}.duration", positive=True)
+        hold = _num(w.get("hold", 0.0), f"{at}.hold", nonneg=True)
+        out.append(Waypoint(pos=pos, quat=quat, duration=duration, hold=hold))  # type: ignore[arg-type]
+    return Script(waypoints=tuple(out), scene=scene, source=source)
+
+
+def load_script(path: str | Path) -> Script:
+    """Read and validate a script file. Raises :class:`ScriptError` (one line) on any problem."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ScriptError(f"{p}: cannot read: {e.strerror or e}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ScriptError(f"{p}: invalid TOML: {e}".replace("\n", " ")) from None
+    return parse_script(data, str(p))

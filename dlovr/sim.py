@@ -1,0 +1,593 @@
+"""MuJoCo simulation of the cable (the only module of dlovr that imports :mod:`mujoco`).
+
+The model (see ``../shared/NOTES.md``, "The cable in MuJoCo 4.0"):
+
+- obstacles: one static body per scene object, one mesh geom per *convex piece* of the object
+  (geom name ``"<object>.P<k>"``), so that every contact names its object and piece;
+- the DLO: a 1-D ``flexcomp`` rod named ``dlo`` lying in the world (not inside the gripper body), with
+  ``<elasticity young poisson damping>`` and ``<edge equality="true">``; its point ``i`` is the flex
+  vertex ``i`` (``P_0 = V_S`` held by the gripper, ``P_n = V_E``);
+- the gripper: a mocap body ``gripper`` whose z axis is ``G_z``. The rod starts straight, leaving the
+  gripper along ``+G_z`` (point ``i`` at ``gripper.pos + i * seg * G_z``). It is held by two
+  ``<connect>`` equalities (points 0 and 1) and a joint equality locking the first twist joint
+  ``dlo_twist_0`` (so a dragged cable does not roll).
+
+The MjSpec Python API cannot give a ``make_flex`` rod its elasticity (``body.make_flex`` has no
+elasticity arguments and the rod's twist bodies are only generated for an elastic flexcomp when it
+is expanded), so the rod alone is parsed from a generated ``<flexcomp>`` element (built with
+:mod:`xml.etree`, never by string concatenation); every other element is added with ``MjSpec``.
+
+Typical use (headless)::
+
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+    from dlovr.sim import Simulator
+
+    sim = Simulator(load_scene("table"))
+    for rec in sim.run(load_script("scenes/table.script.toml")):
+        rec.time, rec.points, rec.contacts
+
+``dlovr scene export NAME -o model.xml``: ``export_xml(build_model(...).spec, path)`` writes the
+compiled MJCF together with its meshes (see :func:`export_xml`).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from dlovr.script import Script, quat_normalize, quat_rotate, slerp
+
+#: Name of the rod (flexcomp) and prefix of its generated bodies/joints (``dlo_<i>``, ``dlo_twist_<i>``).
+ROD = "dlo"
+#: Name of the mocap gripper body.
+GRIPPER = "gripper"
+
+TIMESTEP = 0.002
+CONTACT_SOLREF = (0.004, 1.0)
+CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+#: Detect-only band (no force) beyond the surface: cuts contact flicker (NOTES.md).
+CONTACT_GAP = 0.001
+EQ_SOLREF = (0.004, 1.0)
+EQ_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+
+_WARNINGS_FATAL = (
+    "mjWARN_BADQACC",
+    "mjWARN_BADQPOS",
+    "mjWARN_BADQVEL",
+    "mjWARN_CNSTRFULL",
+    "mjWARN_CONTACTFULL",
+)
+
+
+class SimulationDiverged(RuntimeError):
+    """The simulation became invalid (NaN, MuJoCo instability warning, cable over-stretched).
+
+    ``step`` is the index of the offending step (1 = the first ``mj_step``), ``time`` its time in s.
+    """
+
+    def __init__(self, step: int, time: float, reason: str):
+        super().__init__(f"simulation diverged at step {step} (t = {time:.4f} s): {reason}")
+        self.step = step
+        self.time = time
+        self.reason = reason
+
+
+# --------------------------------------------------------------------------------------------------
+# Inputs
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static scene object given as its convex pieces.
+
+    ``pieces``: vertex arrays (k, 3) in the object's local frame, each the vertices of one convex piece
+    (MuJoCo collides with their convex hull). ``pos``/``quat`` (wxyz) place the object in the world.
+    """
+
+    name: str
+    pieces: Sequence[np.ndarray]
+    pos: Sequence[float] = (0.0, 0.0, 0.0)
+    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
+    friction: float | None = None
+    rgba: Sequence[float] = (0.6, 0.6, 0.65, 1.0)
+
+
+@dataclass(frozen=True)
+class DloParams:
+    """The cable. Any object with these attributes (e.g. ``dlovr.scene.DloSpec``) is accepted too."""
+
+    length: float = 0.3
+    radius: float = 0.005
+    segments: int = 20
+    young: float = 2e7
+    damping: float = 0.01
+    mass: float = 0.05
+    poisson: float = 0.3
+    friction: float = 0.5
+
+
+@dataclass(frozen=True)
+class GripperPose:
+    """Start pose of the gripper (``quat`` wxyz); the cable leaves it along its z axis ``G_z``."""
+
+    pos: Sequence[float] = (0.0, 0.0, 1.0)
+    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Model
+
+
+@dataclass
+class BuiltModel:
+    """A compiled model and the name -> index maps the simulator needs."""
+
+    spec: mujoco.MjSpec
+    model: mujoco.MjModel
+    flex_id: int
+    vert_adr: int
+    nvert: int
+    mocap_id: int
+    seg_length: float
+    geom_piece: dict[int, tuple[str, int]]  # geom id -> (object name, piece index)
+    twist_joints: list[str] = field(default_factory=list)
+
+
+def _rod_spec(dlo: Any, start: np.ndarray, direction: np.ndarray) -> mujoco.MjSpec:
+    n = int(dlo.segments)
+    if n < 2:
+        raise ValueError(f"the DLO needs at least 2 segments, got {n}")
+    seg = float(dlo.length) / n
+    pts = [start + i * seg * direction for i in range(n + 1)]
+    root = ET.Element("mujoco", model="dlovr")
+    wb = ET.SubElement(root, "worldbody")
+    selfcollide = "auto" if seg > 2.2 * float(dlo.radius) else "none"
+    fc = ET.SubElement(
+        wb,
+        "flexcomp",
+        name=ROD,
+        type="direct",
+        dim="1",
+        radius=repr(float(dlo.radius)),
+        mass=repr(float(dlo.mass)),
+        point=" ".join(repr(float(c)) for p in pts for c in p),
+        element=" ".join(f"{i} {i + 1}" for i in range(n)),
+        rgba="0.85 0.35 0.1 1",
+    )
+    ET.SubElement(
+        fc,
+        "elasticity",
+        young=repr(float(dlo.young)),
+        poisson=repr(float(getattr(dlo, "poisson", 0.3))),
+        damping=repr(float(dlo.damping)),
+    )
+    ET.SubElement(
+        fc,
+        "edge",
+        equality="true",
+        solref=" ".join(map(repr, EQ_SOLREF)),
+        solimp=" ".join(map(repr, EQ_SOLIMP)),
+    )
+    mu = float(getattr(dlo, "friction", 0.5))
+    ET.SubElement(
+        fc,
+        "contact",
+        selfcollide=selfcollide,
+        solref=" ".join(map(repr, CONTACT_SOLREF)),
+        solimp=" ".join(map(repr, CONTACT_SOLIMP)),
+        gap=repr(CONTACT_GAP),
+        friction=f"{mu!r} 0.005 0.0001",
+        condim="3",
+    )
+    return mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+
+
+def build_model(
+    obstacles: Sequence[Obstacle],
+    dlo: Any,
+    gripper: Any,
+    *,
+    timestep: float = TIMESTEP,
+    gravity: Sequence[float] = (0.0, 0.0, -9.81),
+) -> BuiltModel:
+    """Build and compile the MuJoCo model of a scene.
+
+    ``dlo``: attributes ``length radius segments young damping mass`` (and optionally ``poisson
+    friction``), e.g. :class:`DloParams` or ``dlovr.scene.DloSpec``. ``gripper``: attributes ``pos`` and
+    ``quat`` (wxyz), e.g. :class:`GripperPose` or ``dlovr.scene.GripperSpec``.
+    """
+    gpos = np.asarray(gripper.pos, dtype=float)
+    gquat = quat_normalize(np.asarray(gripper.quat, dtype=float))
+    gz = quat_rotate(gquat, np.array([0.0, 0.0, 1.0]))
+    spec = _rod_spec(dlo, gpos, gz)
+    spec.modelname = "dlovr"
+    opt = spec.option
+    opt.timestep = float(timestep)
+    opt.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
+    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    opt.tolerance = 1e-6
+    opt.gravity = list(map(float, gravity))
+    spec.compiler.degree = False
+    mu = float(getattr(dlo, "friction", 0.5))
+
+    for ob in obstacles:
+        body = spec.worldbody.add_body(
+            name=ob.name, pos=list(map(float, ob.pos)), quat=list(map(float, ob.quat))
+        )
+        for k, verts in enumerate(ob.pieces):
+            v = np.asarray(verts, dtype=float).reshape(-1, 3)
+            mname = f"{ob.name}.P{k}"
+            spec.add_mesh(name=mname, uservert=v.ravel().tolist())
+            f = mu if ob.friction is None else float(ob.friction)
+            body.add_geom(
+                name=mname,
+                type=mujoco.mjtGeom.mjGEOM_MESH,
+                meshname=mname,
+                solref=list(CONTACT_SOLREF),
+                solimp=list(CONTACT_SOLIMP),
+                gap=CONTACT_GAP,
+                friction=[f, 0.005, 0.0001],
+                condim=3,
+                rgba=list(map(float, ob.rgba)),
+            )
+
+    seg = float(dlo.length) / int(dlo.segments)
+    g = spec.worldbody.add_body(name=GRIPPER, mocap=True, pos=gpos.tolist(), quat=gquat.tolist())
+    g.add_site(name="gripper_site", size=[0.01, 0.0, 0.0], rgba=[0.2, 0.6, 0.9, 0.5])
+    for i, anchor in ((0, [0.0, 0.0, 0.0]), (1, [0.0, 0.0, seg])):
+        eq = spec.add_equality(
+            name=f"hold_{i}",
+            type=mujoco.mjtEq.mjEQ_CONNECT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            name1=GRIPPER,
+            name2=f"{ROD}_{i}",
+            solref=list(EQ_SOLREF),
+            solimp=list(EQ_SOLIMP),
+        )
+        eq.data[0:3] = anchor
+    eq = spec.add_equality(
+        name="hold_twist",
+        type=mujoco.mjtEq.mjEQ_JOINT,
+        objtype=mujoco.mjtObj.mjOBJ_JOINT,
+        name1=f"{ROD}_twist_0",
+        solref=list(EQ_SOLREF),
+        solimp=list(EQ_SOLIMP),
+    )
+    model = spec.compile()
+    flex_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, ROD)
+    geom_piece: dict[int, tuple[str, int]] = {}
+    for ob in obstacles:
+        for k in range(len(ob.pieces)):
+            gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{ob.name}.P{k}")
+            geom_piece[gid] = (ob.name, k)
+    twist = [j.name for j in spec.joints if j.name.startswith(f"{ROD}_twist")]
+    return BuiltModel(
+        spec=spec,
+        model=model,
+        flex_id=flex_id,
+        vert_adr=int(model.flex_vertadr[flex_id]),
+        nvert=int(model.flex_vertnum[flex_id]),
+        mocap_id=int(model.body_mocapid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, GRIPPER)]),
+        seg_length=seg,
+        geom_piece=geom_piece,
+        twist_joints=twist,
+    )
+
+
+def export_xml(built: BuiltModel, path: str | Path) -> Path:
+    """Write the compiled model as MJCF at ``path`` (meshes inline as vertex lists).
+
+    The file is loadable by plain MuJoCo (``mujoco.MjModel.from_xml_path``) and gives the same model.
+    Intended for ``dlovr scene export NAME -o model.xml``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(built.spec.to_xml())
+    return path
+
+
+# --------------------------------------------------------------------------------------------------
+# Per-step records
+
+
+@dataclass(frozen=True)
+class RodContact:
+    """One raw MuJoCo contact between the rod and an obstacle piece.
+
+    ``point``: cable point index when MuJoCo reports a vertex (plane-like contacts), else ``None``;
+    ``segment``: segment index (segment ``i`` joins points ``i`` and ``i+1``) when it reports an element.
+    ``normal`` points from the obstacle toward the rod; ``pos`` is MuJoCo's contact point (midway),
+    ``surface`` the obstacle's surface point; ``dist`` < 0 is penetration. ``force``: normal force (N),
+    0 for contacts in the detect-only gap band (``active`` False).
+    """
+
+    point: int | None
+    segment: int | None
+    obj: str
+    piece: int
+    geom: str
+    dist: float
+    normal: np.ndarray
+    pos: np.ndarray
+    surface: np.ndarray
+    force: float
+    active: bool
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What one simulation step yields.
+
+    ``points``: (n+1, 3) centerline points ``P_0..P_n``; ``vectors``: (n, 3) DLO vectors
+    ``P_{i+1} - P_i``; gripper pose (``gripper_quat`` wxyz, ``gripper_z`` = ``G_z``) and the commanded
+    target; ``contacts``: raw rod-obstacle contacts; ``self_contacts``: pairs of touching segments.
+    """
+
+    step: int
+    time: float
+    points: np.ndarray
+    vectors: np.ndarray
+    gripper_pos: np.ndarray
+    gripper_quat: np.ndarray
+    gripper_z: np.ndarray
+    target_pos: np.ndarray
+    target_quat: np.ndarray
+    contacts: tuple[RodContact, ...]
+    self_contacts: tuple[tuple[int, int], ...] = ()
+
+
+@dataclass(frozen=True)
+class SimState:
+    """Full checkpoint: MuJoCo's ``mjSTATE_INTEGRATION`` plus the simulator's own counters/target."""
+
+    mj: np.ndarray
+    step: int
+    target_pos: np.ndarray
+    target_quat: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------------
+# Simulator
+
+
+def obstacles_from_scene(scene: Any) -> list[Obstacle]:
+    """Convex pieces of each object of a ``dlovr.scene.Scene`` (uses ``dlovr.geometry``)."""
+    from dlovr import geometry
+
+    out = []
+    for obj in scene.objects:
+        dec = geometry.decompose(obj)
+        pieces = [np.asarray(p.vertices, dtype=float) for p in dec.pieces]
+        out.append(Obstacle(name=obj.name, pieces=pieces, pos=tuple(obj.pos), quat=tuple(obj.quat)))
+    return out
+
+
+class Simulator:
+    """Steps the cable model; the gripper follows a commanded target with bounded speed.
+
+    ``Simulator(scene)`` with a ``dlovr.scene.Scene``, or ``Simulator.from_parts(obstacles, dlo,
+    gripper)``. Set the target with :meth:`set_target`; :meth:`step` advances one time step (2 ms) and
+    returns a :class:`StepRecord`; :meth:`run` plays a :class:`dlovr.script.Script`.
+
+    ``max_speed`` (m/s) and ``max_angular_speed`` (rad/s) bound the gripper's motion toward the target;
+    ``max_stretch`` is the relative segment stretch beyond which the run is declared diverged.
+    """
+
+    def __init__(
+        self,
+        scene: Any = None,
+        *,
+        built: BuiltModel | None = None,
+        max_speed: float = 0.25,
+        max_angular_speed: float = 2.0,
+        max_stretch: float = 0.10,
+    ):
+        if built is None:
+            if scene is None:
+                raise ValueError("Simulator needs a scene or a built model")
+            built = build_model(obstacles_from_scene(scene), scene.dlo, scene.gripper)
+        self.scene = scene
+        self.built = built
+        self.model = built.model
+        self.data = mujoco.MjData(self.model)
+        self.max_speed = float(max_speed)
+        self.max_angular_speed = float(max_angular_speed)
+        self.max_stretch = float(max_stretch)
+        self.step_index = 0
+        m = self.model
+        self._fatal = [int(getattr(mujoco.mjtWarning, w)) for w in _WARNINGS_FATAL]
+        self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
+        mujoco.mj_forward(m, self.data)
+        mid = built.mocap_id
+        self.target_pos = self.data.mocap_pos[mid].copy()
+        self.target_quat = self.data.mocap_quat[mid].copy()
+        self._force = np.zeros(6)
+
+    @classmethod
+    def from_parts(cls, obstacles: Sequence[Obstacle], dlo: Any, gripper: Any, **kw: Any) -> Simulator:
+        """Simulator from obstacles given as convex pieces (no scene file needed)."""
+        timestep = kw.pop("timestep", TIMESTEP)
+        return cls(built=build_model(obstacles, dlo, gripper, timestep=timestep), **kw)
+
+    # -- gripper ------------------------------------------------------------------------------------
+
+    def set_target(self, pos: Sequence[float], quat: Sequence[float] | None = None) -> None:
+        """Command the gripper pose (world ``pos``, ``quat`` wxyz; ``None`` keeps the orientation)."""
+        p = np.asarray(pos, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"gripper target position must be 3 finite numbers, got {pos!r}")
+        self.target_pos = p.copy()
+        if quat is not None:
+            q = np.asarray(quat, dtype=float)
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
+                raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
+            self.target_quat = quat_normalize(q)
+
+    def _move_mocap(self) -> None:
+        d, mid, dt = self.data, self.built.mocap_id, self.model.opt.timestep
+        pos = d.mocap_pos[mid]
+        delta = self.target_pos - pos
+        dist = float(np.linalg.norm(delta))
+        vmax = self.max_speed * dt
+        d.mocap_pos[mid] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
+        q = d.mocap_quat[mid].copy()
+        tq = self.target_quat
+        angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(q, tq)))))
+        wmax = self.max_angular_speed * dt
+        d.mocap_quat[mid] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
+
+    # -- stepping -----------------------------------------------------------------------------------
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def points(self) -> np.ndarray:
+        """Centerline points P_0..P_n, shape (n+1, 3) (a copy)."""
+        b = self.built
+        return self.data.flexvert_xpos[b.vert_adr : b.vert_adr + b.nvert].copy()
+
+    def step(self, n: int = 1) -> StepRecord:
+        """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
+        for _ in range(n):
+            self._move_mocap()
+            before = [int(self.data.warning[w].number) for w in self._fatal]
+            mujoco.mj_step(self.model, self.data)
+            self.step_index += 1
+            self._check(before)
+        return self.record()
+
+    def _check(self, before: list[int]) -> None:
+        d = self.data
+        for w, n0 in zip(self._fatal, before, strict=True):
+            if int(d.warning[w].number) > n0:
+                name = mujoco.mjtWarning(w).name
+                raise SimulationDiverged(self.step_index, d.time, f"MuJoCo warning {name}")
+        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+            raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the state")
+        pts = self.points()
+        if not np.all(np.isfinite(pts)):
+            raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the cable points")
+        lens = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        stretch = float(np.max(np.abs(lens / self.built.seg_length - 1.0)))
+        if stretch > self.max_stretch:
+            i = int(np.argmax(np.abs(lens / self.built.seg_length - 1.0)))
+            raise SimulationDiverged(
+                self.step_index,
+                d.time,
+                f"segment {i} length off by {stretch:.1%} (bound {self.max_stretch:.0%})",
+            )
+
+    def contacts(self) -> tuple[tuple[RodContact, ...], tuple[tuple[int, int], ...]]:
+        """Raw contacts of the rod with obstacle pieces, and self-contacts (segment pairs)."""
+        m, d, b = self.model, self.data, self.built
+        out: list[RodContact] = []
+        selfc: list[tuple[int, int]] = []
+        f = b.flex_id
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if c.flex[0] == f and c.flex[1] == f:
+                selfc.append((int(min(c.elem)), int(max(c.elem))))
+                continue
+            if c.flex[1] == f and c.geom[0] >= 0:
+                side = 1
+                gid = int(c.geom[0])
+                sign = 1.0
+            elif c.flex[0] == f and c.geom[1] >= 0:
+                side = 0
+                gid = int(c.geom[1])
+                sign = -1.0  # frame normal points from geom[0]/flex[0] toward the other
+            else:
+                continue
+            piece = b.geom_piece.get(gid)
+            if piece is None:
+                continue
+            elem = int(c.elem[side])
+            vert = int(c.vert[side])
+            n = sign * np.array(c.frame[:3])
+            pos = np.array(c.pos)
+            dist = float(c.dist)
+            force = 0.0
+            if c.efc_address >= 0:
+                mujoco.mj_contactForce(m, d, i, self._force)
+                force = float(self._force[0])
+            out.append(
+                RodContact(
+                    point=vert if vert >= 0 else None,
+                    segment=elem if elem >= 0 else None,
+                    obj=piece[0],
+                    piece=piece[1],
+                    geom=self._geom_names[gid],
+                    dist=dist,
+                    normal=n,
+                    pos=pos,
+                    surface=pos - n * dist / 2.0,
+                    force=force,
+                    active=bool(c.efc_address >= 0),
+                )
+            )
+        return tuple(out), tuple(selfc)
+
+    def record(self) -> StepRecord:
+        d, mid = self.data, self.built.mocap_id
+        pts = self.points()
+        q = d.mocap_quat[mid].copy()
+        contacts, selfc = self.contacts()
+        return StepRecord(
+            step=self.step_index,
+            time=float(d.time),
+            points=pts,
+            vectors=np.diff(pts, axis=0),
+            gripper_pos=d.mocap_pos[mid].copy(),
+            gripper_quat=q,
+            gripper_z=quat_rotate(q, np.array([0.0, 0.0, 1.0])),
+            target_pos=self.target_pos.copy(),
+            target_quat=self.target_quat.copy(),
+            contacts=contacts,
+            self_contacts=selfc,
+        )
+
+    def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
+        """Play ``script`` from the current gripper pose; yield one record per step.
+
+        The script's first waypoint is reached from the gripper's pose at the call over its
+        ``duration``. ``settle`` extra seconds are simulated at the last waypoint at the end.
+        """
+        mid = self.built.mocap_id
+        start_pos = self.data.mocap_pos[mid].copy()
+        start_quat = self.data.mocap_quat[mid].copy()
+        t0 = float(self.data.time)
+        dt = self.model.opt.timestep
+        nsteps = round((script.total_duration + settle) / dt)
+        for k in range(1, nsteps + 1):
+            pos, quat = script.target_at(k * dt, start_pos=start_pos, start_quat=start_quat)
+            self.set_target(pos, quat)
+            yield self.step()
+        del t0
+
+    # -- state --------------------------------------------------------------------------------------
+
+    def get_state(self) -> SimState:
+        """Checkpoint with ``mjSTATE_INTEGRATION`` (includes the rod's plastic state and warm start)."""
+        m, d = self.model, self.data
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        buf = np.empty(mujoco.mj_stateSize(m, spec))
+        mujoco.mj_getState(m, d, buf, spec)
+        return SimState(buf, self.step_index, self.target_pos.copy(), self.target_quat.copy())
+
+    def set_state(self, state: SimState) -> None:
+        """Restore a checkpoint from :meth:`get_state`; later steps are bit-identical to the original."""
+        m, d = self.model, self.data
+        mujoco.mj_setState(m, d, state.mj, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(m, d)
+        self.step_index = state.step
+        self.target_pos = state.target_pos.copy()
+        self.target_quat = state.target_quat.copy()

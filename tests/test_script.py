@@ -1,0 +1,108 @@
+"""Script files: validation errors and waypoint interpolation (pure, no MuJoCo)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dlovr.script import ScriptError, load_script, parse_script, quat_rotate, slerp
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "demo.script.toml"
+    p.write_text(text)
+    return p
+
+
+def test_load_and_interpolate(tmp_path: Path) -> None:
+    p = _write(
+        tmp_path,
+        """
+scene = "table"
+[[waypoints]]
+pos = [0.0, 0.0, 1.0]
+duration = 1.0
+hold = 0.5
+[[waypoints]]
+pos = [1.0, 0.0, 1.0]
+quat = [0.7071068, 0.0, 0.0, 0.7071068]
+duration = 2.0
+""",
+    )
+    s = load_script(p)
+    assert s.scene == "table"
+    assert s.total_duration == pytest.approx(3.5)
+    start = ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
+    pos, quat = s.target_at(0.5, *start)
+    assert np.allclose(pos, [0, 0, 0.5])
+    pos, _ = s.target_at(1.2, *start)
+    assert np.allclose(pos, [0, 0, 1])  # holding
+    pos, quat = s.target_at(2.5, *start)  # halfway to the second waypoint
+    assert np.allclose(pos, [0.5, 0, 1])
+    assert np.allclose(quat, [math.cos(math.pi / 8), 0, 0, math.sin(math.pi / 8)], atol=1e-6)
+    pos, quat = s.target_at(99.0, *start)
+    assert np.allclose(pos, [1, 0, 1])
+    # without a start pose, the first waypoint is the start
+    pos, _ = s.target_at(0.3)
+    assert np.allclose(pos, [0, 0, 1])
+
+
+def test_slerp_and_rotate() -> None:
+    q0 = np.array([1.0, 0, 0, 0])
+    q1 = np.array([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)])  # 90° about z
+    q = slerp(q0, q1, 0.5)
+    assert np.allclose(quat_rotate(q, np.array([1.0, 0, 0])), [math.sqrt(0.5), math.sqrt(0.5), 0])
+    assert np.allclose(slerp(q0, -q1, 1.0), q1) or np.allclose(slerp(q0, -q1, 1.0), -q1)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("[[waypoints]]\npos=[0,0]\nduration=1\n", "waypoints[0].pos: expected a list of 3 numbers"),
+        ("[[waypoints]]\npos=[0,0,1]\n", "waypoints[0].duration: missing"),
+        (
+            "[[waypoints]]\npos=[0,0,1]\nduration=1\n[[waypoints]]\npos=[0,0,1]\nduration=-1\n",
+            "waypoints[1].duration: must be > 0",
+        ),
+        ("[[waypoints]]\npos=[0,0,1]\nduration=1\nhold=-0.1\n", "waypoints[0].hold: must be >= 0"),
+        (
+            "[[waypoints]]\npos=[0,0,1]\nduration=1\nquat=[0,0,0,0]\n",
+            "waypoints[0].quat: must not be all zeros",
+        ),
+        ("[[waypoints]]\npos=[0,0,'a']\nduration=1\n", "waypoints[0].pos: expected a finite number"),
+        ("[[waypoints]]\npos=[0,0,1]\nduration=1\nspeed=3\n", "waypoints[0].speed: unknown key"),
+        ("scene = 3\n[[waypoints]]\npos=[0,0,1]\nduration=1\n", "scene: expected a scene name"),
+        ("scene = 'x'\n", "missing [[waypoints]]"),
+        ("waypoints = [\n", "invalid TOML"),
+        ("foo = 1\n[[waypoints]]\npos=[0,0,1]\nduration=1\n", "unknown key 'foo'"),
+    ],
+)
+def test_errors_are_one_line_and_name_file_waypoint_key(tmp_path: Path, text: str, expected: str) -> None:
+    p = _write(tmp_path, text)
+    with pytest.raises(ScriptError) as ei:
+        load_script(p)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    assert msg.startswith(str(p))
+    assert expected in msg
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(ScriptError, match="cannot read"):
+        load_script(tmp_path / "nope.toml")
+
+
+def test_parse_script_is_a_value_error() -> None:
+    with pytest.raises(ValueError):
+        parse_script({"waypoints": []}, "x")
+
+
+@pytest.mark.parametrize("path", sorted(SCENES.glob("*.script.toml")), ids=lambda p: p.name)
+def test_builtin_scripts_are_valid(path: Path) -> None:
+    s = load_script(path)
+    assert s.scene and s.total_duration > 0

@@ -1,0 +1,171 @@
+"""The MuJoCo cable simulation: rod integrity, gravity, table contacts, gripper speed, determinism,
+divergence detection. Small models (20 segments) and short runs keep this file fast."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dlovr.script import Script, Waypoint
+from dlovr.sim import DloParams, GripperPose, Obstacle, SimulationDiverged, Simulator, export_xml
+
+# gripper z axis (the cable direction at the gripper) along +x
+Q_X = (math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)
+TABLE_TOP = 0.72
+DLO = DloParams(length=0.3, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.05, friction=0.5)
+
+
+@pytest.fixture(autouse=True)
+def _no_log_in_repo(tmp_path, monkeypatch) -> None:
+    """MuJoCo writes its instability warnings to MUJOCO_LOG.TXT in the working directory."""
+    monkeypatch.chdir(tmp_path)
+
+
+def box(hx: float, hy: float, hz: float) -> np.ndarray:
+    return np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+
+
+def table() -> Obstacle:
+    return Obstacle("table", [box(0.5, 0.5, 0.02)], pos=(0.0, 0.0, TABLE_TOP - 0.02))
+
+
+def on_table(**kw) -> Simulator:
+    return Simulator.from_parts([table()], DLO, GripperPose((-0.15, 0.0, TABLE_TOP + 0.0055), Q_X), **kw)
+
+
+def stretch(points: np.ndarray, seg: float) -> float:
+    return float(np.max(np.abs(np.linalg.norm(np.diff(points, axis=0), axis=1) / seg - 1.0)))
+
+
+def test_model_structure() -> None:
+    sim = on_table()
+    b = sim.built
+    assert b.nvert == 21
+    assert b.twist_joints[0] == "dlo_twist_0"
+    assert set(b.geom_piece.values()) == {("table", 0)}
+    pts = sim.points()
+    assert np.allclose(pts[0], [-0.15, 0, TABLE_TOP + 0.0055])
+    assert np.allclose(pts[-1], [0.15, 0, TABLE_TOP + 0.0055])  # straight along G_z = +x
+    assert sim.model.opt.timestep == 0.002
+
+
+def test_hangs_under_gravity_and_holds_together() -> None:
+    sim = Simulator.from_parts([], DLO, GripperPose((0.0, 0.0, 1.0), Q_X))
+    worst = 0.0
+    for _ in range(500):
+        rec = sim.step()
+        worst = max(worst, stretch(rec.points, 0.015))
+    assert worst < 0.03
+    assert np.allclose(rec.points[0], [0, 0, 1], atol=2e-3)  # held at the gripper
+    assert rec.points[-1][2] < 0.95  # the free end sags
+    assert np.allclose(rec.gripper_z, [1, 0, 0], atol=1e-9)
+    assert rec.vectors.shape == (20, 3)
+
+
+def test_rests_on_table_with_contacts() -> None:
+    sim = on_table()
+    rec = sim.step(300)
+    assert stretch(rec.points, 0.015) < 0.03
+    # lies on the table, no penetration beyond a fraction of a mm
+    assert np.all(rec.points[:, 2] > TABLE_TOP + 0.005 - 5e-4)
+    assert np.all(rec.points[:, 2] < TABLE_TOP + 0.005 + 2e-3)
+    assert rec.contacts
+    assert {(c.obj, c.piece, c.geom) for c in rec.contacts} == {("table", 0, "table.P0")}
+    segs = {c.segment for c in rec.contacts}
+    assert len(segs) >= 15
+    for c in rec.contacts:
+        assert np.allclose(c.normal, [0, 0, 1], atol=1e-3)
+        assert abs(c.surface[2] - TABLE_TOP) < 1e-4
+        assert c.dist < 0.0015
+        assert c.force >= 0.0 and (c.active or c.force == 0.0)
+    total = sum(c.force for c in rec.contacts)
+    assert 0.2 < total < 0.6  # most of the cable's weight (0.49 N) rests on the table
+
+
+def test_gripper_speed_is_bounded() -> None:
+    sim = on_table(max_speed=0.25, max_angular_speed=2.0)
+    sim.set_target((0.2, 0.3, 1.0), (1.0, 0.0, 0.0, 0.0))
+    prev = sim.record()
+    for _ in range(50):
+        rec = sim.step()
+        dp = np.linalg.norm(rec.gripper_pos - prev.gripper_pos)
+        assert dp <= 0.25 * 0.002 + 1e-12
+        dq = 2 * math.acos(min(1.0, abs(float(np.dot(rec.gripper_quat, prev.gripper_quat)))))
+        assert dq <= 2.0 * 0.002 + 1e-6
+        prev = rec
+    assert np.linalg.norm(rec.gripper_pos - [-0.15, 0, TABLE_TOP + 0.0055]) == pytest.approx(0.025, rel=1e-6)
+
+
+SCRIPT = Script(
+    waypoints=(
+        Waypoint(pos=(-0.15, 0.0, TABLE_TOP + 0.0055), quat=None, duration=0.1),
+        Waypoint(pos=(-0.15, 0.05, TABLE_TOP + 0.01), quat=None, duration=0.3, hold=0.1),
+    ),
+    scene=None,
+)
+
+
+def test_run_script_is_deterministic_and_replayable() -> None:
+    a = [r.points for r in on_table().run(SCRIPT)]
+    sim = on_table()
+    b = []
+    checkpoint = None
+    for r in sim.run(SCRIPT):
+        b.append(r.points)
+        if r.step == 100:
+            checkpoint = sim.get_state()
+    assert len(a) == len(b) == 250
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert np.linalg.norm(b[-1][0] - [-0.15, 0.05, TABLE_TOP + 0.01]) < 2e-3
+    # restore the step-100 checkpoint and continue with the same commands: bit-identical
+    sim.set_state(checkpoint)
+    for k in range(101, 151):
+        pos, quat = SCRIPT.target_at(k * 0.002, (-0.15, 0.0, TABLE_TOP + 0.0055), Q_X)
+        sim.set_target(pos, quat)
+        assert np.array_equal(sim.step().points, b[k - 1])
+
+
+def test_divergence_nan_names_the_step() -> None:
+    sim = on_table()
+    sim.step(10)
+    sim.data.qvel[5] = np.nan
+    with pytest.raises(SimulationDiverged) as ei:
+        sim.step()
+    assert ei.value.step == 11
+    assert "step 11" in str(ei.value)
+
+
+def test_divergence_absurd_timestep() -> None:
+    sim = Simulator.from_parts(
+        [table()], DLO, GripperPose((-0.15, 0, TABLE_TOP + 0.0055), Q_X), timestep=0.2, max_speed=100.0
+    )
+    sim.set_target((0.5, 0.5, 1.5))
+    with pytest.raises(SimulationDiverged, match=r"step \d+"):
+        for _ in range(200):
+            sim.step()
+
+
+def test_divergence_overstretch() -> None:
+    sim = on_table()
+    sim.data.qpos[sim.model.jnt_qposadr[sim.model.body_jntadr[sim.model.body("dlo_20").id]]] += 0.05
+    with pytest.raises(SimulationDiverged, match="segment 19"):
+        sim.step()
+
+
+def test_bad_target_rejected() -> None:
+    sim = on_table()
+    with pytest.raises(ValueError):
+        sim.set_target((0, 0, float("nan")))
+    with pytest.raises(ValueError):
+        sim.set_target((0, 0, 1), (0, 0, 0, 0))
+
+
+def test_export_xml_loads_in_plain_mujoco(tmp_path) -> None:
+    import mujoco
+
+    sim = on_table()
+    p = export_xml(sim.built, tmp_path / "model.xml")
+    m = mujoco.MjModel.from_xml_path(str(p))
+    assert m.nq == sim.model.nq and m.ngeom == sim.model.ngeom and m.neq == sim.model.neq
