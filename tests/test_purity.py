@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-PURE = ["dlovr.topology", "dlovr.discrete", "dlovr.transitions"]
+PURE = ["dlovr.topology", "dlovr.discrete", "dlovr.transitions", "dlovr.program"]
 
 
 @pytest.mark.parametrize("module", PURE)
