@@ -20,7 +20,7 @@ import numpy as np
 
 from dlovr.sim import DloParams, GripperPose, Obstacle, Simulator
 
-Q_X = (math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)
+Q_X = (math.cos(math.pi / 4), 0.0, -math.sin(math.pi / 4), 0.0)  # G_z = -x: cable along +x
 
 
 def _table_sim(segments: int) -> Simulator:

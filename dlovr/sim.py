@@ -8,7 +8,10 @@ The model (see ``../shared/NOTES.md``, "The cable in MuJoCo 4.0"):
   ``<elasticity young poisson damping>`` and ``<edge equality="true">``; its point ``i`` is the flex
   vertex ``i`` (``P_0 = V_S`` held by the gripper, ``P_n = V_E``);
 - the gripper: a mocap body ``gripper`` whose z axis is ``G_z``. The rod starts straight, leaving the
-  gripper along ``+G_z`` (point ``i`` at ``gripper.pos + i * seg * G_z``). It is held by two
+  gripper along ``-G_z`` (point ``i`` at ``gripper.pos - i * seg * G_z``): ``G_z`` points from the cable
+  into the gripper, so the identity orientation holds the cable hanging straight down, and the
+  gripper's contact vector ``C(V_S/G_z) = z`` (MODEL.md eq. 2) is, like ``-N(F)`` of a face, the
+  direction in which the gripper blocks the cable. It is held by two
   ``<connect>`` equalities (points 0 and 1) and a joint equality locking the first twist joint
   ``dlo_twist_0`` (so a dragged cable does not roll).
 
@@ -116,7 +119,8 @@ class DloParams:
 
 @dataclass(frozen=True)
 class GripperPose:
-    """Start pose of the gripper (``quat`` wxyz); the cable leaves it along its z axis ``G_z``."""
+    """Start pose of the gripper (``quat`` wxyz); the cable leaves it along ``-G_z`` (straight down for
+    the identity orientation)."""
 
     pos: Sequence[float] = (0.0, 0.0, 1.0)
     quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
@@ -146,7 +150,7 @@ def _rod_spec(dlo: Any, start: np.ndarray, direction: np.ndarray) -> mujoco.MjSp
     if n < 2:
         raise ValueError(f"the DLO needs at least 2 segments, got {n}")
     seg = float(dlo.length) / n
-    pts = [start + i * seg * direction for i in range(n + 1)]
+    pts = [start - i * seg * direction for i in range(n + 1)]
     root = ET.Element("mujoco", model="dlovr")
     wb = ET.SubElement(root, "worldbody")
     selfcollide = "auto" if seg > 2.2 * float(dlo.radius) else "none"
@@ -242,7 +246,7 @@ def build_model(
     seg = float(dlo.length) / int(dlo.segments)
     g = spec.worldbody.add_body(name=GRIPPER, mocap=True, pos=gpos.tolist(), quat=gquat.tolist())
     g.add_site(name="gripper_site", size=[0.01, 0.0, 0.0], rgba=[0.2, 0.6, 0.9, 0.5])
-    for i, anchor in ((0, [0.0, 0.0, 0.0]), (1, [0.0, 0.0, seg])):
+    for i, anchor in ((0, [0.0, 0.0, 0.0]), (1, [0.0, 0.0, -seg])):
         eq = spec.add_equality(
             name=f"hold_{i}",
             type=mujoco.mjtEq.mjEQ_CONNECT,

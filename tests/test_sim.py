@@ -11,8 +11,8 @@ import pytest
 from dlovr.script import Script, Waypoint
 from dlovr.sim import DloParams, GripperPose, Obstacle, SimulationDiverged, Simulator, export_xml
 
-# gripper z axis (the cable direction at the gripper) along +x
-Q_X = (math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)
+# the cable leaves the gripper along -G_z: G_z = -x lays it along +x
+Q_X = (math.cos(math.pi / 4), 0.0, -math.sin(math.pi / 4), 0.0)
 TABLE_TOP = 0.72
 DLO = DloParams(length=0.3, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.05, friction=0.5)
 
@@ -47,8 +47,15 @@ def test_model_structure() -> None:
     assert set(b.geom_piece.values()) == {("table", 0)}
     pts = sim.points()
     assert np.allclose(pts[0], [-0.15, 0, TABLE_TOP + 0.0055])
-    assert np.allclose(pts[-1], [0.15, 0, TABLE_TOP + 0.0055])  # straight along G_z = +x
+    assert np.allclose(pts[-1], [0.15, 0, TABLE_TOP + 0.0055])  # straight along -G_z = +x
     assert sim.model.opt.timestep == 0.002
+
+
+def test_identity_gripper_holds_the_cable_hanging_down() -> None:
+    sim = Simulator.from_parts([], DLO, GripperPose((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0)))
+    assert np.allclose(sim.points()[-1], [0, 0, 0.7])
+    rec = sim.step(100)
+    assert np.allclose(rec.points[-1], [0, 0, 0.7], atol=3e-3)  # soft edge equality: < 1 % stretch
 
 
 def test_hangs_under_gravity_and_holds_together() -> None:
@@ -60,7 +67,7 @@ def test_hangs_under_gravity_and_holds_together() -> None:
     assert worst < 0.03
     assert np.allclose(rec.points[0], [0, 0, 1], atol=2e-3)  # held at the gripper
     assert rec.points[-1][2] < 0.95  # the free end sags
-    assert np.allclose(rec.gripper_z, [1, 0, 0], atol=1e-9)
+    assert np.allclose(rec.gripper_z, [-1, 0, 0], atol=1e-9)
     assert rec.vectors.shape == (20, 3)
 
 
