@@ -176,3 +176,23 @@ def test_export_xml_loads_in_plain_mujoco(tmp_path) -> None:
     p = export_xml(sim.built, tmp_path / "model.xml")
     m = mujoco.MjModel.from_xml_path(str(p))
     assert m.nq == sim.model.nq and m.ngeom == sim.model.ngeom and m.neq == sim.model.neq
+
+
+def test_table_demo_script_runs() -> None:
+    """scenes/table.script.toml on the table of the table scene (top at z = 0), 20 segments."""
+    from pathlib import Path
+
+    from dlovr.script import load_script
+
+    script = load_script(Path(__file__).resolve().parent.parent / "scenes" / "table.script.toml")
+    tbl = Obstacle("table", [box(0.5, 0.5, 0.025)], pos=(0.0, 0.0, -0.025))
+    dlo = DloParams(length=0.6, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.06)
+    sim = Simulator.from_parts([tbl], dlo, GripperPose((0.1, 0.0, 0.75), (1.0, 0.0, 0.0, 0.0)))
+    tip_only = lying = 0
+    for rec in sim.run(script):
+        touching = {c.segment for c in rec.contacts if c.dist < 5e-4}
+        tip_only += touching == {19}
+        lying = max(lying, len(touching))
+    assert tip_only > 100  # V_E/F for a while
+    assert lying >= 10  # then lies on the table (E/F)
+    assert rec.points[-1][2] > 0.05 or len(touching) <= 1  # lifted off at the end
