@@ -196,3 +196,27 @@ def test_table_demo_script_runs() -> None:
     assert tip_only > 100  # V_E/F for a while
     assert lying >= 10  # then lies on the table (E/F)
     assert rec.points[-1][2] > 0.05 or len(touching) <= 1  # lifted off at the end
+
+
+def boxat(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def test_cable_in_concave_groove_touches_both_pieces() -> None:
+    # an L object given as two convex pieces: floor plate (piece 0) and wall (piece 1), groove along y
+    lblock = Obstacle(
+        "lblock",
+        [boxat((-0.3, -0.3, 0.0), (0.1, 0.3, 0.02)), boxat((0.1, -0.3, 0.0), (0.3, 0.3, 0.2))],
+        pos=(0.0, 0.0, 0.0),
+    )
+    q = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)  # G_z = -y: the cable runs along +y
+    sim = Simulator.from_parts([lblock], DLO, GripperPose((0.095, -0.15, 0.0255), q))
+    rec = sim.step(300)
+    near = [c for c in rec.contacts if c.dist < 5e-4]
+    floor = {c.segment for c in near if c.piece == 0}
+    wall = {c.segment for c in near if c.piece == 1}
+    assert len(floor & wall) >= 15
+    for c in near:
+        expected = [0, 0, 1] if c.piece == 0 else [-1, 0, 0]
+        assert np.allclose(c.normal, expected, atol=1e-2)
+        assert c.obj == "lblock" and c.geom == f"lblock.P{c.piece}"
