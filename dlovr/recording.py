@@ -1,0 +1,617 @@
+"""Demonstration recordings as MCAP files: writing, reading, validation, recovery.
+
+A recording holds everything needed to replay a demonstration with nothing else:
+
+- the scene (its TOML and meshes) as attachments, with a content hash in the metadata;
+- software versions (dlovr, mujoco) and the time step as metadata;
+- ``/dlovr/command``: the gripper command (target pose) of every step;
+- ``/dlovr/checkpoint``: full simulator states (``mjSTATE_INTEGRATION``) at the start and every second;
+- ``/dlovr/contact_states``: the contact situations (topological, discrete, forces, transitions) each
+  time they change, written in chunks of their own so batch readers skip the bulk data;
+- ``/foxglove/scene`` (``foxglove.SceneUpdate``) and ``/tf`` (``foxglove.FrameTransforms``) at ~30 Hz
+  so that Foxglove can show the cable, the gripper and the obstacles.
+
+Timestamps are ``t0_ns + step * dt_ns`` (uint64 ns). Messages are JSON; floats are written with
+Python's shortest round-trip repr, so states and commands come back bit for bit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import signal
+import time
+import tomllib
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path, PurePosixPath
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from dlovr import __version__
+
+FORMAT_VERSION = "1"
+PROFILE = "dlovr"
+TOPIC_COMMAND = "/dlovr/command"
+TOPIC_CHECKPOINT = "/dlovr/checkpoint"
+TOPIC_STATES = "/dlovr/contact_states"
+TOPIC_SCENE = "/foxglove/scene"
+TOPIC_TF = "/tf"
+REQUIRED_TOPICS = (TOPIC_COMMAND, TOPIC_CHECKPOINT, TOPIC_STATES)
+SCENE_PREFIX = "scene/"
+SCENE_TOML = "scene/scene.toml"
+MAX_ATTACHMENT_BYTES = 64 * 1024 * 1024
+
+
+class RecordingError(ValueError):
+    """A recording cannot be used; the message names the file and the problem in one line."""
+
+
+# --------------------------------------------------------------------------------------------------
+# The embedded scene
+# --------------------------------------------------------------------------------------------------
+
+
+def _safe_relpath(name: str) -> PurePosixPath:
+    p = PurePosixPath(name)
+    if p.is_absolute() or not p.parts or any(part in ("..", "") for part in p.parts) or "\\" in name:
+        raise RecordingError(f"unsafe file name {name!r} in the embedded scene")
+    return p
+
+
+@dataclass(frozen=True)
+class SceneBundle:
+    """A scene file and the mesh files it names, as bytes (paths relative to the scene file)."""
+
+    toml: bytes
+    files: tuple[tuple[str, bytes], ...] = ()
+
+    @classmethod
+    def from_path(cls, path: str | Path) -> SceneBundle:
+        """Read a scene TOML and the meshes its ``[[objects]]`` name (``mesh = "…"``)."""
+        path = Path(path)
+        raw = path.read_bytes()
+        data = tomllib.loads(raw.decode("utf-8"))
+        files = []
+        for obj in data.get("objects", []):
+            mesh = obj.get("mesh") if isinstance(obj, dict) else None
+            if isinstance(mesh, str):
+                rel = _safe_relpath(mesh)
+                files.append((str(rel), (path.parent / rel).read_bytes()))
+        return cls(raw, tuple(sorted(set(files))))
+
+    @property
+    def digest(self) -> str:
+        """sha256 over the TOML and every file (name and content)."""
+        h = hashlib.sha256()
+        h.update(b"scene.toml\0" + self.toml)
+        for name, data in self.files:
+            h.update(b"\0" + name.encode() + b"\0" + hashlib.sha256(data).digest())
+        return h.hexdigest()
+
+    def materialize(self, directory: str | Path) -> Path:
+        """Write the scene into ``directory`` (only the embedded files); return the TOML's path."""
+        root = Path(directory)
+        for name, data in self.files:
+            dst = root / _safe_relpath(name)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            dst.write_bytes(data)
+        out = root / "scene.toml"
+        out.write_bytes(self.toml)
+        return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------------
+
+
+def _schema(name: str) -> bytes:
+    return resources.files("dlovr").joinpath(f"data/foxglove/{name}.json").read_bytes()
+
+
+_COMMAND_SCHEMA = {
+    "title": "dlovr.Command",
+    "description": "Gripper target pose commanded for one step: pos m (world), quat wxyz.",
+    "type": "object",
+    "properties": {
+        "step": {"type": "integer"},
+        "pos": {"type": "array", "items": {"type": "number"}},
+        "quat": {"type": "array", "items": {"type": "number"}},
+    },
+}
+_CHECKPOINT_SCHEMA = {
+    "title": "dlovr.Checkpoint",
+    "description": "Full simulator state (mjSTATE_INTEGRATION) after `step` steps, plus the gripper target.",
+    "type": "object",
+    "properties": {
+        "step": {"type": "integer"},
+        "state": {"type": "array", "items": {"type": "number"}},
+        "target_pos": {"type": "array", "items": {"type": "number"}},
+        "target_quat": {"type": "array", "items": {"type": "number"}},
+    },
+}
+_STATES_SCHEMA = {
+    "title": "dlovr.ContactState",
+    "description": "A contact situation when it began: topological and discrete notation, classes of the "
+    "transition into it, and per contact its discrete state, faces, contact vector and normal force (N).",
+    "type": "object",
+    "properties": {
+        "t": {"type": "number"},
+        "step": {"type": "integer"},
+        "topological": {"type": "string"},
+        "discrete": {"type": "string"},
+        "classes": {"type": "array", "items": {"type": "string"}},
+        "contacts": {"type": "array", "items": {"type": "object"}},
+    },
+}
+
+
+def _dumps(obj: Any) -> bytes:
+    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+
+
+def _floats(a: Any) -> list[float]:
+    return [float(x) for x in np.asarray(a, dtype=float).ravel()]
+
+
+@contextmanager
+def finish_on_sigterm() -> Iterator[None]:
+    """Turn SIGTERM into ``SystemExit`` while inside, so ``with Recorder(...)`` finishes the file."""
+    try:
+        previous = signal.getsignal(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(143)))
+    except ValueError:  # not the main thread: nothing to install
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class Recorder:
+    """Writes one demonstration to an MCAP file (see the module docstring for its contents).
+
+    Use as a context manager: the file is finished on normal exit and on exceptions (and on SIGTERM
+    inside :func:`finish_on_sigterm`). It is flushed every ``flush_interval`` seconds of wall time so
+    that a killed writer loses at most that much (``dlovr recover``).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        scene: SceneBundle,
+        *,
+        scene_name: str,
+        dt: float,
+        extra_metadata: Mapping[str, str] | None = None,
+        flush_interval: float = 2.0,
+        frame_rate: float = 30.0,
+        t0_ns: int | None = None,
+    ):
+        import mujoco
+
+        self.path = Path(path)
+        self.dt = float(dt)
+        self.dt_ns = round(self.dt * 1e9)
+        self.t0_ns = time.time_ns() if t0_ns is None else int(t0_ns)
+        self.flush_interval = float(flush_interval)
+        self.frame_every = max(1, round(1.0 / (frame_rate * self.dt)))
+        self._fh: BinaryIO = open(self.path, "wb")
+        self._w = Writer(self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD)
+        self._w.start(profile=PROFILE, library=f"dlovr {__version__}")
+        meta = {
+            "format_version": FORMAT_VERSION,
+            "dlovr_version": __version__,
+            "mujoco_version": mujoco.__version__,
+            "scene_name": scene_name,
+            "scene_sha256": scene.digest,
+            "timestep": repr(self.dt),
+            "t0_ns": str(self.t0_ns),
+            **dict(extra_metadata or {}),
+        }
+        self._w.add_metadata("dlovr", meta)
+        now = self.t0_ns
+        self._w.add_attachment(now, now, SCENE_TOML, "application/toml", scene.toml)
+        for name, data in scene.files:
+            self._w.add_attachment(now, now, SCENE_PREFIX + name, "application/octet-stream", data)
+        js = "jsonschema"
+        ids = {
+            TOPIC_COMMAND: self._w.register_schema("dlovr.Command", js, _dumps(_COMMAND_SCHEMA)),
+            TOPIC_CHECKPOINT: self._w.register_schema("dlovr.Checkpoint", js, _dumps(_CHECKPOINT_SCHEMA)),
+            TOPIC_STATES: self._w.register_schema("dlovr.ContactState", js, _dumps(_STATES_SCHEMA)),
+            TOPIC_SCENE: self._w.register_schema("foxglove.SceneUpdate", js, _schema("foxglove.SceneUpdate")),
+            TOPIC_TF: self._w.register_schema(
+                "foxglove.FrameTransforms", js, _schema("foxglove.FrameTransforms")
+            ),
+        }
+        self._ch = {topic: self._w.register_channel(topic, "json", sid) for topic, sid in ids.items()}
+        self._pending_states: list[tuple[int, bytes]] = []
+        self._seq = 0
+        self._last_flush = time.monotonic()
+        self._closed = False
+        self._w.flush()
+
+    # -- messages -----------------------------------------------------------------------------------
+
+    def _ns(self, step: int) -> int:
+        return self.t0_ns + int(step) * self.dt_ns
+
+    def _add(self, topic: str, step: int, payload: bytes) -> None:
+        self._seq += 1
+        ns = self._ns(step)
+        self._w.add_message(self._ch[topic], ns, payload, ns, self._seq)
+
+    def command(self, step: int, pos: Sequence[float], quat: Sequence[float]) -> None:
+        """The gripper target commanded for step ``step`` (applied before that step)."""
+        self._add(
+            TOPIC_COMMAND, step, _dumps({"step": int(step), "pos": _floats(pos), "quat": _floats(quat)})
+        )
+        self._maybe_flush()
+
+    def checkpoint(
+        self, step: int, state: np.ndarray, target_pos: Sequence[float], target_quat: Sequence[float]
+    ) -> None:
+        """A full simulator state after ``step`` steps."""
+        payload = {
+            "step": int(step),
+            "state": _floats(state),
+            "target_pos": _floats(target_pos),
+            "target_quat": _floats(target_quat),
+        }
+        self._add(TOPIC_CHECKPOINT, step, _dumps(payload))
+
+    def contact_state(self, step: int, payload: Mapping[str, Any]) -> None:
+        """A contact situation that began at ``step`` (buffered; written in chunks of its own)."""
+        self._pending_states.append((int(step), _dumps(dict(payload))))
+
+    def frame(
+        self,
+        step: int,
+        points: np.ndarray,
+        gripper_pos: Sequence[float],
+        gripper_quat: Sequence[float],
+        radius: float,
+        obstacles: Sequence[tuple[str, np.ndarray]] = (),
+    ) -> None:
+        """Foxglove scene (cable, gripper, and on the first call the obstacles) and gripper frame.
+
+        ``obstacles``: (name, triangles (k, 3, 3) world frame) pairs, sent once (they persist).
+        """
+        ns = self._ns(step)
+        stamp = {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+        w, x, y, z = _floats(gripper_quat)
+        entities = [
+            {
+                "timestamp": stamp,
+                "frame_id": "world",
+                "id": "cable",
+                "lifetime": {"sec": 0, "nsec": 0},
+                "frame_locked": False,
+                "lines": [
+                    {
+                        "type": 0,
+                        "pose": {
+                            "position": {"x": 0, "y": 0, "z": 0},
+                            "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
+                        },
+                        "thickness": 2.0 * radius,
+                        "scale_invariant": False,
+                        "points": [{"x": p[0], "y": p[1], "z": p[2]} for p in np.asarray(points).tolist()],
+                        "color": {"r": 0.95, "g": 0.55, "b": 0.1, "a": 1.0},
+                    }
+                ],
+            },
+            {
+                "timestamp": stamp,
+                "frame_id": "gripper",
+                "id": "gripper",
+                "lifetime": {"sec": 0, "nsec": 0},
+                "frame_locked": True,
+                "cubes": [
+                    {
+                        "pose": {
+                            "position": {"x": 0, "y": 0, "z": 0.02},
+                            "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
+                        },
+                        "size": {"x": 0.03, "y": 0.03, "z": 0.04},
+                        "color": {"r": 0.3, "g": 0.3, "b": 0.35, "a": 1.0},
+                    }
+                ],
+            },
+        ]
+        for name, tris in obstacles:
+            entities.append(
+                {
+                    "timestamp": stamp,
+                    "frame_id": "world",
+                    "id": f"object/{name}",
+                    "lifetime": {"sec": 0, "nsec": 0},
+                    "frame_locked": False,
+                    "triangles": [
+                        {
+                            "pose": {
+                                "position": {"x": 0, "y": 0, "z": 0},
+                                "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
+                            },
+                            "points": [
+                                {"x": v[0], "y": v[1], "z": v[2]}
+                                for v in np.asarray(tris).reshape(-1, 3).tolist()
+                            ],
+                            "color": {"r": 0.6, "g": 0.65, "b": 0.7, "a": 1.0},
+                        }
+                    ],
+                }
+            )
+        self._add(TOPIC_SCENE, step, _dumps({"deletions": [], "entities": entities}))
+        tf = {
+            "transforms": [
+                {
+                    "timestamp": stamp,
+                    "parent_frame_id": "world",
+                    "child_frame_id": "gripper",
+                    "translation": dict(zip("xyz", _floats(gripper_pos), strict=True)),
+                    "rotation": {"x": x, "y": y, "z": z, "w": w},  # Foxglove is xyzw, MuJoCo wxyz
+                }
+            ]
+        }
+        self._add(TOPIC_TF, step, _dumps(tf))
+
+    # -- flushing and closing -----------------------------------------------------------------------
+
+    def _write_states(self) -> None:
+        """End the bulk chunk, write the buffered contact states, end their chunk."""
+        if not self._pending_states:
+            return
+        self._w.flush()
+        for step, payload in self._pending_states:
+            self._add(TOPIC_STATES, step, payload)
+        self._pending_states.clear()
+        self._w.flush()
+
+    def flush(self) -> None:
+        """Write everything so far to disk (complete chunks that ``dlovr recover`` can rescue)."""
+        self._write_states()
+        self._w.flush()
+        os.fsync(self._fh.fileno())
+        self._last_flush = time.monotonic()
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self.flush()
+
+    def close(self) -> None:
+        """Finish the file (summary and footer). Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._write_states()
+            self._w.finish()
+        finally:
+            self._fh.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------------
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    step: int
+    state: np.ndarray
+    target_pos: np.ndarray
+    target_quat: np.ndarray
+
+
+class Recording:
+    """A validated recording opened for reading. Raises :class:`RecordingError` on any problem."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        p = self.path
+        try:
+            size = p.stat().st_size
+        except OSError as e:
+            raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
+        if p.is_dir():
+            raise RecordingError(f"{p}: is a directory, not a recording")
+        if size == 0:
+            raise RecordingError(f"{p}: empty file, not an MCAP recording")
+        with open(p, "rb") as fh:
+            head = fh.read(len(MCAP_MAGIC))
+            fh.seek(max(0, size - len(MCAP_MAGIC)))
+            tail = fh.read()
+        if head != MCAP_MAGIC:
+            raise RecordingError(f"{p}: not an MCAP file (bad magic bytes)")
+        if tail != MCAP_MAGIC:
+            raise RecordingError(
+                f"{p}: truncated recording (no MCAP footer: the writer was killed?); "
+                f"try `dlovr recover {p} -o FIXED.mcap`"
+            )
+        try:
+            with open(p, "rb") as fh:
+                reader = make_reader(fh, validate_crcs=True)
+                header = reader.get_header()
+                summary = reader.get_summary()
+                meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+                attachments = {a.name: a.data for a in reader.iter_attachments()}
+        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
+            raise RecordingError(f"{p}: corrupt MCAP data: {_one_line(e)}") from None
+        if header.profile != PROFILE or "dlovr" not in meta:
+            raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
+        self.metadata: dict[str, str] = meta["dlovr"]
+        if summary is None:
+            raise RecordingError(f"{p}: recording has no summary section")
+        topics = {c.topic for c in summary.channels.values()}
+        missing = [t for t in REQUIRED_TOPICS if t not in topics]
+        if missing:
+            raise RecordingError(f"{p}: recording has no channel {missing[0]}")
+        self._counts = {
+            summary.channels[cid].topic: n for cid, n in (summary.statistics.channel_message_counts.items()
+                                                         if summary.statistics else [])
+        }  # fmt: skip
+        if SCENE_TOML not in attachments:
+            raise RecordingError(f"{p}: recording has no embedded scene ({SCENE_TOML})")
+        files = []
+        for name, data in attachments.items():
+            if name.startswith(SCENE_PREFIX) and name != SCENE_TOML:
+                rel = name[len(SCENE_PREFIX) :]
+                try:
+                    _safe_relpath(rel)
+                except RecordingError as e:
+                    raise RecordingError(f"{p}: {e}") from None
+                if len(data) > MAX_ATTACHMENT_BYTES:
+                    raise RecordingError(f"{p}: embedded file {rel} is too large")
+                files.append((rel, bytes(data)))
+        self.scene = SceneBundle(bytes(attachments[SCENE_TOML]), tuple(sorted(files)))
+        if self.scene.digest != self.metadata.get("scene_sha256"):
+            raise RecordingError(
+                f"{p}: the embedded scene was modified (its sha256 does not match the metadata)"
+            )
+        try:
+            self.dt = float(self.metadata["timestep"])
+            self.t0_ns = int(self.metadata["t0_ns"])
+        except (KeyError, ValueError):
+            raise RecordingError(f"{p}: metadata lacks a valid timestep / t0_ns") from None
+        if not (0 < self.dt < 1):
+            raise RecordingError(f"{p}: implausible timestep {self.dt}")
+
+    def count(self, topic: str) -> int:
+        return self._counts.get(topic, 0)
+
+    def _iter(self, topic: str) -> Iterator[dict[str, Any]]:
+        try:
+            with open(self.path, "rb") as fh:
+                reader = make_reader(fh, validate_crcs=True)
+                for _, _, msg in reader.iter_messages(topics=[topic]):
+                    yield json.loads(msg.data)
+        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
+            raise RecordingError(f"{self.path}: corrupt data in {topic}: {_one_line(e)}") from None
+
+    def states(self) -> list[dict[str, Any]]:
+        """The contact-state messages (reads only their chunks)."""
+        return list(self._iter(TOPIC_STATES))
+
+    def commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Commanded gripper targets: step numbers (k,), positions (k, 3), quaternions (k, 4)."""
+        steps, pos, quat = [], [], []
+        for m in self._iter(TOPIC_COMMAND):
+            steps.append(m["step"])
+            pos.append(m["pos"])
+            quat.append(m["quat"])
+        if not steps:
+            raise RecordingError(f"{self.path}: recording has no gripper commands")
+        s = np.asarray(steps, dtype=np.int64)
+        if np.any(np.diff(s) != 1):
+            raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
+        return s, np.asarray(pos, float), np.asarray(quat, float)
+
+    def checkpoints(self) -> list[Checkpoint]:
+        out = [
+            Checkpoint(int(m["step"]), np.asarray(m["state"], float), np.asarray(m["target_pos"], float),
+                       np.asarray(m["target_quat"], float))
+            for m in self._iter(TOPIC_CHECKPOINT)
+        ]  # fmt: skip
+        if not out:
+            raise RecordingError(f"{self.path}: recording has no checkpoints")
+        return out
+
+
+def _one_line(e: BaseException) -> str:
+    s = str(e).strip().splitlines()
+    return (s[0] if s else type(e).__name__)[:200]
+
+
+# --------------------------------------------------------------------------------------------------
+# Recovery
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RecoveryReport:
+    messages: int
+    attachments: int
+    last_time_s: float
+
+
+def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
+    """Copy every complete chunk of a recording whose writer was killed into a new, finished file."""
+    src, dst = Path(src), Path(dst)
+    if src.resolve() == dst.resolve():
+        raise RecordingError(f"{dst}: recover writes a new file; choose another output path")
+    try:
+        raw = src.read_bytes()
+    except OSError as e:
+        raise RecordingError(f"{src}: cannot read: {e.strerror}") from None
+    if not raw.startswith(MCAP_MAGIC):
+        raise RecordingError(f"{src}: not an MCAP file (bad magic bytes)")
+    from mcap.records import Attachment, Channel, Message, Metadata, Schema
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    attachments: list[Attachment] = []
+    metadata: list[Metadata] = []
+    header_profile = PROFILE
+    reader = StreamReader(io.BytesIO(raw), validate_crcs=True)
+    try:
+        for rec in reader.records:
+            name = type(rec).__name__
+            if name == "Header":
+                header_profile = rec.profile
+            elif isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                channels[rec.id] = rec
+            elif isinstance(rec, Message):
+                messages.append(rec)
+            elif isinstance(rec, Attachment):
+                attachments.append(rec)
+            elif isinstance(rec, Metadata):
+                metadata.append(rec)
+    except Exception:  # the broken tail: keep everything complete before it
+        pass
+    if not channels:
+        raise RecordingError(f"{src}: nothing recoverable (no complete chunk with channel definitions)")
+    with open(dst, "wb") as fh:
+        w = Writer(fh, compression=CompressionType.ZSTD)
+        w.start(profile=header_profile, library=f"dlovr {__version__} recover")
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
+        for a in attachments:
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        sid_map = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()}
+        cid_map = {
+            cid: w.register_channel(
+                c.topic, c.message_encoding, sid_map.get(c.schema_id, 0), dict(c.metadata)
+            )
+            for cid, c in channels.items()
+        }
+        for m in messages:
+            if m.channel_id in cid_map:
+                w.add_message(cid_map[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+        w.finish()
+    last = max((m.log_time for m in messages), default=0)
+    first = min((m.log_time for m in messages), default=0)
+    return RecoveryReport(len(messages), len(attachments), (last - first) / 1e9 if messages else math.nan)
