@@ -40,6 +40,7 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -326,13 +327,81 @@ class RodContact:
     active: bool
 
 
+@dataclass(frozen=True, eq=False)
+class ContactArrays:
+    """Raw rod-obstacle contacts of one step, one row per MuJoCo contact (see :class:`RodContact`).
+
+    ``point``/``segment``: -1 where MuJoCo does not report a vertex/element; ``geom``: MuJoCo geom id;
+    ``obj``: index into ``names[0]`` (object names); ``names[1]``: geom names by ``geom`` id.
+    ``self_pairs``: (k, 2) touching segment pairs of the rod itself.
+    """
+
+    point: np.ndarray
+    segment: np.ndarray
+    geom: np.ndarray
+    obj: np.ndarray
+    piece: np.ndarray
+    dist: np.ndarray
+    normal: np.ndarray
+    pos: np.ndarray
+    force: np.ndarray
+    active: np.ndarray
+    self_pairs: np.ndarray
+    names: tuple[tuple[str, ...], dict[int, str]]
+
+    def __len__(self) -> int:
+        return len(self.dist)
+
+    @property
+    def surface(self) -> np.ndarray:
+        """Surface points of the obstacles (``pos - normal * dist / 2``)."""
+        return self.pos - self.normal * (self.dist / 2.0)[:, None]
+
+    def as_list(self) -> tuple[RodContact, ...]:
+        objs, gnames = self.names
+        surf = self.surface
+        return tuple(
+            RodContact(
+                point=int(self.point[i]) if self.point[i] >= 0 else None,
+                segment=int(self.segment[i]) if self.segment[i] >= 0 else None,
+                obj=objs[self.obj[i]],
+                piece=int(self.piece[i]),
+                geom=gnames[int(self.geom[i])],
+                dist=float(self.dist[i]),
+                normal=self.normal[i].copy(),
+                pos=self.pos[i].copy(),
+                surface=surf[i].copy(),
+                force=float(self.force[i]),
+                active=bool(self.active[i]),
+            )
+            for i in range(len(self.dist))
+        )
+
+
+_EMPTY_CONTACTS = ContactArrays(
+    point=np.zeros(0, int),
+    segment=np.zeros(0, int),
+    geom=np.zeros(0, int),
+    obj=np.zeros(0, int),
+    piece=np.zeros(0, int),
+    dist=np.zeros(0),
+    normal=np.zeros((0, 3)),
+    pos=np.zeros((0, 3)),
+    force=np.zeros(0),
+    active=np.zeros(0, bool),
+    self_pairs=np.zeros((0, 2), int),
+    names=((), {}),
+)
+
+
 @dataclass(frozen=True)
 class StepRecord:
     """What one simulation step yields.
 
     ``points``: (n+1, 3) centerline points ``P_0..P_n``; ``vectors``: (n, 3) DLO vectors
     ``P_{i+1} - P_i``; gripper pose (``gripper_quat`` wxyz, ``gripper_z`` = ``G_z``) and the commanded
-    target; ``contacts``: raw rod-obstacle contacts; ``self_contacts``: pairs of touching segments.
+    target; ``contact_arrays``: raw rod-obstacle contacts as arrays (``contacts``: the same as
+    :class:`RodContact` objects); ``self_contacts``: pairs of touching segments.
     """
 
     step: int
@@ -344,8 +413,17 @@ class StepRecord:
     gripper_z: np.ndarray
     target_pos: np.ndarray
     target_quat: np.ndarray
-    contacts: tuple[RodContact, ...]
-    self_contacts: tuple[tuple[int, int], ...] = ()
+    contact_arrays: ContactArrays
+
+    @cached_property
+    def contacts(self) -> tuple[RodContact, ...]:
+        """The raw rod-obstacle contacts as :class:`RodContact` objects (built on first access)."""
+        return self.contact_arrays.as_list()
+
+    @property
+    def self_contacts(self) -> tuple[tuple[int, int], ...]:
+        """Pairs of touching segments of the rod (self-collision)."""
+        return tuple((int(a), int(b)) for a, b in self.contact_arrays.self_pairs)
 
 
 @dataclass(frozen=True)
@@ -409,11 +487,17 @@ class Simulator:
         m = self.model
         self._fatal = [int(getattr(mujoco.mjtWarning, w)) for w in _WARNINGS_FATAL]
         self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
+        objs = tuple(dict.fromkeys(o for o, _ in built.geom_piece.values()))
+        self._obj_of_geom = np.full(m.ngeom, -1, dtype=int)
+        self._piece_of_geom = np.full(m.ngeom, -1, dtype=int)
+        for g, (o, k) in built.geom_piece.items():
+            self._obj_of_geom[g] = objs.index(o)
+            self._piece_of_geom[g] = k
+        self._names = (objs, self._geom_names)
         mujoco.mj_forward(m, self.data)
         mid = built.mocap_id
         self.target_pos = self.data.mocap_pos[mid].copy()
         self.target_quat = self.data.mocap_quat[mid].copy()
-        self._force = np.zeros(6)
 
     @classmethod
     def from_parts(cls, obstacles: Sequence[Obstacle], dlo: Any, gripper: Any, **kw: Any) -> Simulator:
@@ -490,61 +574,75 @@ class Simulator:
                 f"segment {i} length off by {stretch:.1%} (bound {self.max_stretch:.0%})",
             )
 
-    def contacts(self) -> tuple[tuple[RodContact, ...], tuple[tuple[int, int], ...]]:
-        """Raw contacts of the rod with obstacle pieces, and self-contacts (segment pairs)."""
+    def contact_arrays(self) -> ContactArrays:
+        """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects)."""
         m, d, b = self.model, self.data, self.built
-        out: list[RodContact] = []
-        selfc: list[tuple[int, int]] = []
+        nc = int(d.ncon)
+        if nc == 0:
+            return _EMPTY_CONTACTS
+        c = d.contact
+        flex = c.flex[:nc]
+        geom = c.geom[:nc]
         f = b.flex_id
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.flex[0] == f and c.flex[1] == f:
-                selfc.append((int(min(c.elem)), int(max(c.elem))))
-                continue
-            if c.flex[1] == f and c.geom[0] >= 0:
-                side = 1
-                gid = int(c.geom[0])
-                sign = 1.0
-            elif c.flex[0] == f and c.geom[1] >= 0:
-                side = 0
-                gid = int(c.geom[1])
-                sign = -1.0  # frame normal points from geom[0]/flex[0] toward the other
+        selfm = (flex[:, 0] == f) & (flex[:, 1] == f)
+        side1 = (flex[:, 1] == f) & (geom[:, 0] >= 0)  # obstacle is geom[0], rod is side 1
+        side0 = (flex[:, 0] == f) & (geom[:, 1] >= 0) & ~side1
+        sel = np.nonzero(side0 | side1)[0]
+        s1 = side1[sel]
+        gid = np.where(s1, geom[sel, 0], geom[sel, 1])
+        known = self._piece_of_geom[gid] >= 0
+        sel, s1, gid = sel[known], s1[known], gid[known]
+        side = np.where(s1, 1, 0)
+        sign = np.where(s1, 1.0, -1.0)[:, None]  # frame normal points from side 0 toward side 1
+        normal = sign * c.frame[sel, :3]
+        dist = c.dist[sel].copy()
+        pos = c.pos[sel].copy()
+        adr = c.efc_address[sel]
+        force = np.zeros(len(sel))
+        act = adr >= 0
+        if np.any(act):
+            if m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL:
+                # normal force = sum of the 2*(dim-1) pyramid edge forces (as mj_contactForce decodes it)
+                dims = c.dim[sel][act]
+                a = adr[act]
+                ef = d.efc_force
+                k = int(dims[0])
+                if k > 1 and np.all(dims == k):
+                    force[act] = ef[a[:, None] + np.arange(2 * (k - 1))].sum(axis=1)
+                else:
+                    force[act] = [
+                        float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
+                        for i, n in zip(a, dims, strict=True)
+                    ]
             else:
-                continue
-            piece = b.geom_piece.get(gid)
-            if piece is None:
-                continue
-            elem = int(c.elem[side])
-            vert = int(c.vert[side])
-            n = sign * np.array(c.frame[:3])
-            pos = np.array(c.pos)
-            dist = float(c.dist)
-            force = 0.0
-            if c.efc_address >= 0:
-                mujoco.mj_contactForce(m, d, i, self._force)
-                force = float(self._force[0])
-            out.append(
-                RodContact(
-                    point=vert if vert >= 0 else None,
-                    segment=elem if elem >= 0 else None,
-                    obj=piece[0],
-                    piece=piece[1],
-                    geom=self._geom_names[gid],
-                    dist=dist,
-                    normal=n,
-                    pos=pos,
-                    surface=pos - n * dist / 2.0,
-                    force=force,
-                    active=bool(c.efc_address >= 0),
-                )
-            )
-        return tuple(out), tuple(selfc)
+                force[act] = d.efc_force[adr[act]]
+        elem = c.elem[sel, side]
+        vert = c.vert[sel, side]
+        sp = np.sort(c.elem[:nc][selfm], axis=1)
+        return ContactArrays(
+            point=vert.astype(int),
+            segment=elem.astype(int),
+            geom=gid.astype(int),
+            obj=self._obj_of_geom[gid],
+            piece=self._piece_of_geom[gid],
+            dist=dist,
+            normal=normal,
+            pos=pos,
+            force=force,
+            active=act,
+            self_pairs=sp.astype(int),
+            names=self._names,
+        )
+
+    def contacts(self) -> tuple[RodContact, ...]:
+        """Raw contacts of the rod with obstacle pieces at the current step, as objects."""
+        return self.contact_arrays().as_list()
 
     def record(self) -> StepRecord:
         d, mid = self.data, self.built.mocap_id
         pts = self.points()
         q = d.mocap_quat[mid].copy()
-        contacts, selfc = self.contacts()
+        ca = self.contact_arrays()
         return StepRecord(
             step=self.step_index,
             time=float(d.time),
@@ -555,8 +653,7 @@ class Simulator:
             gripper_z=quat_rotate(q, np.array([0.0, 0.0, 1.0])),
             target_pos=self.target_pos.copy(),
             target_quat=self.target_quat.copy(),
-            contacts=contacts,
-            self_contacts=selfc,
+            contact_arrays=ca,
         )
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
@@ -568,14 +665,12 @@ class Simulator:
         mid = self.built.mocap_id
         start_pos = self.data.mocap_pos[mid].copy()
         start_quat = self.data.mocap_quat[mid].copy()
-        t0 = float(self.data.time)
         dt = self.model.opt.timestep
         nsteps = round((script.total_duration + settle) / dt)
         for k in range(1, nsteps + 1):
             pos, quat = script.target_at(k * dt, start_pos=start_pos, start_quat=start_quat)
             self.set_target(pos, quat)
             yield self.step()
-        del t0
 
     # -- state --------------------------------------------------------------------------------------
 

@@ -220,3 +220,21 @@ def test_cable_in_concave_groove_touches_both_pieces() -> None:
         expected = [0, 0, 1] if c.piece == 0 else [-1, 0, 0]
         assert np.allclose(c.normal, expected, atol=1e-2)
         assert c.obj == "lblock" and c.geom == f"lblock.P{c.piece}"
+
+
+def test_contact_force_matches_mj_contact_force() -> None:
+    import mujoco
+
+    sim = on_table()
+    rec = sim.step(200)
+    ca = rec.contact_arrays
+    assert len(ca) == len(rec.contacts) > 0
+    d = sim.data
+    out = np.zeros(6)
+    rows = [i for i in range(d.ncon) if d.contact.efc_address[i] >= 0]
+    assert rows
+    expected = []
+    for i in range(d.ncon):
+        mujoco.mj_contactForce(sim.model, d, i, out)
+        expected.append(out[0] if d.contact.efc_address[i] >= 0 else 0.0)
+    assert np.allclose(np.sort(ca.force), np.sort(expected), rtol=1e-9, atol=1e-12)
