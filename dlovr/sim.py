@@ -441,14 +441,28 @@ class SimState:
 
 
 def obstacles_from_scene(scene: Any) -> list[Obstacle]:
-    """Convex pieces of each object of a ``dlovr.scene.Scene`` (uses ``dlovr.geometry``)."""
+    """Convex pieces of each object of a ``dlovr.scene.Scene``.
+
+    Uses ``dlovr.geometry.decompose(dlovr.scene.object_local_mesh(obj))``, the same call (and order) as
+    ``dlovr.geometry.build_object``, so MuJoCo piece ``k`` (geom ``"<obj>.P<k>"``) is geometry's
+    ``Piece.index == k``.
+    """
     from dlovr import geometry
+    from dlovr.scene import object_local_mesh
 
     out = []
     for obj in scene.objects:
-        dec = geometry.decompose(obj)
-        pieces = [np.asarray(p.vertices, dtype=float) for p in dec.pieces]
-        out.append(Obstacle(name=obj.name, pieces=pieces, pos=tuple(obj.pos), quat=tuple(obj.quat)))
+        pieces, _approximate = geometry.decompose(object_local_mesh(obj))
+        rgba = (*obj.color, 1.0) if getattr(obj, "color", None) else (0.6, 0.6, 0.65, 1.0)
+        out.append(
+            Obstacle(
+                name=obj.name,
+                pieces=[np.asarray(p, dtype=float) for p in pieces],
+                pos=tuple(obj.pos),
+                quat=tuple(obj.quat),
+                rgba=rgba,
+            )
+        )
     return out
 
 
@@ -498,6 +512,13 @@ class Simulator:
         mid = built.mocap_id
         self.target_pos = self.data.mocap_pos[mid].copy()
         self.target_quat = self.data.mocap_quat[mid].copy()
+        deep = [c for c in self.contacts() if c.dist < -0.5 * float(m.flex_radius[built.flex_id])]
+        if deep:
+            c = min(deep, key=lambda c: c.dist)
+            raise ValueError(
+                f"the cable's start pose (straight along -G_z from the gripper) penetrates {c.geom} "
+                f"by {-c.dist * 1000:.1f} mm at segment {c.segment}: change the gripper pose"
+            )
 
     @classmethod
     def from_parts(cls, obstacles: Sequence[Obstacle], dlo: Any, gripper: Any, **kw: Any) -> Simulator:

@@ -186,8 +186,8 @@ def test_table_demo_script_runs() -> None:
 
     script = load_script(Path(__file__).resolve().parent.parent / "scenes" / "table.script.toml")
     tbl = Obstacle("table", [box(0.5, 0.5, 0.025)], pos=(0.0, 0.0, -0.025))
-    dlo = DloParams(length=0.6, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.06)
-    sim = Simulator.from_parts([tbl], dlo, GripperPose((0.1, 0.0, 0.75), (1.0, 0.0, 0.0, 0.0)))
+    dlo = DloParams(length=0.5, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.05)
+    sim = Simulator.from_parts([tbl], dlo, GripperPose((0.0, 0.0, 0.55), (1.0, 0.0, 0.0, 0.0)))
     tip_only = lying = 0
     for rec in sim.run(script):
         touching = {c.segment for c in rec.contacts if c.dist < 5e-4}
@@ -238,3 +238,8 @@ def test_contact_force_matches_mj_contact_force() -> None:
         mujoco.mj_contactForce(sim.model, d, i, out)
         expected.append(out[0] if d.contact.efc_address[i] >= 0 else 0.0)
     assert np.allclose(np.sort(ca.force), np.sort(expected), rtol=1e-9, atol=1e-12)
+
+
+def test_start_pose_inside_an_obstacle_is_rejected() -> None:
+    with pytest.raises(ValueError, match=r"penetrates table\.P0"):
+        Simulator.from_parts([table()], DLO, GripperPose((0.0, 0.0, TABLE_TOP + 0.1), (1.0, 0.0, 0.0, 0.0)))
