@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -313,6 +313,39 @@ def tip_touches(
         if -sum(a * float(b) for a, b in zip(d, n, strict=True)) / (norm * nn) > sin_tip:
             return True
     return False
+
+
+def situation_from_points(
+    point_env: Sequence[Iterable[EnvPrimitive]],
+    vectors: Sequence[Sequence[float]],
+    face_normal: Callable[[str], Sequence[float]],
+    *,
+    tip_angle_deg: float = 15.0,
+    gripped: bool = True,
+    gripper_z: Vec3 | None = None,
+) -> Situation:
+    """Contact situation from the primitives every point touches, with the end-vertex rule.
+
+    ``vectors[i]`` is D_i = p_{i+1} - p_i for i < n (len n or n+1); ``face_normal`` gives a face's
+    outward unit normal. A cable end keeps its contacts only when :func:`tip_touches` says the tip
+    itself is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``.
+    """
+    env = [list(e) for e in point_env]
+    n = len(env) - 1
+    vecs = [tuple(float(x) for x in v) for v in vectors]
+    if len(vecs) not in (n, n + 1):
+        raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
+    ends = [(n, vecs[n - 1])]
+    if not gripped:
+        ends.append((0, tuple(-x for x in vecs[0])))
+    for i, d in ends:
+        names = sort_faces(f for e in env[i] for f in e.faces)
+        if names and not tip_touches(d, [face_normal(f) for f in names], tip_angle_deg):
+            env[i] = []
+    if gripped:
+        env[0] = [EnvPrimitive("G", (), gripper_z)]
+    full = vecs if len(vecs) == n + 1 else [*vecs, vecs[-1]]
+    return contract(env, full)  # type: ignore[arg-type]
 
 
 # --------------------------------------------------------------------------------------------------

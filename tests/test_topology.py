@@ -19,6 +19,7 @@ from dlovr.topology import (
     faces,
     parse_contact,
     parse_situation,
+    situation_from_points,
     tip_touches,
 )
 
@@ -192,3 +193,20 @@ def test_tip_into_one_face_of_a_groove_touches():
     a = math.radians(20)
     assert tip_touches((math.sin(a), math.cos(a), 0.0), [(0, 0, 1), (-1, 0, 0)])
     assert not tip_touches((0.0, 1.0, 0.0), [(0, 0, 1), (-1, 0, 0)])  # along the groove: an E contact
+
+
+def test_situation_from_points_applies_gripper_and_end_vertex_rule():
+    floor = faces("t.F1")
+    normals = {"t.F1": (0.0, 0.0, 1.0)}
+    env = [[floor], [], [floor], [floor], [floor]]
+    flat = [(1.0, 0.0, 0.0)] * 4
+    s = situation_from_points(env, flat, normals.__getitem__, gripper_z=(0.0, 0.0, 1.0))
+    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/N"  # last segment lies on the face: V_E free
+    assert s.contacts[0].env[0].z == (0.0, 0.0, 1.0)
+    down = [*flat[:3], (0.7, 0.0, -0.7)]
+    s = situation_from_points(env, down, normals.__getitem__)
+    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/t.F1"  # the tip points into the face
+    s = situation_from_points(env, flat, normals.__getitem__, gripped=False)
+    assert s.contacts[0].is_free  # V_S lying flat, not gripped: not a tip contact
+    with pytest.raises(ValueError, match="DLO vectors"):
+        situation_from_points(env, flat[:2], normals.__getitem__)

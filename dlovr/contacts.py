@@ -1,0 +1,207 @@
+"""Per-step contact extraction: a simulation step -> topological and discrete contact situation.
+
+Pure (numpy + the model + geometry; no MuJoCo): it reads the cable points and, when given, the raw
+contact arrays of :class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach
+normal forces). Contacts are labelled geometrically (NOTES.md): a point touches a piece when its
+centerline is within ``radius + enter_tol`` of it, and keeps touching until it is farther than
+``radius + leave_tol`` (hysteresis). The per-step situations are debounced (MODEL.md §4.2) into the
+demonstration's kept situations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dlovr.discrete import DiscreteSituation, ModelParams, discretize
+from dlovr.geometry import SceneGeometry
+from dlovr.topology import EnvPrimitive, Situation, situation_from_points
+from dlovr.transitions import Debouncer, Kept, classify_step, is_transient
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """The contact situation of one step.
+
+    ``forces``: per contact of ``topological`` (same order), the summed normal force (N) of the
+    simulator's contacts on that stretch of cable; 0 for free contacts.
+    """
+
+    step: int
+    t: float
+    topological: Situation
+    discrete: DiscreteSituation
+    forces: tuple[float, ...]
+
+    def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
+        """JSON-able form for recordings and the UI."""
+        contacts = []
+        for tc, dc, f in zip(self.topological.contacts, self.discrete.contacts, self.forces, strict=True):
+            contacts.append(
+                {
+                    "dlo": tc.dlo.format(),
+                    "span": list(tc.dlo.span) if tc.dlo.span else None,
+                    "state": dc.state.name,
+                    "faces": list(dc.faces),
+                    "vector": list(dc.vector) if dc.vector is not None else None,
+                    "force": f,
+                }
+            )
+        return {
+            "t": self.t,
+            "step": self.step,
+            "topological": self.topological.format(),
+            "discrete": self.discrete.format(),
+            "classes": list(classes),
+            "contacts": contacts,
+        }
+
+
+def primitives_per_point(n_points: int, hits: Sequence[Any]) -> list[list[EnvPrimitive]]:
+    """Environment primitives of every point from geometry hits (one per piece; a primitive whose
+    faces are a subset of another's at the same point adds nothing and is dropped)."""
+    out: list[set[EnvPrimitive]] = [set() for _ in range(n_points)]
+    for h in hits:
+        out[h.point].add(EnvPrimitive("faces", h.faces))
+    res: list[list[EnvPrimitive]] = []
+    for s in out:
+        res.append(sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s)))
+    return res
+
+
+@dataclass
+class ContactTracker:
+    """Turns simulation steps into contact situations, debounced into the demonstration's sequence.
+
+    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. ``changes`` lists every step at which the
+    raw situation changed (what a recording stores); ``kept`` the debounced situations.
+    """
+
+    geometry: SceneGeometry
+    params: ModelParams = field(default_factory=ModelParams)
+    hold: float = 0.01
+    enter_tol: float = 5e-4
+    leave_tol: float = 1e-3
+    changes: list[ContactState] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
+        self._touching: set[tuple[int, str, int]] = set()
+        self.current: ContactState | None = None
+
+    @property
+    def kept(self) -> list[Kept[DiscreteSituation]]:
+        return self._debouncer.kept
+
+    def classify(
+        self,
+        points: np.ndarray,
+        gripper_z: Sequence[float] | None = None,
+        candidates: np.ndarray | None = None,
+    ) -> Situation:
+        """Topological situation of the cable polyline ``points`` (hysteresis applied)."""
+        pts = np.asarray(points, dtype=float)
+        r = self.geometry.radius
+        if candidates is None:
+            idx = np.arange(len(pts))
+        else:
+            prev = np.fromiter((k[0] for k in self._touching), dtype=np.int64, count=len(self._touching))
+            idx = np.unique(np.concatenate([candidates.astype(np.int64), prev]))
+        hits = self.geometry.classify_points(pts[idx], contact_tol=self.leave_tol) if len(idx) else []
+        kept_hits = []
+        touching: set[tuple[int, str, int]] = set()
+        for h in hits:
+            point = int(idx[h.point])
+            key = (point, h.piece.obj, h.piece.index)
+            if h.distance <= r + self.enter_tol or (
+                key in self._touching and h.distance <= r + self.leave_tol
+            ):
+                touching.add(key)
+                kept_hits.append(_Hit(point, h.faces))
+        self._touching = touching
+        env = primitives_per_point(len(pts), kept_hits)
+        z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
+        return situation_from_points(
+            env,
+            np.diff(pts, axis=0),
+            self.geometry.face_normal,
+            tip_angle_deg=self.params.tip_angle_deg,
+            gripper_z=z,  # type: ignore[arg-type]
+        )
+
+    def update(self, record: Any) -> ContactState:
+        """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
+        ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
+        arrays = getattr(record, "contact_arrays", None)
+        pts = np.asarray(record.points, dtype=float)
+        candidates = None
+        point_of = np.zeros(0, dtype=np.int64)
+        if arrays is not None:
+            point_of = _contact_points(arrays, pts)
+            candidates = np.unique(point_of[point_of >= 0])
+        topo = self.classify(pts, record.gripper_z, candidates)
+        prev = self.current
+        if prev is not None and prev.topological == topo and _vector_independent(topo):
+            disc = prev.discrete
+        else:
+            disc = discretize(topo, self.geometry.fact_book(), self.params)
+        forces = _forces(topo, arrays, point_of)
+        state = ContactState(int(record.step), float(record.time), topo, disc, forces)
+        if prev is None or prev.discrete != disc or prev.topological != topo:
+            self.changes.append(state)
+        self.current = state
+        self._debouncer.push(state.t, disc)
+        return state
+
+    def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
+        """The kept situations with the classes of the transition into each (``()`` for the first)."""
+        kept = self.kept
+        return [
+            (k, classify_step(kept[i - 1].situation, k.situation) if i else ()) for i, k in enumerate(kept)
+        ]
+
+
+@dataclass(frozen=True)
+class _Hit:
+    point: int
+    faces: tuple[str, ...]
+
+
+def _vector_independent(topo: Situation) -> bool:
+    """Discrete states depend on DLO vectors only through point/line decisions of E contacts on
+    edges: without such contacts the discrete situation of an unchanged topology can be reused."""
+    return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
+
+
+def _contact_points(arrays: Any, pts: np.ndarray) -> np.ndarray:
+    """Cable point of each raw contact: its vertex, or the nearer end of its segment (-1: none)."""
+    if len(arrays.dist) == 0:
+        return np.zeros(0, dtype=np.int64)
+    point = np.asarray(arrays.point, dtype=np.int64)
+    seg = np.asarray(arrays.segment, dtype=np.int64)
+    out = point.copy()
+    use_seg = (point < 0) & (seg >= 0)
+    if use_seg.any():
+        s = seg[use_seg]
+        pos = np.asarray(arrays.pos)[use_seg]
+        d0 = np.linalg.norm(pts[s] - pos, axis=1)
+        d1 = np.linalg.norm(pts[s + 1] - pos, axis=1)
+        out[use_seg] = np.where(d1 < d0, s + 1, s)
+    return out
+
+
+def _forces(topo: Situation, arrays: Any, point_of: np.ndarray) -> tuple[float, ...]:
+    if arrays is None or len(point_of) == 0:
+        return tuple(0.0 for _ in topo.contacts)
+    force = np.asarray(arrays.force, dtype=float)
+    out = []
+    for c in topo.contacts:
+        if c.is_free or c.dlo.span is None:
+            out.append(0.0)
+            continue
+        a, b = c.dlo.span
+        out.append(float(force[(point_of >= a) & (point_of <= b)].sum()))
+    return tuple(out)
