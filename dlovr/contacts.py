@@ -92,6 +92,17 @@ class ContactTracker:
         self._touching: set[tuple[int, str, int]] = set()
         self.current: ContactState | None = None
 
+    def restart(self, record: Any) -> ContactState:
+        """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
+
+        A recording starts this way, and its replay too, so both see the same contact states.
+        """
+        self._debouncer = Debouncer(self.hold, is_transient)
+        self._touching = set()
+        self.changes = []
+        self.current = None
+        return self.update(record)
+
     @property
     def kept(self) -> list[Kept[DiscreteSituation]]:
         return self._debouncer.kept

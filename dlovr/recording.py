@@ -39,6 +39,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
+from dlovr.transitions import classify_step
 
 FORMAT_VERSION = "1"
 PROFILE = "dlovr"
@@ -391,6 +392,10 @@ class Recorder:
         if time.monotonic() - self._last_flush >= self.flush_interval:
             self.flush()
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def close(self) -> None:
         """Finish the file (summary and footer). Safe to call twice."""
         if self._closed:
@@ -615,3 +620,182 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
     last = max((m.log_time for m in messages), default=0)
     first = min((m.log_time for m in messages), default=0)
     return RecoveryReport(len(messages), len(attachments), (last - first) / 1e9 if messages else math.nan)
+
+
+# --------------------------------------------------------------------------------------------------
+# Recording a running demonstration, and replaying one
+# --------------------------------------------------------------------------------------------------
+
+CHECKPOINT_EVERY_S = 1.0
+
+
+class DemoRecorder:
+    """Records a running demonstration: call :meth:`step` after every simulation step.
+
+    ``sim`` is a :class:`dlovr.sim.Simulator`, ``tracker`` its :class:`dlovr.contacts.ContactTracker`;
+    the scene is embedded from ``scene.path``. The first checkpoint is written at construction (so a
+    recording may start at any moment of a session), then one every second of simulated time.
+    """
+
+    def __init__(self, path: str | Path, scene: Any, sim: Any, tracker: Any, **kw: Any):
+        dt = float(sim.model.opt.timestep)
+        self.sim, self.tracker = sim, tracker
+        self.rec = Recorder(path, SceneBundle.from_path(scene.path), scene_name=scene.name, dt=dt, **kw)
+        self.path = self.rec.path
+        self.start_step = int(sim.step_index)
+        self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
+        self._radius = float(scene.dlo.radius)
+        self._obstacles = [(o.name, np.asarray(o.mesh.triangles)) for o in tracker.geometry.objects]
+        self._checkpoint()
+        start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
+        self._prev = start.discrete
+        self._n_changes = len(tracker.changes)
+        self.rec.contact_state(self.start_step, start.payload())
+
+    def _checkpoint(self) -> None:
+        st = self.sim.get_state()
+        self.rec.checkpoint(st.step, st.mj, st.target_pos, st.target_quat)
+
+    def step(self, record: Any) -> None:
+        """Log the step just taken (its command, and on schedule checkpoints, states and frames)."""
+        k = int(record.step)
+        self.rec.command(k, record.target_pos, record.target_quat)
+        for st in self.tracker.changes[self._n_changes :]:
+            classes = classify_step(self._prev, st.discrete) if self._prev is not None else ()
+            self.rec.contact_state(st.step, st.payload(classes))
+            self._prev = st.discrete
+        self._n_changes = len(self.tracker.changes)
+        since = k - self.start_step
+        if since % self._cp_every == 0:
+            self._checkpoint()
+        if since % self.rec.frame_every == 0:
+            first = since == self.rec.frame_every
+            self.rec.frame(
+                k, record.points, record.gripper_pos, record.gripper_quat, self._radius,
+                self._obstacles if first else (),
+            )  # fmt: skip
+
+    def close(self) -> Path:
+        """Finish the file (with a final checkpoint at the last step); return its path. Idempotent."""
+        if not self.rec.closed:
+            if (int(self.sim.step_index) - self.start_step) % self._cp_every:
+                self._checkpoint()
+            self.rec.close()
+        return self.path
+
+    def __enter__(self) -> DemoRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """Outcome of :func:`replay`. ``divergence``: the first difference found by ``verify`` (or None)."""
+
+    steps: int
+    sim_time: float
+    wall_time: float
+    states: tuple[dict[str, Any], ...]
+    divergence: str | None
+    warnings: tuple[str, ...]
+
+
+def load_embedded_scene(recording: Recording, directory: str | Path) -> Any:
+    """Load the recording's own scene (written into ``directory``; never a path named inside it)."""
+    from dlovr.scene import SceneError, load_scene
+
+    path = recording.scene.materialize(directory)
+    try:
+        return load_scene(path)
+    except SceneError as e:
+        raise RecordingError(f"{recording.path}: embedded scene is invalid: {e}") from None
+
+
+def replay(
+    path: str | Path, *, verify: bool = False, progress: Any = None, hold: float | None = None
+) -> ReplayResult:
+    """Re-simulate a recording from its first checkpoint and its command stream alone.
+
+    With ``verify``, the state at every checkpoint is compared bit for bit and the contact-state
+    sequence with the recorded one; the first difference is reported in ``divergence``.
+    ``progress(n)`` is called with the number of steps done so far.
+    """
+    import tempfile
+
+    import mujoco
+
+    from dlovr.contacts import ContactTracker
+    from dlovr.geometry import SceneGeometry
+    from dlovr.sim import SimState, Simulator
+
+    rec = Recording(path)
+    warnings = []
+    for key, have in (("mujoco_version", mujoco.__version__), ("dlovr_version", __version__)):
+        want = rec.metadata.get(key)
+        if want != have:
+            warnings.append(
+                f"recorded with {key.split('_')[0]} {want}, replaying with {have}: may not be bit-exact"
+            )
+    steps, pos, quat = rec.commands()
+    cps = rec.checkpoints()
+    recorded_states = rec.states()
+    with tempfile.TemporaryDirectory(prefix="dlovr-replay-") as tmp:
+        scene = load_embedded_scene(rec, tmp)
+        sim = Simulator(scene)
+        if abs(sim.model.opt.timestep - rec.dt) > 1e-15:
+            raise RecordingError(
+                f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
+            )
+        tracker = ContactTracker(
+            SceneGeometry.from_scene(scene), scene.params, **({"hold": hold} if hold else {})
+        )
+    first = cps[0]
+    if len(first.state) != len(sim.get_state().mj):
+        raise RecordingError(f"{rec.path}: checkpoint size does not match the embedded scene's model")
+    sim.set_state(SimState(first.state, first.step, first.target_pos, first.target_quat))
+    if steps[0] != first.step + 1:
+        raise RecordingError(f"{rec.path}: command stream does not start right after the first checkpoint")
+    by_step = {c.step: c for c in cps[1:]}
+    divergence: str | None = None
+    t0 = time.perf_counter()
+    tracker.restart(sim.record())
+    dt = rec.dt
+    for i, k in enumerate(steps):
+        # the recorded targets are the exact ones used (already validated and normalised when
+        # recorded): set them as they are, since normalising again may change the last bit
+        sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
+        record = sim.step()
+        tracker.update(record)
+        if verify and divergence is None and int(k) in by_step:
+            want = by_step[int(k)].state
+            got = sim.get_state().mj
+            if not np.array_equal(want.view(np.uint64), got.view(np.uint64)):
+                bad = int(np.argmax(want.view(np.uint64) != got.view(np.uint64)))
+                divergence = (
+                    f"state differs at checkpoint step {int(k)} (t={k * dt:.3f} s), element {bad}: "
+                    f"recorded {want[bad]!r}, replayed {got[bad]!r}"
+                )
+        if progress is not None and (i % 500 == 0 or i == len(steps) - 1):
+            progress(i + 1)
+    wall = time.perf_counter() - t0
+    replayed = tuple(st.payload() for st in tracker.changes)
+    if verify and divergence is None:
+        divergence = _compare_states(recorded_states, replayed, dt)
+    return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
+
+
+def _compare_states(
+    recorded: Sequence[Mapping[str, Any]], replayed: Sequence[Mapping[str, Any]], dt: float
+) -> str | None:
+    for i, (a, b) in enumerate(zip(recorded, replayed, strict=False)):
+        for key in ("step", "topological", "discrete"):
+            if a.get(key) != b.get(key):
+                return (
+                    f"contact state {i + 1} (t={a.get('step', 0) * dt:.3f} s) differs in {key}: "
+                    f"recorded {a.get(key)!r}, replayed {b.get(key)!r}"
+                )
+    if len(recorded) != len(replayed):
+        return f"recorded {len(recorded)} contact-state changes, replay produced {len(replayed)}"
+    return None
