@@ -35,6 +35,8 @@ class ContactState:
     topological: Situation
     discrete: DiscreteSituation
     forces: tuple[float, ...]
+    gripper_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gripper_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
 
     def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
         """JSON-able form for recordings and the UI."""
@@ -56,6 +58,8 @@ class ContactState:
             "topological": self.topological.format(),
             "discrete": self.discrete.format(),
             "classes": list(classes),
+            "gripper_pos": list(self.gripper_pos),
+            "gripper_quat": list(self.gripper_quat),
             "contacts": contacts,
         }
 
@@ -160,7 +164,11 @@ class ContactTracker:
         else:
             disc = discretize(topo, self.geometry.fact_book(), self.params)
         forces = _forces(topo, arrays, point_of)
-        state = ContactState(int(record.step), float(record.time), topo, disc, forces)
+        state = ContactState(
+            int(record.step), float(record.time), topo, disc, forces,
+            _tuple(getattr(record, "gripper_pos", (0.0, 0.0, 0.0))),
+            _tuple(getattr(record, "gripper_quat", (1.0, 0.0, 0.0, 0.0))),
+        )  # fmt: skip
         if prev is None or prev.discrete != disc or prev.topological != topo:
             self.changes.append(state)
         self.current = state
@@ -173,6 +181,10 @@ class ContactTracker:
         return [
             (k, classify_step(kept[i - 1].situation, k.situation) if i else ()) for i, k in enumerate(kept)
         ]
+
+
+def _tuple(v: Any) -> Any:
+    return tuple(float(x) for x in v)
 
 
 @dataclass(frozen=True)

@@ -220,6 +220,7 @@ class Recorder:
             "scene_sha256": scene.digest,
             "timestep": repr(self.dt),
             "t0_ns": str(self.t0_ns),
+            "hold": repr(DEFAULT_HOLD),
             **dict(extra_metadata or {}),
         }
         self._w.add_metadata("dlovr", meta)
@@ -799,3 +800,74 @@ def _compare_states(
     if len(recorded) != len(replayed):
         return f"recorded {len(recorded)} contact-state changes, replay produced {len(replayed)}"
     return None
+
+
+# --------------------------------------------------------------------------------------------------
+# From recorded contact states to kept situations and programs (reads only the states channel)
+# --------------------------------------------------------------------------------------------------
+
+DEFAULT_HOLD = 0.01
+
+
+def situation_from_payload(payload: Mapping[str, Any]) -> Any:
+    """The discrete situation of a contact-state message, with its contact vectors."""
+    from dataclasses import replace
+
+    from dlovr.discrete import DiscreteSituation, parse_discrete_situation
+
+    sit = parse_discrete_situation(payload["discrete"])
+    contacts = payload.get("contacts") or []
+    if len(contacts) == len(sit.contacts):
+        sit = DiscreteSituation(
+            tuple(
+                replace(c, vector=tuple(m["vector"])) if m.get("vector") is not None else c
+                for c, m in zip(sit.contacts, contacts, strict=True)
+            )
+        )
+    return sit
+
+
+def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
+    """The recording's contact situations debounced as in MODEL.md §4.2, as ``TimedSituation``s."""
+    from dlovr.program import TimedSituation
+    from dlovr.transitions import Debouncer, is_transient
+
+    payloads = recording.states()
+    if not payloads:
+        raise RecordingError(f"{recording.path}: recording has no contact states")
+    hold = float(recording.metadata.get("hold", DEFAULT_HOLD)) if hold is None else hold
+    deb: Debouncer[Any] = Debouncer(hold, is_transient)
+    first: dict[Any, Mapping[str, Any]] = {}
+    try:
+        for p in payloads:
+            sit = situation_from_payload(p)
+            deb.push(float(p["t"]), sit)
+            first.setdefault((float(p["t"]), sit), p)
+    except (KeyError, ValueError, TypeError) as e:
+        raise RecordingError(f"{recording.path}: bad contact-state message: {e}") from None
+    end = payloads[-1]["t"]
+    n_steps = recording.count(TOPIC_COMMAND)
+    if n_steps:
+        end = max(end, (int(recording.checkpoints()[0].step) + n_steps) * recording.dt)
+    out = []
+    for i, k in enumerate(deb.kept):
+        p = first.get((k.start, k.situation), {})
+        stop = k.end if i + 1 < len(deb.kept) else end
+        force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
+        out.append(
+            TimedSituation(k.start, round(stop - k.start, 9), k.situation, p.get("topological"), force)
+        )
+    return out
+
+
+def compile_recording(path: str | Path, hold: float | None = None) -> Any:
+    """Compile a recording into a program (MODEL.md §5); reads only the contact-state channel."""
+    from dlovr.program import PoseTrack, compile_program
+
+    rec = Recording(path)
+    states = kept_states(rec, hold)
+    payloads = rec.states()
+    t = np.array([float(p["t"]) for p in payloads])
+    pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+    quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+    return compile_program(states, PoseTrack(t, pos, quat), name=Path(path).stem, source=Path(path).name)
