@@ -286,12 +286,6 @@ class DecompositionError(ValueError):
     """The exact decomposition failed (the caller falls back to CoACD)."""
 
 
-def _is_convex(m, rel: float = 1e-9) -> bool:
-    v = m.volume()
-    h = m.hull().volume()
-    return h - v <= rel * max(h, 1e-300)
-
-
 def _reflex_planes(tm: trimesh.Trimesh) -> list[tuple[np.ndarray, float]]:
     """Planes (normal, offset) of triangles adjacent to reflex (concave) edges, deterministic order."""
     adj = tm.face_adjacency
@@ -314,11 +308,50 @@ def _reflex_planes(tm: trimesh.Trimesh) -> list[tuple[np.ndarray, float]]:
     return [planes[k] for k in sorted(planes)]
 
 
+def _solid_vertices(m) -> np.ndarray:
+    """Vertices of a manifold that are corners of the solid.
+
+    A cut along the plane of one of the solid's own faces can leave a zero-volume fold: a vertex whose
+    triangles all lie in one plane, sticking out of the cap. Such vertices (and harmless ones inside a
+    flat face) are dropped, so that they do not make a convex piece look non-convex.
+    """
+    mm = m.to_mesh64()
+    v = np.asarray(mm.vert_properties)[:, :3]
+    f = np.asarray(mm.tri_verts, dtype=np.int64)
+    tn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    tn = tn / np.maximum(np.linalg.norm(tn, axis=1, keepdims=True), 1e-300)
+    keep = np.zeros(len(v), dtype=bool)
+    ref = np.full((len(v), 3), np.nan)
+    for t in range(len(f)):
+        for k in range(3):
+            i = f[t, k]
+            if np.isnan(ref[i, 0]):
+                ref[i] = tn[t]
+            elif abs(abs(float(ref[i] @ tn[t])) - 1.0) > 1e-9:
+                keep[i] = True
+    return v[keep]
+
+
+def _convex_piece(m):
+    """The piece as a clean convex manifold if it is convex (up to folds), else None."""
+    import manifold3d
+
+    pts = _solid_vertices(m)
+    if len(pts) < 4:
+        return None
+    h = manifold3d.Manifold.hull_points(pts)
+    v = m.volume()
+    if abs(h.volume() - v) <= 1e-9 * max(h.volume(), 1e-300):
+        return h
+    return None
+
+
 def _split_rec(m, depth: int, out: list) -> None:
     if m.is_empty() or m.volume() <= 0:
         return
-    if _is_convex(m):
-        out.append(m)
+    cp = _convex_piece(m)
+    if cp is not None:
+        out.append(cp)
         return
     if depth > 40:
         raise DecompositionError("too many cuts")
@@ -332,7 +365,7 @@ def _split_rec(m, depth: int, out: list) -> None:
             continue
         parts = [p for side in (a, b) for p in side.decompose()]
         # prefer cuts that leave the fewest non-convex parts, then the most balanced
-        score = (sum(not _is_convex(p) for p in parts), len(parts), abs(va - vb))
+        score = (sum(_convex_piece(p) is None for p in parts), len(parts), abs(va - vb))
         if best is None or score < best[0]:
             best = (score, parts)
     if best is None:
@@ -350,8 +383,9 @@ def _merge_convex(pieces: list) -> list:
         for i in range(len(pieces)):
             for j in range(i + 1, len(pieces)):
                 u = pieces[i] + pieces[j]
-                if u.decompose().__len__() == 1 and _is_convex(u, 1e-9):
-                    pieces[i] = u
+                cu = _convex_piece(u) if len(u.decompose()) == 1 else None
+                if cu is not None:
+                    pieces[i] = cu
                     del pieces[j]
                     changed = True
                     break
