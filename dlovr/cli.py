@@ -137,3 +137,40 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
     click.echo(f"{'step':>4}  {'class':<5}  situation")
     for s in steps:
         click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
+
+
+# --------------------------------------------------------------------------------------------------
+# dlovr scenes, dlovr scene show (issue 3)
+# --------------------------------------------------------------------------------------------------
+
+
+@main.command("scenes")
+def scenes_cmd() -> None:
+    """List the built-in scenes (use them by name, e.g. ``dlovr scene show peg_in_hole``)."""
+    from dlovr.scene import builtin_scenes
+
+    rows = builtin_scenes()
+    width = max((len(n) for n, _ in rows), default=4)
+    for name, desc in rows:
+        click.echo(f"{name:<{width}}  {desc}")
+
+
+@main.group("scene")
+def scene_group() -> None:
+    """Inspect scenes: built-in ones by name, others by the path of their TOML file."""
+
+
+@scene_group.command("show")
+@click.argument("ref", metavar="NAME|PATH")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+def scene_show_cmd(ref: str, as_json: bool) -> None:
+    """Print a scene: cable, gripper, objects, convex pieces, named faces and the edge table."""
+    import json
+
+    from dlovr.scene import SceneError, describe_scene, format_scene, load_scene
+
+    try:
+        desc = describe_scene(load_scene(ref))
+    except SceneError as e:
+        raise UserError(str(e)) from None
+    click.echo(json.dumps(desc, indent=2, ensure_ascii=False) if as_json else format_scene(desc))

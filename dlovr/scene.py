@@ -393,7 +393,80 @@ __all__ = [
     "SceneError",
     "SceneObject",
     "builtin_scenes",
+    "describe_scene",
+    "format_scene",
     "load_scene",
     "object_local_mesh",
     "scenes_dir",
 ]
+
+
+# --------------------------------------------------------------------------------------------------
+# Description (``dlovr scene show``)
+# --------------------------------------------------------------------------------------------------
+
+
+def describe_scene(scene: Scene, geom=None) -> dict:
+    """JSON-able description of a scene and its geometry (objects, pieces, faces, edge table)."""
+    from dataclasses import asdict
+
+    from dlovr.geometry import SceneGeometry
+
+    geom = geom if geom is not None else SceneGeometry.from_scene(scene)
+    g = geom.describe()["objects"]
+    objs = []
+    for o, go in zip(scene.objects, g, strict=True):
+        d = {
+            "name": o.name,
+            "kind": o.kind,
+            "pos": list(o.pos),
+            "quat": list(o.quat),
+            "size": list(o.size) if o.size is not None else None,
+            "mesh": str(o.mesh_path) if o.mesh_path is not None else None,
+        }
+        d.update({k: v for k, v in go.items() if k != "name"})
+        objs.append(d)
+    return {
+        "name": scene.name,
+        "description": scene.description,
+        "path": str(scene.path),
+        "dlo": asdict(scene.dlo),
+        "gripper": {"pos": list(scene.gripper.pos), "quat": list(scene.gripper.quat)},
+        "model": asdict(scene.params),
+        "objects": objs,
+    }
+
+
+def format_scene(desc: dict) -> str:
+    """Human-readable text of :func:`describe_scene`'s output."""
+
+    def v(x) -> str:
+        return "[" + ", ".join(f"{float(c):.4g}" for c in x) + "]"
+
+    d = desc["dlo"]
+    lines = [
+        f"scene {desc['name']}: {desc['description']}",
+        f"  file: {desc['path']}",
+        f"  cable: length {d['length']:g} m, radius {d['radius']:g} m, {d['segments']} segments, "
+        f"E {d['young']:g} Pa, mass {d['mass']:g} kg",
+        f"  gripper: pos {v(desc['gripper']['pos'])}, quat {v(desc['gripper']['quat'])}",
+        "  model: " + ", ".join(f"{k} {val:g}" for k, val in desc["model"].items()),
+    ]
+    for o in desc["objects"]:
+        what = f"box {v(o['size'])}" if o["kind"] == "box" else f"mesh {o['mesh']}"
+        kinds = sorted({p["kind"] for p in o["pieces"]})
+        lines.append(
+            f"object {o['name']}: {what} at {v(o['pos'])}, "
+            f"{len(o['pieces'])} piece(s) ({', '.join(kinds)}), {len(o['faces'])} faces"
+        )
+        for f in o["faces"]:
+            lines.append(f"  face {f['name']:<16} normal {v(f['normal'])}  area {f['area']:.4g} m^2")
+        for p in o["pieces"]:
+            fl = ", ".join(f"{x['face'] or '-'}:{x['kind']}" for x in p["faces"])
+            lines.append(f"  piece {p['index']} ({p['kind']}, volume {p['volume']:.4g} m^3): {fl}")
+        for e in o["edges"]:
+            lines.append(
+                f"  edge {e['faces'][0]} / {e['faces'][1]}: {e['kind']}, opening {e['opening_deg']:.4g} deg, "
+                f"length {e['length']:.4g} m"
+            )
+    return "\n".join(lines)
