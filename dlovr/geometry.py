@@ -237,7 +237,7 @@ def _self_intersects(mesh: trimesh.Trimesh) -> bool:
         qv = np.cross(sv, e1[None])
         vv = np.einsum("etk,ek->et", qv, d) * inv
         tt = np.einsum("etk,tk->et", qv, e2) * inv
-        hit = ok & (uu > eps) & (vv > eps) & (uu + vv < 1 - eps) & (tt > eps) & (tt < 1 - eps)
+        hit = ok & (uu >= -eps) & (vv >= -eps) & (uu + vv <= 1 + eps) & (tt > eps) & (tt < 1 - eps)
         if hit.any():
             shares = (ei[:, None, 0, None] == f[None]).any(-1) | (ei[:, None, 1, None] == f[None]).any(-1)
             if (hit & ~shares).any():
@@ -346,32 +346,36 @@ def _convex_piece(m):
     return None
 
 
-def _split_rec(m, depth: int, out: list) -> None:
+def _split_rec(m, depth: int, budget: list[int]) -> list:
+    """Convex pieces of ``m`` by recursive cuts along reflex-face planes (backtracking on failure)."""
     if m.is_empty() or m.volume() <= 0:
-        return
+        return []
     cp = _convex_piece(m)
     if cp is not None:
-        out.append(cp)
-        return
-    if depth > 40:
+        return [cp]
+    budget[0] -= 1
+    if depth > 40 or budget[0] < 0:
         raise DecompositionError("too many cuts")
     tm = _to_trimesh(m)
     vol = m.volume()
-    best = None
-    for nn, d in _reflex_planes(tm):
+    cands = []
+    for k, (nn, d) in enumerate(_reflex_planes(tm)):
         a, b = m.split_by_plane(nn, d)
         va, vb = a.volume(), b.volume()
         if va <= 1e-9 * vol or vb <= 1e-9 * vol:
             continue
         parts = [p for side in (a, b) for p in side.decompose()]
         # prefer cuts that leave the fewest non-convex parts, then the most balanced
-        score = (sum(_convex_piece(p) is None for p in parts), len(parts), abs(va - vb))
-        if best is None or score < best[0]:
-            best = (score, parts)
-    if best is None:
-        raise DecompositionError("no reflex-edge plane splits a non-convex piece")
-    for p in best[1]:
-        _split_rec(p, depth + 1, out)
+        score = (sum(_convex_piece(p) is None for p in parts), len(parts), abs(va - vb), k)
+        cands.append((score, parts))
+    cands.sort(key=lambda c: c[0])
+    for _, parts in cands:
+        try:
+            return [q for p in parts for q in _split_rec(p, depth + 1, budget)]
+        except DecompositionError:
+            if budget[0] < 0:
+                raise
+    raise DecompositionError("no reflex-edge plane splits a non-convex piece")
 
 
 def _merge_convex(pieces: list) -> list:
@@ -399,9 +403,7 @@ def decompose_exact(mesh: trimesh.Trimesh) -> list[np.ndarray]:
     m = to_manifold(mesh)
     if m.is_empty():
         raise DecompositionError(f"mesh is not a manifold solid ({m.status()})")
-    pieces: list = []
-    _split_rec(m, 0, pieces)
-    pieces = _merge_convex(pieces)
+    pieces = _merge_convex(_split_rec(m, 0, [500]))
     total = sum(p.volume() for p in pieces)
     if abs(total - m.volume()) > 1e-8 * m.volume():
         raise DecompositionError("pieces do not add up to the object's volume")
