@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from dlovr.discrete import DiscreteSituation, ModelParams, discretize
-from dlovr.geometry import SceneGeometry
-from dlovr.topology import EnvPrimitive, Situation, situation_from_points
+from dlovr.geometry import SceneGeometry, primitives_per_point
+from dlovr.topology import Situation, situation_from_points
 from dlovr.transitions import Debouncer, Kept, classify_step, is_transient
 
 
@@ -64,23 +64,13 @@ class ContactState:
         }
 
 
-def primitives_per_point(n_points: int, hits: Sequence[Any]) -> list[list[EnvPrimitive]]:
-    """Environment primitives of every point from geometry hits (one per piece; a primitive whose
-    faces are a subset of another's at the same point adds nothing and is dropped)."""
-    out: list[set[EnvPrimitive]] = [set() for _ in range(n_points)]
-    for h in hits:
-        out[h.point].add(EnvPrimitive("faces", h.faces))
-    res: list[list[EnvPrimitive]] = []
-    for s in out:
-        res.append(sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s)))
-    return res
-
-
 @dataclass
 class ContactTracker:
     """Turns simulation steps into contact situations, debounced into the demonstration's sequence.
 
-    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. ``changes`` lists every step at which the
+    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. A step whose simulator contacts (point,
+    piece) are those of the last classified step, with no point moved more than ``reuse_tol`` (m),
+    keeps its labels without classifying again. ``changes`` lists every step at which the
     raw situation changed (what a recording stores); ``kept`` the debounced situations.
     """
 
@@ -89,11 +79,14 @@ class ContactTracker:
     hold: float = 0.01
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
+    reuse_tol: float = 1e-4
     changes: list[ContactState] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
         self._touching: set[tuple[int, str, int]] = set()
+        self._key: np.ndarray | None = None
+        self._pts = np.zeros((0, 3))
         self.current: ContactState | None = None
 
     def restart(self, record: Any) -> ContactState:
@@ -103,6 +96,7 @@ class ContactTracker:
         """
         self._debouncer = Debouncer(self.hold, is_transient)
         self._touching = set()
+        self._key = None
         self.changes = []
         self.current = None
         return self.update(record)
@@ -157,8 +151,23 @@ class ContactTracker:
         if arrays is not None:
             point_of = _contact_points(arrays, pts)
             candidates = np.unique(point_of[point_of >= 0])
-        topo = self.classify(pts, record.gripper_z, candidates)
         prev = self.current
+        key = None
+        if arrays is not None:
+            key = np.unique(point_of * 65536 + np.asarray(arrays.geom, dtype=np.int64))
+        if (
+            prev is not None
+            and key is not None
+            and self._key is not None
+            and np.array_equal(key, self._key)
+            and float(np.max(np.abs(pts - self._pts))) < self.reuse_tol
+        ):
+            # the simulator reports the same contacts and no point moved more than reuse_tol since
+            # the last classification: the labels cannot have changed
+            topo = prev.topological
+        else:
+            topo = self.classify(pts, record.gripper_z, candidates)
+            self._key, self._pts = key, pts
         if prev is not None and prev.topological == topo and _vector_independent(topo):
             disc = prev.discrete
         else:

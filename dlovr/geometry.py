@@ -42,7 +42,7 @@ from dlovr.discrete import (
     PairFact,
     discretize,
 )
-from dlovr.topology import Contact, EnvPrimitive, Situation, contract
+from dlovr.topology import Contact, EnvPrimitive, Situation, situation_from_points
 
 if TYPE_CHECKING:
     from dlovr.scene import Scene
@@ -776,6 +776,15 @@ class PointHit:
     faces: tuple[str, ...]
 
 
+def primitives_per_point(n_points: int, hits: Iterable[PointHit]) -> list[list[EnvPrimitive]]:
+    """Environment primitives of every point from its hits (one per piece; a primitive whose faces
+    are a subset of another's at the same point adds nothing and is dropped)."""
+    out: list[set[EnvPrimitive]] = [set() for _ in range(n_points)]
+    for h in hits:
+        out[h.point].add(EnvPrimitive("faces", h.faces))
+    return [sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s)) for s in out]
+
+
 class SceneFactBook(FactBook):
     """FactBook of a scene: every object face, and pair facts computed on demand from the geometry."""
 
@@ -961,15 +970,7 @@ class SceneGeometry:
     ) -> list[list[EnvPrimitive]]:
         """For each point, the environment primitives it touches (one per piece, duplicates merged)."""
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
-        out: list[set[EnvPrimitive]] = [set() for _ in range(len(pts))]
-        for h in self.classify_points(pts, radius, contact_tol, tangential_tol):
-            out[h.point].add(EnvPrimitive("faces", h.faces))
-        # a primitive whose faces are a subset of another's at the same point adds nothing new
-        res: list[list[EnvPrimitive]] = []
-        for s in out:
-            keep = [e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s)]
-            res.append(sorted(keep))
-        return res
+        return primitives_per_point(len(pts), self.classify_points(pts, radius, contact_tol, tangential_tol))
 
     def situation(
         self,
@@ -983,31 +984,21 @@ class SceneGeometry:
     ) -> Situation:
         """Topological situation of a cable polyline (point 0 = V_S, last = V_E).
 
-        ``V_S`` touches the gripper when ``gripped``. The end-vertex rule (MODEL.md §2): a cable end
-        is in contact only when its last DLO vector points into the surface by more than the tip
-        angle; otherwise it is free (the contact belongs to the neighbouring E points).
+        ``V_S`` touches the gripper when ``gripped``; the end-vertex rule (MODEL.md §2) is applied by
+        :func:`dlovr.topology.situation_from_points`.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         if len(pts) < 2:
             raise ValueError("a cable polyline needs at least two points")
-        env = self.point_primitives(pts, radius, contact_tol, tangential_tol)
-        vecs = np.diff(pts, axis=0)
-        vecs = np.vstack([vecs, vecs[-1:]])
-        sin_tip = np.sin(np.radians(self.params.tip_angle_deg))
-        ends = [(len(pts) - 1, pts[-1] - pts[-2])]
-        if not gripped:
-            ends.append((0, pts[0] - pts[1]))
-        for i, d in ends:
-            names = {f for e in env[i] for f in e.faces}
-            if not names:
-                continue
-            c = -np.sum([self.face_normal(f) for f in names], axis=0)
-            if np.linalg.norm(c) < 1e-12 or float(_unit(d) @ _unit(c)) <= sin_tip:
-                env[i] = []
-        if gripped:
-            z = tuple(float(x) for x in (gripper_z if gripper_z is not None else (0.0, 0.0, 1.0)))
-            env[0] = [EnvPrimitive("G", (), z)]  # type: ignore[arg-type]
-        return contract(env, [tuple(v) for v in vecs])
+        z = tuple(float(x) for x in (gripper_z if gripper_z is not None else (0.0, 0.0, 1.0)))
+        return situation_from_points(
+            self.point_primitives(pts, radius, contact_tol, tangential_tol),
+            np.diff(pts, axis=0),
+            self.face_normal,
+            tip_angle_deg=self.params.tip_angle_deg,
+            gripped=gripped,
+            gripper_z=z,  # type: ignore[arg-type]
+        )
 
     def discrete_situation(self, points: np.ndarray, **kw) -> DiscreteSituation:
         """Discrete situation of a cable polyline: :meth:`situation` then the model (MODEL.md §3.3)."""
