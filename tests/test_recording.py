@@ -1,0 +1,189 @@
+"""Recording a scripted demonstration, exact replay, states, recovery and compiling (CLI and API)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from dlovr.cli import main
+from dlovr.recording import (
+    TOPIC_STATES,
+    Recording,
+    RecordingError,
+    compile_recording,
+    recover,
+    replay,
+)
+
+SCRIPT = Path(__file__).parent / "data" / "touch_table.script.toml"
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec") / "touch.mcap"
+    r = cli("record", "--script", SCRIPT, "-o", out)
+    assert r.exit_code == 0, r.output
+    return out
+
+
+def test_record_then_replay_verify_is_bit_exact(recorded):
+    res = replay(recorded, verify=True)
+    assert res.divergence is None and res.warnings == ()
+    assert res.steps == Recording(recorded).count("/dlovr/command")
+    r = cli("replay", recorded, "--verify")
+    assert r.exit_code == 0 and "verified" in r.output
+
+
+def test_recording_holds_everything_needed(recorded):
+    rec = Recording(recorded)
+    assert rec.metadata["scene_name"] == "table" and rec.metadata["mujoco_version"].startswith("4.0")
+    assert b"[dlo]" in rec.scene.toml
+    cps = rec.checkpoints()
+    assert cps[0].step == 0 and len(cps) >= 3  # start + every second + end
+    states = rec.states()
+    assert states[0]["discrete"] == "V/G & E/N & V/N"
+    assert any("V/F[table.F1]" in s["discrete"] for s in states)
+    for s in states:
+        assert {"t", "step", "topological", "discrete", "classes", "contacts"} <= set(s)
+
+
+def test_replay_detects_a_changed_command_stream(recorded, tmp_path):
+    """A recording whose checkpoints do not match its commands is reported with time and element."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    bad = tmp_path / "bad.mcap"
+    with open(recorded, "rb") as fh, open(bad, "wb") as oh:
+        rd = make_reader(fh)
+        w = Writer(oh)
+        w.start(profile="dlovr")
+        for m in rd.iter_metadata():
+            w.add_metadata(m.name, dict(m.metadata))
+        for a in rd.iter_attachments():
+            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
+        chans = {}
+        for schema, ch, msg in rd.iter_messages():
+            if ch.id not in chans:
+                sid = w.register_schema(schema.name, schema.encoding, schema.data)
+                chans[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid)
+            data = msg.data
+            if ch.topic == "/dlovr/command":
+                d = json.loads(data)
+                if d["step"] == 300:
+                    d["pos"][0] += 1e-4  # a nudge of 0.1 mm at step 300
+                    data = json.dumps(d).encode()
+            w.add_message(chans[ch.id], msg.log_time, data, msg.publish_time)
+        w.finish()
+    res = replay(bad, verify=True)
+    assert res.divergence and "checkpoint step 500" in res.divergence
+    r = cli("replay", bad, "--verify")
+    assert r.exit_code == 1 and "diverged" in r.output
+
+
+def test_states_formats_read_only_the_states_channel(recorded):
+    t = cli("states", recorded)
+    assert t.exit_code == 0 and "V/F[table.F1]" in t.output and "VS/G" in t.output
+    j = cli("states", recorded, "--format", "json")
+    rows = json.loads(j.output)
+    assert rows[0]["classes"] == [] and rows[1]["classes"] == ["E"]
+    assert {"t", "topological", "discrete", "classes"} <= set(rows[0])
+    c = cli("states", recorded, "--format", "csv")
+    assert c.output.splitlines()[0] == "t,classes,topological,discrete"
+    raw = json.loads(cli("states", recorded, "--format", "json", "--raw").output)
+    assert len(raw) >= len(rows)
+
+
+def test_program_of_a_recording(recorded):
+    prog = compile_recording(recorded)
+    assert prog.macros and prog.macros[0].label == "E"
+    assert prog.macros[0].to_situation == "V/G & E/N & V/F[table.F1]"
+    assert prog.macros[0].to_contacts[0].vector == pytest.approx((0.0, 0.0, -1.0))
+
+
+def test_compile_one_and_two_workers_identical_and_failures_reported(recorded, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(recorded, src / "a.mcap")
+    shutil.copy(recorded, src / "b.mcap")
+    (src / "broken.mcap").write_bytes(b"not an mcap file")
+    r1 = cli("compile", src, "-o", tmp_path / "o1", "--workers", "1")
+    r2 = cli("compile", src, "-o", tmp_path / "o2", "--workers", "2")
+    for r in (r1, r2):
+        assert r.exit_code == 1 and "2 compiled, 1 failed" in r.output and "broken.mcap" in r.output
+    for name in ("a.program.json", "a.program.txt", "b.program.json"):
+        assert (tmp_path / "o1" / name).read_bytes() == (tmp_path / "o2" / name).read_bytes()
+    (src / "broken.mcap").unlink()
+    again = cli("compile", src, "-o", tmp_path / "o1")
+    assert again.exit_code == 0 and again.output.count("unchanged, skipped") == 2
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [(b"", "empty file"), (b"PK\x03\x04 zip", "not an MCAP file")],
+)
+def test_cli_errors_are_one_line_exit_2(tmp_path, content, message):
+    f = tmp_path / "x.mcap"
+    f.write_bytes(content)
+    for cmd in ("states", "replay", "compile"):
+        r = subprocess.run([sys.executable, "-m", "dlovr", cmd, str(f)], capture_output=True, text=True)
+        assert r.returncode in (1, 2) and message in r.stderr + r.stdout and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "dlovr", "states", str(f)], capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_truncated_recording_points_to_recover(recorded, tmp_path):
+    f = tmp_path / "cut.mcap"
+    f.write_bytes(recorded.read_bytes()[: os.path.getsize(recorded) // 2])
+    r = cli("states", f)
+    assert r.exit_code == 2 and "dlovr recover" in r.output
+    with pytest.raises(RecordingError, match="truncated"):
+        Recording(f)
+
+
+def test_sigterm_finishes_the_file_and_sigkill_is_recoverable(tmp_path):
+    long_script = tmp_path / "long.script.toml"
+    long_script.write_text(
+        SCRIPT.read_text() + "\n[[waypoints]]\npos = [-0.45, 0.3, 0.03]\nduration = 30.0\n"
+    )
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        out = tmp_path / f"rec-{sig.name}.mcap"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "dlovr", "record", "--script", str(long_script), "-o", str(out)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        deadline = time.time() + 60
+        while time.time() < deadline and (not out.exists() or out.stat().st_size < 200_000):
+            time.sleep(0.2)
+        time.sleep(2.5)  # past at least one flush interval
+        proc.send_signal(sig)
+        proc.wait(timeout=30)
+        if sig == signal.SIGTERM:
+            rec = Recording(out)  # finished: footer and summary present
+            assert rec.count("/dlovr/command") > 0
+            continue
+        with pytest.raises(RecordingError, match="truncated"):
+            Recording(out)
+        fixed = tmp_path / "fixed.mcap"
+        rep = recover(out, fixed)
+        rec = Recording(fixed)
+        steps, _, _ = rec.commands()
+        assert rep.messages > 0 and steps[0] == 1
+        assert np.all(np.diff(steps) == 1)
+        assert rec.count(TOPIC_STATES) >= 1
+        r = cli("recover", out, "-o", tmp_path / "fixed2.mcap")
+        assert r.exit_code == 0
