@@ -463,3 +463,22 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
     click.echo(f"{ok} compiled, {len(failed)} failed")
     if failed:
         raise SystemExit(1)
+
+
+@scene_group.command("export")
+@click.argument("ref", metavar="NAME|PATH")
+@click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write.")
+def scene_export_cmd(ref: str, out: str) -> None:
+    """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo."""
+    from dlovr.sim import Simulator, export_xml
+
+    scene = _scene(ref)
+    try:
+        sim = Simulator(scene)
+    except ValueError as e:
+        raise UserError(f"{scene.path}: {e}") from None
+    try:
+        path = export_xml(sim.built, out)
+    except OSError as e:
+        raise UserError(f"{out}: cannot write: {e.strerror}") from None
+    click.echo(f"wrote {path}")

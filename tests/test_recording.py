@@ -187,3 +187,15 @@ def test_sigterm_finishes_the_file_and_sigkill_is_recoverable(tmp_path):
         assert rec.count(TOPIC_STATES) >= 1
         r = cli("recover", out, "-o", tmp_path / "fixed2.mcap")
         assert r.exit_code == 0
+
+
+def test_scene_export_loads_in_plain_mujoco(tmp_path):
+    import mujoco
+
+    out = tmp_path / "model.xml"
+    r = cli("scene", "export", "peg_in_hole", "-o", out)
+    assert r.exit_code == 0, r.output
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.nflex == 1 and m.nmocap == 1
+    bad = cli("scene", "export", "no_such_scene", "-o", out)
+    assert bad.exit_code == 2
