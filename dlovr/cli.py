@@ -467,7 +467,9 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
 
 @scene_group.command("export")
 @click.argument("ref", metavar="NAME|PATH")
-@click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write.")
+@click.option(
+    "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write."
+)
 def scene_export_cmd(ref: str, out: str) -> None:
     """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo."""
     from dlovr.sim import Simulator, export_xml
