@@ -1,73 +1,76 @@
-"""Bare ``mj_step`` time per step at 40 and 80 segments, side by side.
+"""Cost of contact-state extraction on top of bare MuJoCo stepping, at 40 and 80 segments.
 
-Run: ``.venv/bin/python benchmarks/bench_sim.py [--seconds 2] [--scene peg_in_hole]``.
+Run: ``.venv/bin/python benchmarks/bench_sim.py [--scene peg_in_hole] [--script FILE]``
 
-Without ``--scene`` (or while ``dlovr.scene`` is not available) the benchmark uses a built-in table
-drag: a 0.6 m cable lying on a table, dragged sideways at 5 cm/s, so that most segments are in contact.
-Columns: segments, steps, bare mj_step µs/step, real-time factor (2 ms step / wall time per step).
-(Step + contact-state extraction columns are to be added with the contact pipeline.)
+Plays the scene's built-in demonstration (``scenes/NAME.script.toml``) twice per segment count, side
+by side in one run: once timing bare ``mj_step`` only (the gripper's mocap is moved untimed), once
+timing the full pipeline (``Simulator.step`` with its checks and contact arrays, plus
+``ContactTracker.update``: topology, discrete states, debouncing). Prints µs per step, their ratio
+and the real-time factor of the full pipeline (2 ms step / wall time per step).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import mujoco
-import numpy as np
 
-from dlovr.sim import DloParams, GripperPose, Obstacle, Simulator
-
-Q_X = (math.cos(math.pi / 4), 0.0, -math.sin(math.pi / 4), 0.0)  # G_z = -x: cable along +x
-
-
-def _table_sim(segments: int) -> Simulator:
-    hx, hy, hz = 0.5, 0.5, 0.02
-    box = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    table = Obstacle("table", [box], pos=(0.0, 0.0, 0.7))
-    dlo = DloParams(length=0.6, radius=0.005, segments=segments)
-    return Simulator.from_parts([table], dlo, GripperPose((-0.3, 0.0, 0.7255), Q_X))
+from dlovr.contacts import ContactTracker
+from dlovr.geometry import SceneGeometry
+from dlovr.scene import load_scene, scenes_dir
+from dlovr.script import load_script
+from dlovr.sim import Simulator
 
 
-def _scene_sim(name: str, segments: int) -> Simulator:
-    from dlovr.scene import load_scene
-
-    scene = load_scene(name)
+def bench(scene_name: str, script_path: Path, segments: int) -> tuple[int, float, float]:
+    scene = load_scene(scene_name)
     scene = replace(scene, dlo=replace(scene.dlo, segments=segments))
-    return Simulator(scene)
+    script = load_script(script_path)
 
-
-def bench(sim: Simulator, seconds: float) -> tuple[int, float]:
+    sim = Simulator(scene)  # bare mj_step along the same command stream
+    bare = 0.0
+    targets = []
+    for rec in sim.run(script):
+        targets.append((rec.target_pos, rec.target_quat))
+    sim = Simulator(scene)
     m, d = sim.model, sim.data
-    mid = sim.built.mocap_id
-    dt = m.opt.timestep
-    nsteps = round(seconds / dt)
-    sim.step(100)  # settle
-    v = np.array([0.0, 0.05, 0.0]) * dt
-    t = 0.0
-    for _ in range(nsteps):
-        d.mocap_pos[mid] += v  # steady drag; moving the mocap is not timed
+    for pos, quat in targets:
+        sim.target_pos, sim.target_quat = pos, quat
+        sim._move_mocap()
         t0 = time.perf_counter()
         mujoco.mj_step(m, d)
-        t += time.perf_counter() - t0
-    if not np.all(np.isfinite(d.qpos)):
-        raise SystemExit("benchmark diverged")
-    return nsteps, t / nsteps
+        bare += time.perf_counter() - t0
+
+    sim = Simulator(scene)  # full pipeline
+    tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
+    full = 0.0
+    for pos, quat in targets:
+        t0 = time.perf_counter()
+        sim.target_pos, sim.target_quat = pos, quat
+        tracker.update(sim.step())
+        full += time.perf_counter() - t0
+    n = len(targets)
+    return n, bare / n, full / n
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per case")
-    ap.add_argument("--scene", default=None, help="scene name (default: built-in table drag)")
+    ap.add_argument("--scene", default="peg_in_hole")
+    ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
     args = ap.parse_args()
-    print(f"mujoco {mujoco.__version__}, scene: {args.scene or 'built-in table drag'}")
-    print(f"{'segments':>8} {'steps':>7} {'mj_step µs/step':>16} {'real-time factor':>17}")
+    script = args.script or scenes_dir() / f"{args.scene}.script.toml"
+    if not script.is_file():
+        raise SystemExit(f"no script {script}; give --script")
+    print(f"mujoco {mujoco.__version__}; scene {args.scene}; script {script.name}")
+    head = ("segments", "steps", "bare mj_step µs", "step+extract µs", "ratio", "RTF")
+    print("{:>8} {:>7} {:>16} {:>16} {:>6} {:>6}".format(*head))
     for segments in (40, 80):
-        sim = _scene_sim(args.scene, segments) if args.scene else _table_sim(segments)
-        n, per = bench(sim, args.seconds)
-        print(f"{segments:>8} {n:>7} {per * 1e6:>16.1f} {sim.model.opt.timestep / per:>17.2f}")
+        n, bare, full = bench(args.scene, script, segments)
+        row = (segments, n, bare * 1e6, full * 1e6, full / bare, 0.002 / full)
+        print("{:>8} {:>7} {:>16.1f} {:>16.1f} {:>6.2f} {:>6.2f}".format(*row))
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import numpy as np
 
 from dlovr.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.geometry import SceneGeometry, primitives_per_point
-from dlovr.topology import Situation, situation_from_points
+from dlovr.topology import Situation, situation_from_points, tip_touches
 from dlovr.transitions import Debouncer, Kept, classify_step, is_transient
 
 
@@ -68,9 +68,7 @@ class ContactState:
 class ContactTracker:
     """Turns simulation steps into contact situations, debounced into the demonstration's sequence.
 
-    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. A step whose simulator contacts (point,
-    piece) are those of the last classified step, with no point moved more than ``reuse_tol`` (m),
-    keeps its labels without classifying again. ``changes`` lists every step at which the
+    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. ``changes`` lists every step at which the
     raw situation changed (what a recording stores); ``kept`` the debounced situations.
     """
 
@@ -79,14 +77,14 @@ class ContactTracker:
     hold: float = 0.01
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
-    reuse_tol: float = 1e-4
     changes: list[ContactState] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
         self._touching: set[tuple[int, str, int]] = set()
-        self._key: np.ndarray | None = None
-        self._pts = np.zeros((0, 3))
+        self._signature: tuple[Any, ...] | None = None
+        self._piece_map: tuple[Any, dict[tuple[int, int], int]] | None = None
+        self._situation: Situation | None = None
         self.current: ContactState | None = None
 
     def restart(self, record: Any) -> ContactState:
@@ -96,7 +94,7 @@ class ContactTracker:
         """
         self._debouncer = Debouncer(self.hold, is_transient)
         self._touching = set()
-        self._key = None
+        self._signature = self._situation = None
         self.changes = []
         self.current = None
         return self.update(record)
@@ -109,21 +107,28 @@ class ContactTracker:
         self,
         points: np.ndarray,
         gripper_z: Sequence[float] | None = None,
-        candidates: np.ndarray | None = None,
+        pairs: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Situation:
-        """Topological situation of the cable polyline ``points`` (hysteresis applied)."""
+        """Topological situation of the cable polyline ``points`` (hysteresis applied).
+
+        ``pairs``: (point indices, piece ids) the simulator reports in contact; only those (and the
+        pairs touching at the last step) are classified. ``None``: every point against every piece.
+        """
         pts = np.asarray(points, dtype=float)
         r = self.geometry.radius
-        if candidates is None:
-            idx = np.arange(len(pts))
+        geom = self.geometry
+        if pairs is None:
+            hits = geom.classify_points(pts, contact_tol=self.leave_tol)
         else:
-            prev = np.fromiter((k[0] for k in self._touching), dtype=np.int64, count=len(self._touching))
-            idx = np.unique(np.concatenate([candidates.astype(np.int64), prev]))
-        hits = self.geometry.classify_points(pts[idx], contact_tol=self.leave_tol) if len(idx) else []
+            pi, pc = pairs
+            if self._touching:
+                prev = np.array([(k[0], geom.piece_id(k[1], k[2])) for k in self._touching], dtype=np.int64)
+                pi, pc = _unique_pairs(np.concatenate([pi, prev[:, 0]]), np.concatenate([pc, prev[:, 1]]))
+            hits = geom.classify_pairs(pts, pi, pc, contact_tol=self.leave_tol)
         kept_hits = []
         touching: set[tuple[int, str, int]] = set()
         for h in hits:
-            point = int(idx[h.point])
+            point = h.point
             key = (point, h.piece.obj, h.piece.index)
             if h.distance <= r + self.enter_tol or (
                 key in self._touching and h.distance <= r + self.leave_tol
@@ -131,43 +136,62 @@ class ContactTracker:
                 touching.add(key)
                 kept_hits.append(_Hit(point, h.faces))
         self._touching = touching
+        n = len(pts) - 1
+        # the labels decide the situation, and the end-vertex rule when the tip has a contact:
+        # cache the situation by both
+        tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
+        tip = (
+            tip_touches(
+                pts[n] - pts[n - 1], [geom.face_normal(f) for f in tip_faces], self.params.tip_angle_deg
+            )
+            if tip_faces
+            else None
+        )
+        signature = (len(pts), tuple(kept_hits), tip)
+        if signature == self._signature and self._situation is not None:
+            return self._situation
         env = primitives_per_point(len(pts), kept_hits)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
-        return situation_from_points(
+        sit = situation_from_points(
             env,
             np.diff(pts, axis=0),
             self.geometry.face_normal,
             tip_angle_deg=self.params.tip_angle_deg,
             gripper_z=z,  # type: ignore[arg-type]
         )
+        self._signature, self._situation = signature, sit
+        return sit
+
+    def _pairs(self, arrays: Any, point_of: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(point, piece id) pairs of the simulator's contacts, unique."""
+        if not ok.any():
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        objs = arrays.names[0]
+        if self._piece_map is None or self._piece_map[0] is not objs:
+            self._piece_map = (objs, {})
+        cache = self._piece_map[1]
+        obj, piece = np.asarray(arrays.obj)[ok], np.asarray(arrays.piece)[ok]
+        ids = np.empty(len(obj), dtype=np.int64)
+        for i, (o, k) in enumerate(zip(obj.tolist(), piece.tolist(), strict=True)):
+            key = (o, k)
+            if key not in cache:
+                cache[key] = self.geometry.piece_id(objs[o], k)
+            ids[i] = cache[key]
+        return _unique_pairs(point_of[ok], ids)
 
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
         arrays = getattr(record, "contact_arrays", None)
         pts = np.asarray(record.points, dtype=float)
-        candidates = None
+        pairs = None
         point_of = np.zeros(0, dtype=np.int64)
         if arrays is not None:
             point_of = _contact_points(arrays, pts)
-            candidates = np.unique(point_of[point_of >= 0])
+            ok = point_of >= 0
+            pairs = self._pairs(arrays, point_of, ok)
         prev = self.current
-        key = None
-        if arrays is not None:
-            key = np.unique(point_of * 65536 + np.asarray(arrays.geom, dtype=np.int64))
-        if (
-            prev is not None
-            and key is not None
-            and self._key is not None
-            and np.array_equal(key, self._key)
-            and float(np.max(np.abs(pts - self._pts))) < self.reuse_tol
-        ):
-            # the simulator reports the same contacts and no point moved more than reuse_tol since
-            # the last classification: the labels cannot have changed
-            topo = prev.topological
-        else:
-            topo = self.classify(pts, record.gripper_z, candidates)
-            self._key, self._pts = key, pts
+        topo = self.classify(pts, record.gripper_z, pairs)
         if prev is not None and prev.topological == topo and _vector_independent(topo):
             disc = prev.discrete
         else:
@@ -190,6 +214,12 @@ class ContactTracker:
         return [
             (k, classify_step(kept[i - 1].situation, k.situation) if i else ()) for i, k in enumerate(kept)
         ]
+
+
+def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique (a, b) pairs of non-negative ints (b < 2**20), sorted by a then b."""
+    u = np.unique(a.astype(np.int64) << 20 | b.astype(np.int64))
+    return u >> 20, u & ((1 << 20) - 1)
 
 
 def _tuple(v: Any) -> Any:

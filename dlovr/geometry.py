@@ -780,9 +780,18 @@ def primitives_per_point(n_points: int, hits: Iterable[PointHit]) -> list[list[E
     """Environment primitives of every point from its hits (one per piece; a primitive whose faces
     are a subset of another's at the same point adds nothing and is dropped)."""
     out: list[set[EnvPrimitive]] = [set() for _ in range(n_points)]
+    made: dict[tuple[str, ...], EnvPrimitive] = {}
     for h in hits:
-        out[h.point].add(EnvPrimitive("faces", h.faces))
-    return [sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s)) for s in out]
+        e = made.get(h.faces)
+        if e is None:
+            e = made[h.faces] = EnvPrimitive("faces", h.faces)
+        out[h.point].add(e)
+    return [
+        sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s))
+        if len(s) > 1
+        else list(s)
+        for s in out
+    ]
 
 
 class SceneFactBook(FactBook):
@@ -824,6 +833,8 @@ class SceneGeometry:
         self._by_name = {o.name: o for o in self.objects}
         self._face_owner = {n: (o, k) for o in self.objects for k, n in enumerate(o.face_names)}
         self._book: SceneFactBook | None = None
+        self._piece_ids: dict[tuple[str, int], int] | None = None
+        self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -882,6 +893,82 @@ class SceneGeometry:
         return ok
 
     # ---------------------------------------------------------------- classification
+    def piece_id(self, obj: str, index: int) -> int:
+        """Position of piece ``index`` of object ``obj`` in :attr:`pieces`."""
+        if self._piece_ids is None:
+            self._piece_ids = {(p.obj, p.index): k for k, p in enumerate(self.pieces)}
+        return self._piece_ids[(obj, index)]
+
+    def _padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """All pieces' planes padded to one array: normals (P,F,3), offsets (P,F), face names (P,F)
+        and ``simple`` (P,F): an external face far from every other object (never covered)."""
+        if self._pad is None:
+            fmax = max((len(p.faces) for p in self.pieces), default=1)
+            n = np.zeros((len(self.pieces), fmax, 3))
+            d = np.full((len(self.pieces), fmax), 1e9)
+            names = np.full((len(self.pieces), fmax), None, dtype=object)
+            simple = np.zeros((len(self.pieces), fmax), dtype=bool)
+            reach = 2.0 * self.radius + 2e-3
+            for k, p in enumerate(self.pieces):
+                others = [q for q in self.pieces if q.obj != p.obj]
+                for f, pf in enumerate(p.faces):
+                    n[k, f], d[k, f], names[k, f] = pf.normal, pf.offset, pf.face
+                    lo, hi = pf.polygon.min(axis=0) - reach, pf.polygon.max(axis=0) + reach
+                    far = all(np.any(q.lo > hi) or np.any(q.hi < lo) for q in others)
+                    simple[k, f] = pf.label == "external" and far
+            self._pad = (n, d, names, simple)
+        return self._pad
+
+    def classify_pairs(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float = 5e-4,
+        tangential_tol: float | None = None,
+    ) -> list[PointHit]:
+        """:meth:`classify_points` restricted to given (point, piece) pairs, vectorised.
+
+        A pair whose closest point lies on one external, uncovered face at least the tangential
+        tolerance away from that face's other planes is a face contact, decided here in one numpy
+        pass (the distance from the projection to any edge of the face is at least its distance to
+        the other face's plane). Points with any other pair fall back to :meth:`classify_points`.
+        """
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
+        if len(pi) == 0:
+            return []
+        r = self.radius
+        ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
+        n_all, d_all, names, simple = self._padded()
+        p = pts[pi]
+        nrm, off = n_all[pc], d_all[pc]  # (K,F,3), (K,F)
+        res = np.einsum("kfi,ki->kf", nrm, p) - off
+        k = np.arange(len(pi))
+        best = np.argmax(res, axis=1)
+        rb = res[k, best]
+        nb = nrm[k, best]
+        resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)  # residuals of the projection
+        resq[k, best] = -np.inf
+        pure = (resq.max(axis=1) <= -ttol) & simple[pc, best]
+        near = rb <= r + contact_tol
+        hits: list[PointHit] = []
+        ambiguous = set(pi[~pure].tolist())
+        for j in np.nonzero(pure & near)[0]:
+            if int(pi[j]) in ambiguous:
+                continue
+            q = p[j] - rb[j] * nb[j]
+            hits.append(
+                PointHit(int(pi[j]), self.pieces[int(pc[j])], q, float(rb[j]), (names[pc[j], best[j]],))
+            )
+        if ambiguous:
+            amb = np.array(sorted(ambiguous))
+            for h in self.classify_points(pts[amb], r, contact_tol, tangential_tol):
+                h.point = int(amb[h.point])
+                hits.append(h)
+        hits.sort(key=lambda h: (h.point, h.piece.obj, h.piece.index))
+        return hits
+
     def classify_points(
         self,
         points: np.ndarray,

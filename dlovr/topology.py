@@ -276,7 +276,7 @@ def contract(
         if vectors is None:
             return None
         v = vectors[i]
-        return (float(v[0]), float(v[1]), float(v[2]))
+        return (float(v[0]), float(v[1]), float(v[2]))  # only for the few contacts made
 
     out = [Contact(DloPrimitive("VS", 0, (0, 0), vec(0)), envs[0])]
     i = 1
@@ -332,7 +332,7 @@ def situation_from_points(
     """
     env = [list(e) for e in point_env]
     n = len(env) - 1
-    vecs = [tuple(float(x) for x in v) for v in vectors]
+    vecs = [tuple(v) for v in (vectors.tolist() if hasattr(vectors, "tolist") else vectors)]
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
     ends = [(n, vecs[n - 1])]
