@@ -22,7 +22,7 @@ from dlovr.contacts import ContactTracker
 from dlovr.geometry import SceneGeometry
 from dlovr.scene import load_scene, scenes_dir
 from dlovr.script import load_script
-from dlovr.sim import Simulator
+from dlovr.sim import SimulationDiverged, Simulator
 
 
 def bench(scene_name: str, script_path: Path, segments: int) -> tuple[int, float, float]:
@@ -68,7 +68,11 @@ def main() -> None:
     head = ("segments", "steps", "bare mj_step µs", "step+extract µs", "ratio", "RTF")
     print("{:>8} {:>7} {:>16} {:>16} {:>6} {:>6}".format(*head))
     for segments in (40, 80):
-        n, bare, full = bench(args.scene, script, segments)
+        try:
+            n, bare, full = bench(args.scene, script, segments)
+        except SimulationDiverged as e:
+            print(f"{segments:>8} diverged: {e}")
+            continue
         row = (segments, n, bare * 1e6, full * 1e6, full / bare, 0.002 / full)
         print("{:>8} {:>7} {:>16.1f} {:>16.1f} {:>6.2f} {:>6.2f}".format(*row))
 

@@ -1,0 +1,93 @@
+"""Recording overhead, replay speed and compile throughput, measured side by side in one run.
+
+Run: ``.venv/bin/python benchmarks/bench_recording.py [--scene peg_in_hole] [--copies 8]``
+
+1. simulation (step + contact extraction) alone vs the same with recording to MCAP (target: at most
+   10% more);
+2. ``replay --verify`` of that recording as a real-time factor (target: at least 3x);
+3. ``dlovr compile`` throughput in recordings per second with 1 and 2 workers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from dlovr.contacts import ContactTracker
+from dlovr.geometry import SceneGeometry
+from dlovr.recording import DemoRecorder, replay
+from dlovr.scene import load_scene, scenes_dir
+from dlovr.script import load_script
+from dlovr.sim import Simulator
+
+
+def simulate(scene_name: str, script_path: Path, out: Path | None) -> float:
+    scene = load_scene(scene_name)
+    script = load_script(script_path)
+    sim = Simulator(scene)
+    tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
+    t0 = time.perf_counter()
+    if out is None:
+        for rec in sim.run(script):
+            tracker.update(rec)
+    else:
+        with DemoRecorder(out, scene, sim, tracker) as dr:
+            for rec in sim.run(script):
+                tracker.update(rec)
+                dr.step(rec)
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="peg_in_hole")
+    ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
+    ap.add_argument("--copies", type=int, default=8, help="recordings compiled in the throughput test")
+    args = ap.parse_args()
+    script = args.script or scenes_dir() / f"{args.scene}.script.toml"
+    sim_time = load_script(script).total_duration
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "demo.mcap"
+        plain = min(simulate(args.scene, script, None) for _ in range(2))
+        recorded = min(simulate(args.scene, script, out) for _ in range(2))
+        size = out.stat().st_size / 1e6
+        print(f"scene {args.scene}, script {script.name}, {sim_time:.1f} s simulated, {size:.2f} MB")
+        print(f"simulation alone        {plain:7.2f} s")
+        print(f"simulation + recording  {recorded:7.2f} s   ratio {recorded / plain:.3f} (target <= 1.10)")
+        res = replay(out, verify=True)
+        rtf = res.sim_time / res.wall_time
+        print(f"replay --verify         {res.wall_time:7.2f} s   {rtf:.2f}x real time (target >= 3), "
+              f"divergence: {res.divergence}")  # fmt: skip
+        src = Path(tmp) / "many"
+        src.mkdir()
+        for i in range(args.copies):
+            shutil.copy(out, src / f"r{i:02d}.mcap")
+        for workers in (1, 2):
+            dst = Path(tmp) / f"out{workers}"
+            t0 = time.perf_counter()
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "dlovr",
+                    "compile",
+                    str(src),
+                    "-o",
+                    str(dst),
+                    "--workers",
+                    str(workers),
+                ],
+                check=True,
+                capture_output=True,
+            )
+            dt = time.perf_counter() - t0
+            print(f"compile, {workers} worker(s)    {dt:7.2f} s   {args.copies / dt:.1f} recordings/s")
+
+
+if __name__ == "__main__":
+    main()
