@@ -19,7 +19,7 @@ import numpy as np
 from dlovr.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.geometry import SceneGeometry, primitives_per_point
 from dlovr.topology import Situation, situation_from_points, tip_touches
-from dlovr.transitions import Debouncer, Kept, classify_step, is_transient
+from dlovr.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ class ContactTracker:
 
     geometry: SceneGeometry
     params: ModelParams = field(default_factory=ModelParams)
-    hold: float = 0.01
+    hold: float = DEFAULT_HOLD_S
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
     changes: list[ContactState] = field(default_factory=list)

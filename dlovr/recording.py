@@ -39,7 +39,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
-from dlovr.transitions import classify_step
+from dlovr.transitions import DEFAULT_HOLD_S, classify_step
 
 FORMAT_VERSION = "1"
 PROFILE = "dlovr"
@@ -220,7 +220,7 @@ class Recorder:
             "scene_sha256": scene.digest,
             "timestep": repr(self.dt),
             "t0_ns": str(self.t0_ns),
-            "hold": repr(DEFAULT_HOLD),
+            "hold": repr(DEFAULT_HOLD_S),
             **dict(extra_metadata or {}),
         }
         self._w.add_metadata("dlovr", meta)
@@ -641,7 +641,10 @@ class DemoRecorder:
     def __init__(self, path: str | Path, scene: Any, sim: Any, tracker: Any, **kw: Any):
         dt = float(sim.model.opt.timestep)
         self.sim, self.tracker = sim, tracker
-        self.rec = Recorder(path, SceneBundle.from_path(scene.path), scene_name=scene.name, dt=dt, **kw)
+        meta = {"hold": repr(float(tracker.hold)), **dict(kw.pop("extra_metadata", None) or {})}
+        self.rec = Recorder(
+            path, SceneBundle.from_path(scene.path), scene_name=scene.name, dt=dt, extra_metadata=meta, **kw
+        )
         self.path = self.rec.path
         self.start_step = int(sim.step_index)
         self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
@@ -714,9 +717,7 @@ def load_embedded_scene(recording: Recording, directory: str | Path) -> Any:
         raise RecordingError(f"{recording.path}: embedded scene is invalid: {e}") from None
 
 
-def replay(
-    path: str | Path, *, verify: bool = False, progress: Any = None, hold: float | None = None
-) -> ReplayResult:
+def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> ReplayResult:
     """Re-simulate a recording from its first checkpoint and its command stream alone.
 
     With ``verify``, the state at every checkpoint is compared bit for bit and the contact-state
@@ -750,7 +751,9 @@ def replay(
                 f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
             )
         tracker = ContactTracker(
-            SceneGeometry.from_scene(scene), scene.params, **({"hold": hold} if hold else {})
+            SceneGeometry.from_scene(scene),
+            scene.params,
+            hold=float(rec.metadata.get("hold", DEFAULT_HOLD_S)),
         )
     first = cps[0]
     if len(first.state) != len(sim.get_state().mj):
@@ -806,8 +809,6 @@ def _compare_states(
 # From recorded contact states to kept situations and programs (reads only the states channel)
 # --------------------------------------------------------------------------------------------------
 
-DEFAULT_HOLD = 0.01
-
 
 def situation_from_payload(payload: Mapping[str, Any]) -> Any:
     """The discrete situation of a contact-state message, with its contact vectors."""
@@ -835,7 +836,7 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
     payloads = recording.states()
     if not payloads:
         raise RecordingError(f"{recording.path}: recording has no contact states")
-    hold = float(recording.metadata.get("hold", DEFAULT_HOLD)) if hold is None else hold
+    hold = float(recording.metadata.get("hold", DEFAULT_HOLD_S)) if hold is None else hold
     deb: Debouncer[Any] = Debouncer(hold, is_transient)
     first: dict[Any, Mapping[str, Any]] = {}
     try:

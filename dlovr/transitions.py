@@ -252,6 +252,9 @@ def classify_sequence(situations: Sequence[DiscreteSituation], rules: Sequence[R
 
 S = TypeVar("S", bound=Hashable)
 
+DEFAULT_HOLD_S = 0.01
+"""Default flicker hold time (s): NOTES.md measured that about 10 ms keeps real semi-stable states."""
+
 
 @dataclass
 class Kept(Generic[S]):
