@@ -1,0 +1,256 @@
+"""Live simulation of the built-in demonstration scripts (scenes/*.script.toml): which discrete states
+they reach, the Fig. 6 edge drags, the peg-in-hole story (Fig. 11), determinism, a steady drag.
+
+Each demo is simulated once per session (module-scoped cache); the whole file runs in about a minute.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dlovr.contacts import ContactTracker
+from dlovr.discrete import STATES, DiscreteSituation
+from dlovr.geometry import SceneGeometry
+from dlovr.scene import load_scene
+from dlovr.script import Script, Waypoint, load_script
+from dlovr.sim import Simulator
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+
+@pytest.fixture(autouse=True)
+def _no_log_in_repo(tmp_path, monkeypatch) -> None:
+    """MuJoCo writes its instability warnings to MUJOCO_LOG.TXT in the working directory."""
+    monkeypatch.chdir(tmp_path)
+
+
+@dataclass
+class Run:
+    tracker: ContactTracker
+    points: list[np.ndarray]
+
+    @property
+    def transitions(self):
+        return self.tracker.transitions()
+
+    def kept_in(self, t0: float, t1: float):
+        """Kept situations (with the classes of the transition into each) that began in [t0, t1)."""
+        return [(k, c) for k, c in self.transitions if t0 <= k.start < t1]
+
+
+def simulate(scene_name: str, script: Script, keep_points: bool = False) -> Run:
+    scene = load_scene(scene_name)
+    sim = Simulator(scene)
+    tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
+    pts = []
+    for rec in sim.run(script):
+        tracker.update(rec)
+        if keep_points:
+            pts.append(rec.points)
+    return Run(tracker, pts)
+
+
+_CACHE: dict[str, Run] = {}
+
+
+def demo(scene_name: str) -> Run:
+    """The built-in demonstration of a scene, simulated once per session."""
+    if scene_name not in _CACHE:
+        _CACHE[scene_name] = simulate(scene_name, load_script(SCENES / f"{scene_name}.script.toml"))
+    return _CACHE[scene_name]
+
+
+def principal(sit: DiscreteSituation) -> list[tuple[str, tuple[str, ...]]]:
+    return [(c.state.name, c.faces) for c in sit.contacts if c.state.is_principal_kind]
+
+
+def has(sit: DiscreteSituation, state: str, faces: tuple[str, ...] | None = None) -> bool:
+    return any(s == state and (faces is None or f == tuple(sorted(faces))) for s, f in principal(sit))
+
+
+# --------------------------------------------------------------------------------------------------
+# Each of the 15 discrete states, reached live: (scene whose built-in script reaches it, faces)
+
+REACHED: dict[str, tuple[str, tuple[str, ...]]] = {
+    "E/F": ("edges", ("concave90.F1",)),
+    "E/E^P": ("peg_in_hole", ("block.F1", "block.F3")),
+    "E/E^LS": ("edges", ("concave90.F1", "concave90.F5")),
+    "V/F": ("peg_in_hole", ("block.F1",)),
+    "E/E^LT": ("edges", ("concave175.F1", "concave175.F2")),
+    "E/E^LI": ("edges", ("convex185.F2", "convex185.F3")),
+    "V/E^LI": ("peg_in_hole", ("holeblock.F2", "holeblock.F7")),
+}
+NOT_YET = {
+    "V/E^LS": "the tip does not stay in a groove: the edges lift-off passed it with a 0.3 m cable; the "
+    "peg_in_hole script does not yet bring the tip into the groove with the hole block",
+    "E/VS": "no built-in script yet lays the cable through a concave corner (the hole's bottom corner)",
+    "V/VS": "no built-in script yet pushes the tip into the hole's bottom corner",
+    "E/VT": "no built-in scene has a concave corner with a nearly flat pair of faces (e.g. a wall at the "
+    "end of the 175° valley) and no script drives the cable through one",
+    "V/E^LT": "no built-in script yet presses the tip into the 175° valley",
+    "V/VT": "no built-in scene has a concave corner with a nearly flat pair of faces",
+    "E/VI": "no built-in script yet drapes the cable diagonally over a convex corner",
+    "V/VI": "no built-in script yet puts the tip on a convex corner (e.g. a corner of the hole's rim)",
+}
+
+
+def test_table_covers_all_fifteen_states():
+    assert set(REACHED) | set(NOT_YET) == set(STATES)
+    assert not set(REACHED) & set(NOT_YET)
+
+
+@pytest.mark.parametrize(
+    "state",
+    [
+        *sorted(REACHED),
+        *(
+            pytest.param(s, marks=pytest.mark.xfail(strict=True, reason=r))
+            for s, r in sorted(NOT_YET.items())
+        ),
+    ],
+)
+def test_state_reached_live(state):
+    if state in REACHED:
+        scene, faces = REACHED[state]
+        run = demo(scene)
+        assert any(has(k.situation, state, faces) for k in run.tracker.kept), (
+            f"{state}{list(faces)} not among the kept situations of {scene}.script.toml"
+        )
+        return
+    # not (yet) reached by any built-in demo: fails, hence the strict xfail
+    assert any(
+        has(k.situation, state)
+        for name in ("edges", "peg_in_hole", "l_block")
+        for k in demo(name).tracker.kept
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# edges (paper Fig. 6): time windows of the four drags in scenes/edges.script.toml
+
+WINDOWS = {
+    "concave90": (0.0, 3.8),
+    "concave175": (15.1, 18.9),
+    "convex185": (30.2, 36.0),
+    "convex270": (47.3, 51.3),
+}
+
+
+def test_edges_90_concave_stable_transition():
+    kept = demo("edges").kept_in(*WINDOWS["concave90"])
+    into = [c for k, c in kept if has(k.situation, "E/E^LS", ("concave90.F1", "concave90.F5"))]
+    assert into and "C" in into[0], kept
+    assert not {"T", "I", "S"} & {x for _, c in kept for x in c}
+
+
+def test_edges_175_concave_transient_transition():
+    kept = demo("edges").kept_in(*WINDOWS["concave175"])
+    semi = [
+        i for i, (k, _) in enumerate(kept) if has(k.situation, "E/E^LT", ("concave175.F1", "concave175.F2"))
+    ]
+    assert semi, kept
+    assert "T" in kept[semi[0]][1]
+    assert any(has(k.situation, "E/F", ("concave175.F2",)) for k, _ in kept[semi[0] :])
+    assert not {"I", "S"} & {x for _, c in kept for x in c}
+
+
+@pytest.mark.parametrize(
+    "plate,faces",
+    [("convex185", ("convex185.F2", "convex185.F3")), ("convex270", ("convex270.F2", "convex270.F4"))],
+)
+def test_edges_convex_instable_then_spontaneous(plate, faces):
+    kept = demo("edges").kept_in(*WINDOWS[plate])
+    classes = [c for _, c in kept]
+    i = next(i for i, (k, c) in enumerate(kept) if "I" in c)
+    assert has(kept[i][0].situation, "E/E^LI", faces)
+    assert any("S" in c for c in classes[i + 1 :]), kept
+
+
+# --------------------------------------------------------------------------------------------------
+# peg_in_hole (paper Fig. 11)
+
+STORY = [
+    ("V/F", ("block.F1",)),
+    ("E/F", ("block.F1",)),
+    ("E/E^P", ("block.F1", "block.F3")),
+]
+STORY_END = [
+    ("E/E^LS", ("block.F3", "holeblock.F2")),  # or V/E^LS: the concave groove with the hole block
+    ("V/VS", None),  # the tip in the hole
+]
+
+
+def _in_order(kept, steps) -> int:
+    i = 0
+    for k in kept:
+        if i < len(steps) and has(k.situation, *steps[i]):
+            i += 1
+    return i
+
+
+def test_peg_in_hole_story_block_part():
+    kept = demo("peg_in_hole").tracker.kept
+    assert _in_order(kept, STORY) == len(STORY), [k.situation.format() for k in kept]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the script does not yet bring the tip down the side face into the groove and into the hole",
+)
+def test_peg_in_hole_story_groove_and_hole():
+    kept = demo("peg_in_hole").tracker.kept
+    groove = [
+        k
+        for k in kept
+        if has(k.situation, "E/E^LS", STORY_END[0][1]) or has(k.situation, "V/E^LS", STORY_END[0][1])
+    ]
+    assert groove
+    assert any(
+        has(k.situation, "V/VS") or has(k.situation, "V/E^LS", ("holeblock.F1", "holeblock.F5"))
+        for k in kept
+        if k.start > groove[0].start
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# determinism, steady drag
+
+
+def _short_edges() -> Script:
+    """The first drag of scenes/edges.script.toml (90° concave), 3.8 s."""
+    full = load_script(SCENES / "edges.script.toml")
+    return Script(waypoints=full.waypoints[:3], scene="edges")
+
+
+def test_same_script_twice_is_identical():
+    a = simulate("edges", _short_edges(), keep_points=True)
+    b = simulate("edges", _short_edges(), keep_points=True)
+    assert [(k.situation, k.start, k.end) for k in a.tracker.kept] == [
+        (k.situation, k.start, k.end) for k in b.tracker.kept
+    ]
+    assert len(a.tracker.kept) >= 2
+    assert len(a.points) == len(b.points)
+    assert all(np.array_equal(p, q) for p, q in zip(a.points, b.points, strict=True))
+
+
+def test_steady_drag_along_a_face_has_no_transitions():
+    # the edges scene starts with the cable on the 90° plate's floor; drag it 3 cm away from the wall
+    start = (-0.5, -0.15, 0.0255)
+    script = Script(
+        waypoints=(
+            Waypoint(pos=start, quat=None, duration=0.3, hold=0.3),
+            Waypoint(pos=(-0.53, -0.15, 0.0255), quat=None, duration=1.0, hold=0.3),
+        ),
+        scene="edges",
+    )
+    run = simulate("edges", script)
+    kept = run.tracker.kept
+    # the start pose (cable 0.5 mm above the floor) settles within a few ms; from then on, nothing
+    settled = [k for k in kept if k.end > 0.1]
+    assert len(settled) == 1, [k.situation.format() for k in kept]
+    assert settled[0].start < 0.1 and settled[0].end > 1.8
+    assert has(settled[0].situation, "E/F", ("concave90.F1",))
