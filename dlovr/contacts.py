@@ -81,7 +81,7 @@ class ContactTracker:
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
-        self._touching: set[tuple[int, str, int]] = set()
+        self._touching = np.zeros(0, dtype=np.int64)  # (point << 20 | piece id) in contact
         self._signature: tuple[Any, ...] | None = None
         self._piece_map: tuple[Any, dict[tuple[int, int], int]] | None = None
         self._situation: Situation | None = None
@@ -93,7 +93,7 @@ class ContactTracker:
         A recording starts this way, and its replay too, so both see the same contact states.
         """
         self._debouncer = Debouncer(self.hold, is_transient)
-        self._touching = set()
+        self._touching = np.zeros(0, dtype=np.int64)
         self._signature = self._situation = None
         self.changes = []
         self.current = None
@@ -118,24 +118,20 @@ class ContactTracker:
         r = self.geometry.radius
         geom = self.geometry
         if pairs is None:
-            hits = geom.classify_points(pts, contact_tol=self.leave_tol)
+            pi = np.repeat(np.arange(len(pts)), len(geom.pieces))
+            pc = np.tile(np.arange(len(geom.pieces)), len(pts))
         else:
             pi, pc = pairs
-            if self._touching:
-                prev = np.array([(k[0], geom.piece_id(k[1], k[2])) for k in self._touching], dtype=np.int64)
-                pi, pc = _unique_pairs(np.concatenate([pi, prev[:, 0]]), np.concatenate([pc, prev[:, 1]]))
-            hits = geom.classify_pairs(pts, pi, pc, contact_tol=self.leave_tol)
-        kept_hits = []
-        touching: set[tuple[int, str, int]] = set()
-        for h in hits:
-            point = h.point
-            key = (point, h.piece.obj, h.piece.index)
-            if h.distance <= r + self.enter_tol or (
-                key in self._touching and h.distance <= r + self.leave_tol
-            ):
-                touching.add(key)
-                kept_hits.append(_Hit(point, h.faces))
-        self._touching = touching
+            if len(self._touching):
+                prev_pi, prev_pc = self._touching >> 20, self._touching & _LOW
+                pi, pc = _unique_pairs(np.concatenate([pi, prev_pi]), np.concatenate([pc, prev_pc]))
+        pt, pid, dist, faces, _ = geom.pair_hits(pts, pi, pc, contact_tol=self.leave_tol)
+        keys = pt << 20 | pid
+        keep = (dist <= r + self.enter_tol) | (np.isin(keys, self._touching) & (dist <= r + self.leave_tol))
+        self._touching = keys[keep]
+        kept_hits = [
+            _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
+        ]
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
@@ -219,7 +215,10 @@ class ContactTracker:
 def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique (a, b) pairs of non-negative ints (b < 2**20), sorted by a then b."""
     u = np.unique(a.astype(np.int64) << 20 | b.astype(np.int64))
-    return u >> 20, u & ((1 << 20) - 1)
+    return u >> 20, u & _LOW
+
+
+_LOW = (1 << 20) - 1
 
 
 def _tuple(v: Any) -> Any:

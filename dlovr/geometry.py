@@ -927,19 +927,37 @@ class SceneGeometry:
         contact_tol: float = 5e-4,
         tangential_tol: float | None = None,
     ) -> list[PointHit]:
-        """:meth:`classify_points` restricted to given (point, piece) pairs, vectorised.
+        """:meth:`classify_points` restricted to given (point, piece id) pairs (see :meth:`pair_hits`)."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        pt, pid, dist, faces, closest = self.pair_hits(pts, point_idx, piece_idx, contact_tol, tangential_tol)
+        return [
+            PointHit(int(pt[i]), self.pieces[int(pid[i])], closest[i], float(dist[i]), faces[i])
+            for i in range(len(pt))
+        ]
+
+    def pair_hits(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float = 5e-4,
+        tangential_tol: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray]:
+        """Contacts of given (point, piece id) pairs as arrays, sorted by point then piece:
+        point indices, piece ids (into :attr:`pieces`), distances (m), face names, closest points.
 
         A pair whose closest point lies on one external, uncovered face at least the tangential
         tolerance away from that face's other planes is a face contact, decided here in one numpy
         pass (the distance from the projection to any edge of the face is at least its distance to
-        the other face's plane). Points with any other pair fall back to :meth:`classify_points`.
+        the other face's plane). Points with any other pair go through :meth:`classify_points`.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
-        if len(pi) == 0:
-            return []
         r = self.radius
         ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
+        empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)))
+        if len(pi) == 0:
+            return empty
         n_all, d_all, names, simple = self._padded()
         p = pts[pi]
         nrm, off = n_all[pc], d_all[pc]  # (K,F,3), (K,F)
@@ -951,23 +969,22 @@ class SceneGeometry:
         resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)  # residuals of the projection
         resq[k, best] = -np.inf
         pure = (resq.max(axis=1) <= -ttol) & simple[pc, best]
-        near = rb <= r + contact_tol
-        hits: list[PointHit] = []
-        ambiguous = set(pi[~pure].tolist())
-        for j in np.nonzero(pure & near)[0]:
-            if int(pi[j]) in ambiguous:
-                continue
-            q = p[j] - rb[j] * nb[j]
-            hits.append(
-                PointHit(int(pi[j]), self.pieces[int(pc[j])], q, float(rb[j]), (names[pc[j], best[j]],))
+        amb_points = np.unique(pi[~pure])
+        take = pure & (rb <= r + contact_tol) & ~np.isin(pi, amb_points)
+        pt, pid, dist = pi[take], pc[take], rb[take]
+        faces = [(f,) for f in names[pid, best[take]].tolist()]
+        closest = p[take] - rb[take, None] * nb[take]
+        if len(amb_points):
+            extra = self.classify_points(pts[amb_points], r, contact_tol, tangential_tol)
+            pt = np.concatenate([pt, amb_points[[h.point for h in extra]].astype(np.int64)])
+            pid = np.concatenate(
+                [pid, np.array([self.piece_id(h.piece.obj, h.piece.index) for h in extra], np.int64)]
             )
-        if ambiguous:
-            amb = np.array(sorted(ambiguous))
-            for h in self.classify_points(pts[amb], r, contact_tol, tangential_tol):
-                h.point = int(amb[h.point])
-                hits.append(h)
-        hits.sort(key=lambda h: (h.point, h.piece.obj, h.piece.index))
-        return hits
+            dist = np.concatenate([dist, [h.distance for h in extra]])
+            faces = faces + [h.faces for h in extra]
+            closest = np.concatenate([closest, np.array([h.closest for h in extra]).reshape(-1, 3)])
+        order = np.lexsort((pid, pt))
+        return pt[order], pid[order], dist[order], [faces[i] for i in order.tolist()], closest[order]
 
     def classify_points(
         self,
