@@ -108,11 +108,15 @@ class ContactTracker:
         points: np.ndarray,
         gripper_z: Sequence[float] | None = None,
         pairs: tuple[np.ndarray, np.ndarray] | None = None,
+        between: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> Situation:
         """Topological situation of the cable polyline ``points`` (hysteresis applied).
 
         ``pairs``: (point indices, piece ids) the simulator reports in contact; only those (and the
         pairs touching at the last step) are classified. ``None``: every point against every piece.
+        ``between``: (centerline positions, owner point, piece id) of contacts the simulator reports
+        between two points (a segment crossing an edge touches it between its end points); their
+        labels count for the nearer point.
         """
         pts = np.asarray(points, dtype=float)
         r = self.geometry.radius
@@ -125,7 +129,17 @@ class ContactTracker:
             if len(self._touching):
                 prev_pi, prev_pc = self._touching >> 20, self._touching & _LOW
                 pi, pc = _unique_pairs(np.concatenate([pi, prev_pi]), np.concatenate([pc, prev_pc]))
-        pt, pid, dist, faces, _ = geom.pair_hits(pts, pi, pc, contact_tol=self.leave_tol)
+        owner = np.arange(len(pts))
+        if between is not None and len(between[0]):
+            vpos, vowner, vpiece = between
+            pi = np.concatenate([pi, len(pts) + np.arange(len(vpos))])
+            pc = np.concatenate([pc, vpiece])
+            owner = np.concatenate([owner, vowner])
+            pts_all = np.concatenate([pts, vpos])
+        else:
+            pts_all = pts
+        pt, pid, dist, faces, _ = geom.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
+        pt = owner[pt]
         keys = pt << 20 | pid
         keep = (dist <= r + self.enter_tol) | (np.isin(keys, self._touching) & (dist <= r + self.leave_tol))
         self._touching = keys[keep]
@@ -158,22 +172,41 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
-    def _pairs(self, arrays: Any, point_of: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(point, piece id) pairs of the simulator's contacts, unique."""
-        if not ok.any():
-            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    def _piece_ids(self, arrays: Any, rows: np.ndarray) -> np.ndarray:
+        """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts ``rows``."""
         objs = arrays.names[0]
         if self._piece_map is None or self._piece_map[0] is not objs:
             self._piece_map = (objs, {})
         cache = self._piece_map[1]
-        obj, piece = np.asarray(arrays.obj)[ok], np.asarray(arrays.piece)[ok]
+        obj, piece = np.asarray(arrays.obj)[rows], np.asarray(arrays.piece)[rows]
         ids = np.empty(len(obj), dtype=np.int64)
-        for i, (o, k) in enumerate(zip(obj.tolist(), piece.tolist(), strict=True)):
-            key = (o, k)
+        for i, key in enumerate(zip(obj.tolist(), piece.tolist(), strict=True)):
             if key not in cache:
-                cache[key] = self.geometry.piece_id(objs[o], k)
+                cache[key] = self.geometry.piece_id(objs[key[0]], key[1])
             ids[i] = cache[key]
-        return _unique_pairs(point_of[ok], ids)
+        return ids
+
+    def _pairs(self, arrays: Any, point_of: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unique (point, piece id) pairs of the simulator's contacts, sorted."""
+        rows = np.nonzero(point_of >= 0)[0]
+        return _unique_pairs(point_of[rows], self._piece_ids(arrays, rows))
+
+    def _between(self, arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centerline points of segment contacts that lie between the segment's end points."""
+        seg = np.asarray(arrays.segment, dtype=np.int64)
+        sel = np.nonzero((np.asarray(arrays.point) < 0) & (seg >= 0))[0]
+        if len(sel) == 0:
+            return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+        s = seg[sel]
+        a, b = pts[s], pts[s + 1]
+        ab = b - a
+        t = np.einsum("ij,ij->i", np.asarray(arrays.pos)[sel] - a, ab) / np.maximum(
+            np.einsum("ij,ij->i", ab, ab), 1e-18
+        )
+        t = np.clip(t, 0.0, 1.0)
+        pos = a + t[:, None] * ab
+        owner = np.where(t < 0.5, s, s + 1)
+        return pos, owner, self._piece_ids(arrays, sel)
 
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
@@ -181,13 +214,14 @@ class ContactTracker:
         arrays = getattr(record, "contact_arrays", None)
         pts = np.asarray(record.points, dtype=float)
         pairs = None
+        between = None
         point_of = np.zeros(0, dtype=np.int64)
         if arrays is not None:
             point_of = _contact_points(arrays, pts)
-            ok = point_of >= 0
-            pairs = self._pairs(arrays, point_of, ok)
+            pairs = self._pairs(arrays, point_of)
+            between = self._between(arrays, pts)
         prev = self.current
-        topo = self.classify(pts, record.gripper_z, pairs)
+        topo = self.classify(pts, record.gripper_z, pairs, between)
         if prev is not None and prev.topological == topo and _vector_independent(topo):
             disc = prev.discrete
         else:
