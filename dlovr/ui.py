@@ -462,6 +462,7 @@ class DemoServer:
         self.server: viser.ViserServer | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._wake = threading.Event()
         self._paused = False
         self._target: tuple[np.ndarray, np.ndarray] | None = None
         self._target_dirty = False
@@ -535,6 +536,7 @@ class DemoServer:
         q = np.asarray(quat, dtype=float) if quat is not None else self.target()[1]
         self._target = (p, q)
         self._target_dirty = True
+        self._wake.set()
         if move_gizmo and self.server is not None:
             self._gizmo.position = tuple(p)
             self._gizmo.wxyz = tuple(q)
@@ -704,36 +706,41 @@ class DemoServer:
 
     def _loop(self) -> None:
         period = 1.0 / self.publish_hz
-        next_pub = time.perf_counter()
+        min_period = 1.0 / 60.0  # viser coalesces to ~60 frames/s anyway
+        next_pub = last_pub = time.perf_counter()
         anchor_wall = time.perf_counter()
         anchor_steps = 0
         done = 0
         rtf_t, rtf_sim = time.perf_counter(), self.session.record.time
         session = self.session
+        kicked = False  # a new target was applied and has not been published yet
         while not self._stop.is_set():
             now = time.perf_counter()
             if session is not self.session or self._paused:
                 session = self.session
                 anchor_wall, anchor_steps, done = now, 0, 0
+            dt = session.dt
             if not self._paused:
-                dt = session.dt
                 due = int((now - anchor_wall) / dt) - (done - anchor_steps)
                 if due > 50:  # more than 0.1 s behind: give up catching up (slower than real time)
                     anchor_wall, anchor_steps = now, done
                     due = 50
-                if due > 0:
-                    n = min(due, 25)
-                    target = None
-                    if self._target_dirty:
-                        self._target_dirty = False
-                        target = self._target
+                target = None
+                if self._target_dirty:
+                    self._target_dirty = False
+                    target = self._target
+                    due = max(due, 1)  # show a new target at once
+                # small chunks: publishing and new targets are never held up by a long batch
+                n = min(due, 5)
+                if n > 0:
                     if not session.advance(n, target):
                         self.pause(True)
                         with contextlib.suppress(Exception):
                             self.hold()
                     done += n
+                    kicked = kicked or target is not None
             now = time.perf_counter()
-            if now >= next_pub:
+            if now >= next_pub or (kicked and now - last_pub >= min_period):
                 if now - rtf_t >= 1.0:
                     self._rtf = (session.record.time - rtf_sim) / (now - rtf_t)
                     rtf_t, rtf_sim = now, session.record.time
@@ -742,10 +749,18 @@ class DemoServer:
                 except Exception as e:  # keep the simulation alive whatever a publish does
                     if self.verbose:
                         print(f"dlovr serve: publish failed: {e!r}")
-                next_pub = max(next_pub + period, now - period)
-            wait = min(next_pub, time.perf_counter() + 0.004) - time.perf_counter()
+                last_pub = now
+                kicked = False
+                if now >= next_pub:  # on schedule
+                    next_pub = next_pub + period if next_pub + period > now else now + period
+                else:  # early, for a new target: keep the schedule
+                    next_pub = max(next_pub, now + min_period)
+            next_step = anchor_wall + (done - anchor_steps + 4) * dt
+            pub_at = min(next_pub, last_pub + min_period) if kicked else next_pub
+            wait = min(pub_at, next_step) - time.perf_counter()
             if wait > 0:
-                time.sleep(wait)
+                self._wake.wait(wait)
+                self._wake.clear()
 
     def _publish(self) -> None:
         srv = self.server
@@ -1019,7 +1034,7 @@ class DemoServer:
 
     def _update_timeline_gui(self, force: bool = False) -> None:
         tl = self._view or self.session.timeline
-        key = (id(tl), len(tl.bands), round(tl.end, 1))
+        key = (id(tl), len(tl.bands), round(tl.end))
         if not force and key == getattr(self, "_tl_key", None):
             return
         self._tl_key = key
