@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from mcap_edit import rewrite_mcap
 
 from dlovr.cli import main
 from dlovr.recording import (
@@ -63,31 +64,16 @@ def test_recording_holds_everything_needed(recorded):
 
 def test_replay_detects_a_changed_command_stream(recorded, tmp_path):
     """A recording whose checkpoints do not match its commands is reported with time and element."""
-    from mcap.reader import make_reader
-    from mcap.writer import Writer
+
+    def nudge(topic, data):
+        d = json.loads(data)
+        if topic == "/dlovr/command" and d["step"] == 300:
+            d["pos"][0] += 1e-4  # a nudge of 0.1 mm at step 300
+            return json.dumps(d).encode()
+        return data
 
     bad = tmp_path / "bad.mcap"
-    with open(recorded, "rb") as fh, open(bad, "wb") as oh:
-        rd = make_reader(fh)
-        w = Writer(oh)
-        w.start(profile="dlovr")
-        for m in rd.iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
-        for a in rd.iter_attachments():
-            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-        chans = {}
-        for schema, ch, msg in rd.iter_messages():
-            if ch.id not in chans:
-                sid = w.register_schema(schema.name, schema.encoding, schema.data)
-                chans[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid)
-            data = msg.data
-            if ch.topic == "/dlovr/command":
-                d = json.loads(data)
-                if d["step"] == 300:
-                    d["pos"][0] += 1e-4  # a nudge of 0.1 mm at step 300
-                    data = json.dumps(d).encode()
-            w.add_message(chans[ch.id], msg.log_time, data, msg.publish_time)
-        w.finish()
+    rewrite_mcap(recorded, bad, message=nudge)
     res = replay(bad, verify=True)
     assert res.divergence and "checkpoint step 500" in res.divergence
     r = cli("replay", bad, "--verify")

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from mcap_edit import rewrite_mcap
 
 from dlovr.recording import (
     TOPIC_CHECKPOINT,
@@ -107,31 +108,13 @@ def test_bad_files_give_one_clear_error(tmp_path, mangle, message):
 
 
 def test_tampered_scene_is_detected(tmp_path):
-    from mcap.writer import Writer
-
     p = tmp_path / "a.mcap"
     write(p)
     r = Recording(p)
-    # rewrite the file with a modified scene attachment but the old metadata
-    from mcap.reader import make_reader
-
-    out = tmp_path / "t.mcap"
-    with open(p, "rb") as fh, open(out, "wb") as oh:
-        rd = make_reader(fh)
-        w = Writer(oh)
-        w.start(profile="dlovr")
-        for m in rd.iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
-        for a in rd.iter_attachments():
-            data = a.data + b"# evil\n" if a.name == "scene/scene.toml" else a.data
-            w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, data)
-        chans = {}
-        for schema, ch, msg in rd.iter_messages():
-            if ch.id not in chans:
-                sid = w.register_schema(schema.name, schema.encoding, schema.data)
-                chans[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid)
-            w.add_message(chans[ch.id], msg.log_time, msg.data, msg.publish_time)
-        w.finish()
+    out = tmp_path / "t.mcap"  # a modified scene attachment under the old metadata
+    rewrite_mcap(
+        p, out, attachment=lambda name, data: data + b"# evil\n" if name == "scene/scene.toml" else data
+    )
     assert r.scene.digest
     with pytest.raises(RecordingError, match="embedded scene was modified"):
         Recording(out)
