@@ -294,68 +294,44 @@ class Recorder:
         ns = self._ns(step)
         stamp = {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
         w, x, y, z = _floats(gripper_quat)
-        entities = [
-            {
-                "timestamp": stamp,
-                "frame_id": "world",
-                "id": "cable",
-                "lifetime": {"sec": 0, "nsec": 0},
-                "frame_locked": False,
-                "lines": [
-                    {
-                        "type": 0,
-                        "pose": {
-                            "position": {"x": 0, "y": 0, "z": 0},
-                            "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
-                        },
-                        "thickness": 2.0 * radius,
-                        "scale_invariant": False,
-                        "points": [{"x": p[0], "y": p[1], "z": p[2]} for p in np.asarray(points).tolist()],
-                        "color": {"r": 0.95, "g": 0.55, "b": 0.1, "a": 1.0},
-                    }
-                ],
-            },
-            {
-                "timestamp": stamp,
-                "frame_id": "gripper",
-                "id": "gripper",
-                "lifetime": {"sec": 0, "nsec": 0},
-                "frame_locked": True,
-                "cubes": [
-                    {
-                        "pose": {
-                            "position": {"x": 0, "y": 0, "z": 0.02},
-                            "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
-                        },
-                        "size": {"x": 0.03, "y": 0.03, "z": 0.04},
-                        "color": {"r": 0.3, "g": 0.3, "b": 0.35, "a": 1.0},
-                    }
-                ],
-            },
-        ]
+        origin = {"position": {"x": 0, "y": 0, "z": 0}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}
+
+        def entity(id_: str, frame: str, **primitives: list[dict[str, Any]]) -> dict[str, Any]:
+            e: dict[str, Any] = {
+                "timestamp": stamp, "frame_id": frame, "id": id_, "lifetime": {"sec": 0, "nsec": 0},
+                "frame_locked": frame != "world", "metadata": [],
+            }  # fmt: skip
+            for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
+                e[kind] = primitives.get(kind, [])
+            return e
+
+        line = {
+            "type": 0,  # LINE_STRIP
+            "pose": origin,
+            "thickness": 2.0 * radius,
+            "scale_invariant": False,
+            "points": [{"x": p[0], "y": p[1], "z": p[2]} for p in np.asarray(points).tolist()],
+            "color": {"r": 0.95, "g": 0.55, "b": 0.1, "a": 1.0},
+            "colors": [],
+            "indices": [],
+        }
+        grip = {
+            "pose": {"position": {"x": 0, "y": 0, "z": 0.02}, "orientation": origin["orientation"]},
+            "size": {"x": 0.03, "y": 0.03, "z": 0.04},
+            "color": {"r": 0.3, "g": 0.3, "b": 0.35, "a": 1.0},
+        }
+        entities = [entity("cable", "world", lines=[line]), entity("gripper", "gripper", cubes=[grip])]
         for name, tris in obstacles:
-            entities.append(
-                {
-                    "timestamp": stamp,
-                    "frame_id": "world",
-                    "id": f"object/{name}",
-                    "lifetime": {"sec": 0, "nsec": 0},
-                    "frame_locked": False,
-                    "triangles": [
-                        {
-                            "pose": {
-                                "position": {"x": 0, "y": 0, "z": 0},
-                                "orientation": {"x": 0, "y": 0, "z": 0, "w": 1},
-                            },
-                            "points": [
-                                {"x": v[0], "y": v[1], "z": v[2]}
-                                for v in np.asarray(tris).reshape(-1, 3).tolist()
-                            ],
-                            "color": {"r": 0.6, "g": 0.65, "b": 0.7, "a": 1.0},
-                        }
-                    ],
-                }
-            )
+            mesh = {
+                "pose": origin,
+                "points": [
+                    {"x": v[0], "y": v[1], "z": v[2]} for v in np.asarray(tris).reshape(-1, 3).tolist()
+                ],
+                "color": {"r": 0.6, "g": 0.65, "b": 0.7, "a": 1.0},
+                "colors": [],
+                "indices": [],
+            }
+            entities.append(entity(f"object/{name}", "world", triangles=[mesh]))
         self._add(TOPIC_SCENE, step, _dumps({"deletions": [], "entities": entities}))
         tf = {
             "transforms": [

@@ -43,7 +43,8 @@ def write(path, steps=200, flush_interval=2.0):
                     k, {"t": k * 0.002, "step": k, "discrete": "V/G & E/N & V/N", "classes": []}
                 )
             if k % 17 == 0:
-                rec.frame(k, rng.standard_normal((5, 3)), [0, 0, 1], [1, 0, 0, 0], 0.005)
+                obstacles = [("box", rng.standard_normal((4, 3, 3)))] if k == 17 else ()
+                rec.frame(k, rng.standard_normal((5, 3)), [0, 0, 1], [1, 0, 0, 0], 0.005, obstacles)
         rec.checkpoint(steps, rng.standard_normal(50), [0, 0, 1], [1, 0, 0, 0])
 
 
@@ -176,3 +177,17 @@ def test_killed_writer_is_recovered_up_to_the_last_flush(tmp_path):
     assert [s["step"] for s in r.states()] == list(range(100, steps[-1] + 1, 100))[: len(r.states())]
     assert len(r.states()) >= 19
     json.dumps(r.metadata)
+
+
+def test_foxglove_messages_validate_against_foxglove_schemas(tmp_path):
+    import jsonschema
+    from mcap.reader import make_reader
+
+    p = tmp_path / "a.mcap"
+    write(p)
+    seen = set()
+    with open(p, "rb") as fh:
+        for schema, channel, msg in make_reader(fh).iter_messages(topics=["/foxglove/scene", "/tf"]):
+            jsonschema.validate(json.loads(msg.data), json.loads(schema.data))
+            seen.add((channel.topic, schema.name))
+    assert seen == {("/foxglove/scene", "foxglove.SceneUpdate"), ("/tf", "foxglove.FrameTransforms")}
