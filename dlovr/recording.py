@@ -509,6 +509,28 @@ class Recording:
             raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
         return s, np.asarray(pos, float), np.asarray(quat, float)
 
+    def frames(self) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+        """The ~30 Hz visual frames: (time s, cable points (n+1, 3), gripper pos (3,), quat wxyz (4,)).
+
+        Read from the Foxglove channels (this decompresses the bulk chunks: slower than states()).
+        """
+        poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for m in self._iter(TOPIC_TF):
+            for tf in m.get("transforms", []):
+                tr, ro = tf["translation"], tf["rotation"]
+                poses[_stamp_ns(tf["timestamp"])] = (
+                    np.array([tr["x"], tr["y"], tr["z"]], dtype=float),
+                    np.array([ro["w"], ro["x"], ro["y"], ro["z"]], dtype=float),
+                )
+        for m in self._iter(TOPIC_SCENE):
+            for ent in m.get("entities", []):
+                if ent.get("id") != "cable" or not ent.get("lines"):
+                    continue
+                ns = _stamp_ns(ent["timestamp"])
+                pts = np.array([[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]], dtype=float)
+                gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
+                yield (ns - self.t0_ns) / 1e9, pts, gp, gq
+
     def checkpoints(self) -> list[Checkpoint]:
         out = [
             Checkpoint(int(m["step"]), np.asarray(m["state"], float), np.asarray(m["target_pos"], float),
@@ -518,6 +540,10 @@ class Recording:
         if not out:
             raise RecordingError(f"{self.path}: recording has no checkpoints")
         return out
+
+
+def _stamp_ns(stamp: Mapping[str, int]) -> int:
+    return int(stamp["sec"]) * 1_000_000_000 + int(stamp["nsec"])
 
 
 def _one_line(e: BaseException) -> str:

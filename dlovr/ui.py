@@ -36,6 +36,7 @@ from dlovr.discrete import Stability
 from dlovr.geometry import SceneGeometry
 from dlovr.recording import DemoRecorder, Recording, RecordingError, compile_recording, kept_states
 from dlovr.scene import Scene, SceneError, builtin_scenes, load_scene
+from dlovr.script import quat_mul
 from dlovr.sim import SimulationDiverged, Simulator
 from dlovr.transitions import classify_step, format_classes
 
@@ -123,19 +124,6 @@ def contact_arrows(state: ContactState | None, points: np.ndarray, length: float
         v = np.asarray(dc.vector, dtype=float)
         out.append([base, base + length * v / max(float(np.linalg.norm(v)), 1e-12)])
     return np.asarray(out, dtype=float).reshape(-1, 2, 3)
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
 
 
 @dataclass
@@ -384,7 +372,7 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     Foxglove frames), its embedded scene (loaded from a temporary directory) and the Recording."""
     import tempfile
 
-    from dlovr.recording import TOPIC_SCENE, TOPIC_TF, load_embedded_scene, situation_from_payload
+    from dlovr.recording import load_embedded_scene, situation_from_payload
 
     rec = Recording(path)
     tmp = tempfile.mkdtemp(prefix="dlovr-ui-")
@@ -396,37 +384,20 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
         tl.bands.append(Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes)))
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])
-    t0 = rec.t0_ns
-    poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for m in rec._iter(TOPIC_TF):
-        for tf in m.get("transforms", []):
-            ns = tf["timestamp"]["sec"] * 1_000_000_000 + tf["timestamp"]["nsec"]
-            tr, ro = tf["translation"], tf["rotation"]
-            poses[ns] = (
-                np.array([tr["x"], tr["y"], tr["z"]]),
-                np.array([ro["w"], ro["x"], ro["y"], ro["z"]]),
-            )
-    for m in rec._iter(TOPIC_SCENE):
-        for ent in m.get("entities", []):
-            if ent.get("id") != "cable":
-                continue
-            ns = ent["timestamp"]["sec"] * 1_000_000_000 + ent["timestamp"]["nsec"]
-            t = (ns - t0) / 1e9
-            pts = np.array([[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]], dtype=float)
-            j = max(0, int(np.searchsorted(st_t, t + 1e-9, side="right")) - 1)
-            payload = states[j] if states else None
-            classes: list[Stability | None] = [None] * len(pts)
-            text = ""
-            if payload is not None:
-                sit = situation_from_payload(payload)
-                text = payload.get("discrete", "")
-                for c, m_c in zip(sit.contacts, payload.get("contacts", []), strict=False):
-                    span, cls = m_c.get("span"), c.state.stability_class
-                    if span and cls is not None:
-                        for i in range(max(0, span[0]), min(len(pts) - 1, span[1]) + 1):
-                            classes[i] = cls
-            gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0, 0, 0])))
-            tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text))
+    for t, pts, gp, gq in rec.frames():
+        j = max(0, int(np.searchsorted(st_t, t + 1e-9, side="right")) - 1)
+        payload = states[j] if states else None
+        classes: list[Stability | None] = [None] * len(pts)
+        text = ""
+        if payload is not None:
+            sit = situation_from_payload(payload)
+            text = payload.get("discrete", "")
+            for c, m_c in zip(sit.contacts, payload.get("contacts", []), strict=False):
+                span, cls = m_c.get("span"), c.state.stability_class
+                if span and cls is not None:
+                    for i in range(max(0, span[0]), min(len(pts) - 1, span[1]) + 1):
+                        classes[i] = cls
+        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text))
     return tl, scene, rec
 
 
