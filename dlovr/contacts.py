@@ -27,7 +27,8 @@ class ContactState:
     """The contact situation of one step.
 
     ``forces``: per contact of ``topological`` (same order), the summed normal force (N) of the
-    simulator's contacts on that stretch of cable; 0 for free contacts.
+    simulator's contacts on that stretch of cable; 0 for free contacts. ``gripper_force``: the force
+    (N, world frame) the cable exerts on the gripper; gripper pose in the world frame (quat wxyz).
     """
 
     step: int
@@ -37,6 +38,7 @@ class ContactState:
     forces: tuple[float, ...]
     gripper_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gripper_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    gripper_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
         """JSON-able form for recordings and the UI."""
@@ -60,6 +62,7 @@ class ContactState:
             "classes": list(classes),
             "gripper_pos": list(self.gripper_pos),
             "gripper_quat": list(self.gripper_quat),
+            "gripper_force": list(self.gripper_force),
             "contacts": contacts,
         }
 
@@ -231,6 +234,7 @@ class ContactTracker:
             int(record.step), float(record.time), topo, disc, forces,
             _tuple(getattr(record, "gripper_pos", (0.0, 0.0, 0.0))),
             _tuple(getattr(record, "gripper_quat", (1.0, 0.0, 0.0, 0.0))),
+            _tuple(getattr(record, "gripper_force", (0.0, 0.0, 0.0))),
         )  # fmt: skip
         if prev is None or prev.discrete != disc or prev.topological != topo:
             self.changes.append(state)

@@ -401,7 +401,8 @@ class StepRecord:
     ``points``: (n+1, 3) centerline points ``P_0..P_n``; ``vectors``: (n, 3) DLO vectors
     ``P_{i+1} - P_i``; gripper pose (``gripper_quat`` wxyz, ``gripper_z`` = ``G_z``) and the commanded
     target; ``contact_arrays``: raw rod-obstacle contacts as arrays (``contacts``: the same as
-    :class:`RodContact` objects); ``self_contacts``: pairs of touching segments.
+    :class:`RodContact` objects); ``self_contacts``: pairs of touching segments; ``gripper_force``:
+    the force (N, world frame) the cable exerts on the gripper, as a wrist force sensor would read it.
     """
 
     step: int
@@ -414,6 +415,7 @@ class StepRecord:
     target_pos: np.ndarray
     target_quat: np.ndarray
     contact_arrays: ContactArrays
+    gripper_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @cached_property
     def contacts(self) -> tuple[RodContact, ...]:
@@ -508,6 +510,8 @@ class Simulator:
             self._obj_of_geom[g] = objs.index(o)
             self._piece_of_geom[g] = k
         self._names = (objs, self._geom_names)
+        eq = mujoco.mjtObj.mjOBJ_EQUALITY
+        self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
         mujoco.mj_forward(m, self.data)
         mid = built.mocap_id
         self.target_pos = self.data.mocap_pos[mid].copy()
@@ -677,7 +681,17 @@ class Simulator:
             target_pos=self.target_pos.copy(),
             target_quat=self.target_quat.copy(),
             contact_arrays=ca,
+            gripper_force=self.gripper_force(),
         )
+
+    def gripper_force(self) -> np.ndarray:
+        """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
+        (a hanging cable pulls with its weight, -m g along z)."""
+        d = self.data
+        n = int(d.nefc)
+        equality = d.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+        rows = equality & np.isin(d.efc_id[:n], self._hold_ids)
+        return d.efc_force[:n][rows].reshape(-1, 3).sum(axis=0)
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
         """Play ``script`` from the current gripper pose; yield one record per step.

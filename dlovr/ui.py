@@ -223,13 +223,14 @@ def status_markdown(
 ) -> str:
     if state is None:
         return "Situation: (starting)"
-    force = float(sum(state.forces))
+    fx, fy, fz = state.gripper_force
     run = "paused" if paused else f"running, {rtf:.2f}x real time"
     lines = [
         f"**Discrete:** `{state.discrete.format()}`",
         f"**Topological:** `{state.topological.format()}`",
         f"**Last transition:** `{last_class or '-'}`",
-        f"**Gripper force:** {force:.2f} N (sum of the cable's contact normal forces)",
+        f"**Gripper force:** {math.hypot(fx, fy, fz):.2f} N ({fx:+.2f}, {fy:+.2f}, {fz:+.2f})",
+        f"**Contact force on the cable:** {sum(state.forces):.2f} N",
         f"t = {t:.2f} s, {run}",
     ]
     if note:
@@ -667,6 +668,7 @@ class DemoServer:
                 "topological": st.topological.format(),
                 "last_class": s.last_class(),
                 "force": float(sum(st.forces)),
+                "gripper_force": list(st.gripper_force),
                 "recording": s.recorder.path if s.recorder else None,
                 "paused": self._paused,
                 "rtf": self._rtf,

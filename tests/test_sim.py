@@ -243,3 +243,13 @@ def test_contact_force_matches_mj_contact_force() -> None:
 def test_start_pose_inside_an_obstacle_is_rejected() -> None:
     with pytest.raises(ValueError, match=r"penetrates table\.P0"):
         Simulator.from_parts([table()], DLO, GripperPose((0.0, 0.0, TABLE_TOP + 0.1), (1.0, 0.0, 0.0, 0.0)))
+
+
+def test_gripper_force_of_a_hanging_cable_is_its_weight():
+    from dlovr.scene import load_scene
+
+    scene = load_scene("table")
+    sim = Simulator(scene)
+    sim.set_target([0.0, 0.0, 0.9])
+    rec = sim.step(1500)  # lifted clear of the table, settled
+    np.testing.assert_allclose(rec.gripper_force, [0.0, 0.0, -scene.dlo.mass * 9.81], atol=0.01)

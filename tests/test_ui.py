@@ -85,6 +85,7 @@ def test_server_runs_in_real_time_and_reports_the_table_contact(server: DemoServ
         classes = point_classes(server.session.state, len(server.session.record.points))
     assert Stability.STABLE in classes  # points on the table are coloured as stable
     assert st["force"] > 0
+    assert len(st["gripper_force"]) == 3
     # bounded speed: the gripper never jumped to the target
     assert server.session.sim.max_speed <= 0.25
     # the live timeline has kept situations with transition classes
