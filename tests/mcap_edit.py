@@ -14,14 +14,15 @@ def rewrite_mcap(
     dst: Path,
     attachment: Callable[[str, bytes], bytes] = lambda name, data: data,
     message: Callable[[str, bytes], bytes] = lambda topic, data: data,
+    metadata: Callable[[str, dict[str, str]], dict[str, str]] = lambda name, data: data,
 ) -> None:
-    """Write ``dst`` as a copy of ``src`` (metadata kept) with attachments and messages edited."""
+    """Write ``dst`` as a copy of ``src`` with metadata, attachments and messages edited."""
     with open(src, "rb") as fh, open(dst, "wb") as oh:
         rd = make_reader(fh)
         w = Writer(oh)
         w.start(profile=rd.get_header().profile)
         for m in rd.iter_metadata():
-            w.add_metadata(m.name, dict(m.metadata))
+            w.add_metadata(m.name, metadata(m.name, dict(m.metadata)))
         for a in rd.iter_attachments():
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, attachment(a.name, a.data))
         chans: dict[int, int] = {}

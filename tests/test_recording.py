@@ -185,3 +185,12 @@ def test_scene_export_loads_in_plain_mujoco(tmp_path):
     assert m.nflex == 1 and m.nmocap == 1
     bad = cli("scene", "export", "no_such_scene", "-o", out)
     assert bad.exit_code == 2
+
+
+def test_version_mismatch_is_a_clear_warning(recorded, tmp_path):
+    other = tmp_path / "old.mcap"
+    rewrite_mcap(recorded, other, metadata=lambda name, d: {**d, "mujoco_version": "3.3.0"})
+    res = replay(other)
+    assert res.warnings and "mujoco 3.3.0" in res.warnings[0]
+    r = subprocess.run([sys.executable, "-m", "dlovr", "replay", str(other)], capture_output=True, text=True)
+    assert r.returncode == 0 and "warning: recorded with mujoco 3.3.0" in r.stderr
