@@ -17,20 +17,8 @@ import numpy as np
 import pytest
 
 from dlovr.recording import Recording, replay
+from dlovr.ui import HEADLESS_CHROMIUM_ARGS as CHROMIUM_ARGS
 from dlovr.ui import DemoServer, Stability, point_classes, segment_transforms
-
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-dev-shm-usage",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-]
 
 
 def wait_for(pred: Callable[[], bool], timeout: float = 20.0, what: str = "condition") -> None:
