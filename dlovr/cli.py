@@ -183,8 +183,6 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
     """Run a scripted demonstration headless (optionally recording it); return (scene, tracker)."""
     from contextlib import nullcontext
 
-    from dlovr.contacts import ContactTracker
-    from dlovr.geometry import SceneGeometry
     from dlovr.recording import DemoRecorder, finish_on_sigterm
     from dlovr.sim import SimulationDiverged, Simulator
 
@@ -195,17 +193,16 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
     script = _script(script_path)
     scene = _scene(scene_ref or script.scene or "table")
     try:
-        sim = Simulator(scene)
+        sim = Simulator(scene, track=True)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
-    tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
+    tracker = sim.tracker
     nsteps = round(script.total_duration / sim.model.opt.timestep)
     with finish_on_sigterm():
         recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
         with recorder as rec, _progress(nsteps, label) as bar:
             try:
                 for k, record in enumerate(sim.run(script), 1):
-                    tracker.update(record)
                     if rec is not None:
                         rec.step(record)
                     if k % 100 == 0:

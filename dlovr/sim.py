@@ -26,9 +26,10 @@ Typical use (headless)::
     from dlovr.script import load_script
     from dlovr.sim import Simulator
 
-    sim = Simulator(load_scene("table"))
-    for rec in sim.run(load_script("scenes/table.script.toml")):
-        rec.time, rec.points, rec.contacts
+    sim = Simulator(load_scene("table"), track=True)
+    for step in sim.run(load_script("scenes/table.script.toml")):
+        step.time, step.points, step.contacts, step.situation, step.discrete
+    sim.tracker.transitions()   # the debounced situations with their transition classes
 
 ``dlovr scene export NAME -o model.xml``: ``export_xml(build_model(...).spec, path)`` writes the
 compiled MJCF together with its meshes (see :func:`export_xml`).
@@ -416,6 +417,17 @@ class StepRecord:
     target_quat: np.ndarray
     contact_arrays: ContactArrays
     gripper_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    state: Any = None  # the step's dlovr.contacts.ContactState when the simulator tracks contacts
+
+    @property
+    def situation(self) -> Any:
+        """Topological contact situation of this step (``Simulator(..., track=True)``)."""
+        return None if self.state is None else self.state.topological
+
+    @property
+    def discrete(self) -> Any:
+        """Discrete contact situation of this step (``Simulator(..., track=True)``)."""
+        return None if self.state is None else self.state.discrete
 
     @cached_property
     def contacts(self) -> tuple[RodContact, ...]:
@@ -477,6 +489,9 @@ class Simulator:
 
     ``max_speed`` (m/s) and ``max_angular_speed`` (rad/s) bound the gripper's motion toward the target;
     ``max_stretch`` is the relative segment stretch beyond which the run is declared diverged.
+    ``track=True`` (scene needed) also extracts the contact states every step: ``sim.tracker`` is a
+    :class:`dlovr.contacts.ContactTracker` and each record carries its ``state`` (``.situation``,
+    ``.discrete``).
     """
 
     def __init__(
@@ -487,12 +502,21 @@ class Simulator:
         max_speed: float = 0.25,
         max_angular_speed: float = 2.0,
         max_stretch: float = 0.10,
+        track: bool = False,
     ):
         if built is None:
             if scene is None:
                 raise ValueError("Simulator needs a scene or a built model")
             built = build_model(obstacles_from_scene(scene), scene.dlo, scene.gripper)
         self.scene = scene
+        self.tracker: Any = None
+        if track:
+            if scene is None:
+                raise ValueError("contact tracking needs the scene")
+            from dlovr.contacts import ContactTracker
+            from dlovr.geometry import SceneGeometry
+
+            self.tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
         self.built = built
         self.model = built.model
         self.data = mujoco.MjData(self.model)
@@ -570,13 +594,18 @@ class Simulator:
 
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
-        for _ in range(n):
+        for k in range(n):
             self._move_mocap()
             before = [int(self.data.warning[w].number) for w in self._fatal]
             mujoco.mj_step(self.model, self.data)
             self.step_index += 1
             self._check(before)
-        return self.record()
+            if self.tracker is not None and k < n - 1:
+                self.tracker.update(self.record())
+        rec = self.record()
+        if self.tracker is not None:
+            object.__setattr__(rec, "state", self.tracker.update(rec))
+        return rec
 
     def _check(self, before: list[int]) -> None:
         d = self.data

@@ -253,3 +253,17 @@ def test_gripper_force_of_a_hanging_cable_is_its_weight():
     sim.set_target([0.0, 0.0, 0.9])
     rec = sim.step(1500)  # lifted clear of the table, settled
     np.testing.assert_allclose(rec.gripper_force, [0.0, 0.0, -scene.dlo.mass * 9.81], atol=0.01)
+
+
+def test_tracking_simulator_gives_situations_per_step():
+    from dlovr.scene import load_scene
+    from dlovr.script import parse_script
+
+    sim = Simulator(load_scene("table"), track=True)
+    script = parse_script({"waypoints": [{"pos": [0.0, 0.0, 0.59], "duration": 0.6}]})
+    steps = list(sim.run(script))
+    assert steps[0].discrete.format() == "V/G & E/N & V/N"
+    assert steps[-1].discrete.format() == "V/G & E/N & V/F[table.F1]"
+    assert steps[-1].situation.format().startswith("VS/G")
+    assert [c for _, c in sim.tracker.transitions()] == [(), ("E",)]
+    assert Simulator(load_scene("table")).step().state is None
