@@ -147,15 +147,19 @@ def test_sigterm_finishes_the_file_and_sigkill_is_recoverable(tmp_path):
     )
     for sig in (signal.SIGTERM, signal.SIGKILL):
         out = tmp_path / f"rec-{sig.name}.mcap"
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "dlovr", "record", "--script", str(long_script), "-o", str(out)],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
+        err = tmp_path / f"stderr-{sig.name}.txt"
+        with open(err, "w") as fh:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "dlovr", "record", "--script", str(long_script), "-o", str(out)],
+                stdout=subprocess.DEVNULL,
+                stderr=fh,
+            )
         deadline = time.time() + 60
         while time.time() < deadline and (not out.exists() or out.stat().st_size < 200_000):
+            assert proc.poll() is None, f"recording process ended early: {err.read_text()[-2000:]}"
             time.sleep(0.2)
         time.sleep(2.5)  # past at least one flush interval
+        assert proc.poll() is None, f"recording process ended early: {err.read_text()[-2000:]}"
         proc.send_signal(sig)
         proc.wait(timeout=30)
         if sig == signal.SIGTERM:
