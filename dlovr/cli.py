@@ -243,7 +243,9 @@ def _kept_rows(tracker) -> list[dict]:
 
 @main.command("demo")
 @click.option(
-    "--scene", "scene_ref", default="peg_in_hole", show_default=True, help="Built-in scene name or path."
+    "--scene",
+    "scene_ref",
+    help="Built-in scene name or path (default: the script's scene, else peg_in_hole).",
 )
 @click.option("--script", "script_path", type=click.Path(dir_okay=False), help="Demonstration script (TOML).")
 @click.option(
@@ -254,7 +256,9 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     """Run a built-in demonstration headless and print its contact situations (Fig. 11 style)."""
     import json
 
-    _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref}")
+    if scene_ref is None and script_path is None:
+        scene_ref = "peg_in_hole"
+    _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
