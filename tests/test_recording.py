@@ -198,3 +198,22 @@ def test_version_mismatch_is_a_clear_warning(recorded, tmp_path):
     assert res.warnings and "mujoco 3.3.0" in res.warnings[0]
     r = subprocess.run([sys.executable, "-m", "dlovr", "replay", str(other)], capture_output=True, text=True)
     assert r.returncode == 0 and "warning: recorded with mujoco 3.3.0" in r.stderr
+
+
+def test_demo_prints_the_fig11_style_table_and_bad_scripts_exit_2(tmp_path):
+    r = cli("demo", "--script", SCRIPT, "--json")
+    rows = json.loads(r.stdout)
+    assert (
+        r.exit_code == 0
+        and rows[1]["discrete"] == "V/G & E/N & V/F[table.F1]"
+        and rows[1]["classes"] == ["E"]
+    )
+    assert rows[1]["topological"].startswith("VS/G")
+    bad = tmp_path / "bad.script.toml"
+    bad.write_text('scene = "table"\n[[waypoints]]\npos = [0, 0]\nduration = 1\n')
+    r = subprocess.run(
+        [sys.executable, "-m", "dlovr", "demo", "--script", str(bad)], capture_output=True, text=True
+    )
+    assert r.returncode == 2 and str(bad) in r.stderr and "Traceback" not in r.stderr
+    r = cli("record", "--scene", "nonexistent_scene", "--script", SCRIPT, "-o", tmp_path / "x.mcap")
+    assert r.exit_code == 2 and not (tmp_path / "x.mcap").exists()
