@@ -144,8 +144,8 @@ class ContactTracker:
         pt, pid, dist, faces, _ = geom.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
         pt = owner[pt]
         keys = pt << 20 | pid
-        keep = (dist <= r + self.enter_tol) | (np.isin(keys, self._touching) & (dist <= r + self.leave_tol))
-        self._touching = keys[keep]
+        keep = (dist <= r + self.enter_tol) | (_member(keys, self._touching) & (dist <= r + self.leave_tol))
+        self._touching = np.unique(keys[keep])
         kept_hits = [
             _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
         ]
@@ -189,28 +189,6 @@ class ContactTracker:
             ids[i] = cache[key]
         return ids
 
-    def _pairs(self, arrays: Any, point_of: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unique (point, piece id) pairs of the simulator's contacts, sorted."""
-        rows = np.nonzero(point_of >= 0)[0]
-        return _unique_pairs(point_of[rows], self._piece_ids(arrays, rows))
-
-    def _between(self, arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centerline points of segment contacts that lie between the segment's end points."""
-        seg = np.asarray(arrays.segment, dtype=np.int64)
-        sel = np.nonzero((np.asarray(arrays.point) < 0) & (seg >= 0))[0]
-        if len(sel) == 0:
-            return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
-        s = seg[sel]
-        a, b = pts[s], pts[s + 1]
-        ab = b - a
-        t = np.einsum("ij,ij->i", np.asarray(arrays.pos)[sel] - a, ab) / np.maximum(
-            np.einsum("ij,ij->i", ab, ab), 1e-18
-        )
-        t = np.clip(t, 0.0, 1.0)
-        pos = a + t[:, None] * ab
-        owner = np.where(t < 0.5, s, s + 1)
-        return pos, owner, self._piece_ids(arrays, sel)
-
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
@@ -219,10 +197,14 @@ class ContactTracker:
         pairs = None
         between = None
         point_of = np.zeros(0, dtype=np.int64)
-        if arrays is not None:
-            point_of = _contact_points(arrays, pts)
-            pairs = self._pairs(arrays, point_of)
-            between = self._between(arrays, pts)
+        if arrays is not None and len(arrays.dist):
+            point_of, seg_rows, seg_pos = _locate(arrays, pts)
+            ids = self._piece_ids(arrays, np.arange(len(point_of)))
+            ok = point_of >= 0
+            pairs = _unique_pairs(point_of[ok], ids[ok])
+            between = (seg_pos, point_of[seg_rows], ids[seg_rows])
+        elif arrays is not None:
+            pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         prev = self.current
         topo = self.classify(pts, record.gripper_z, pairs, between)
         if prev is not None and prev.topological == topo and _vector_independent(topo):
@@ -250,6 +232,14 @@ class ContactTracker:
         ]
 
 
+def _member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
+    """``np.isin(a, sorted_b)`` for a sorted ``sorted_b`` (cheaper for the small arrays here)."""
+    if len(sorted_b) == 0:
+        return np.zeros(len(a), dtype=bool)
+    i = np.minimum(np.searchsorted(sorted_b, a), len(sorted_b) - 1)
+    return sorted_b[i] == a
+
+
 def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique (a, b) pairs of non-negative ints (b < 2**20), sorted by a then b."""
     u = np.unique(a.astype(np.int64) << 20 | b.astype(np.int64))
@@ -275,21 +265,26 @@ def _vector_independent(topo: Situation) -> bool:
     return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
 
 
-def _contact_points(arrays: Any, pts: np.ndarray) -> np.ndarray:
-    """Cable point of each raw contact: its vertex, or the nearer end of its segment (-1: none)."""
-    if len(arrays.dist) == 0:
-        return np.zeros(0, dtype=np.int64)
+def _locate(arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where each raw contact is on the cable.
+
+    Returns the cable point of every contact (its vertex, or the nearer end of its segment; -1 for
+    none), the rows of segment contacts, and their centerline points (the contact projected onto the
+    segment).
+    """
     point = np.asarray(arrays.point, dtype=np.int64)
     seg = np.asarray(arrays.segment, dtype=np.int64)
     out = point.copy()
-    use_seg = (point < 0) & (seg >= 0)
-    if use_seg.any():
-        s = seg[use_seg]
-        pos = np.asarray(arrays.pos)[use_seg]
-        d0 = np.linalg.norm(pts[s] - pos, axis=1)
-        d1 = np.linalg.norm(pts[s + 1] - pos, axis=1)
-        out[use_seg] = np.where(d1 < d0, s + 1, s)
-    return out
+    rows = np.nonzero((point < 0) & (seg >= 0))[0]
+    s = seg[rows]
+    a = pts[s]
+    ab = pts[s + 1] - a
+    t = np.einsum("ij,ij->i", np.asarray(arrays.pos)[rows] - a, ab) / np.maximum(
+        np.einsum("ij,ij->i", ab, ab), 1e-18
+    )
+    t = np.clip(t, 0.0, 1.0)
+    out[rows] = np.where(t < 0.5, s, s + 1)
+    return out, rows, a + t[:, None] * ab
 
 
 def _forces(topo: Situation, arrays: Any, point_of: np.ndarray) -> tuple[float, ...]:

@@ -717,9 +717,9 @@ class Simulator:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
         (a hanging cable pulls with its weight, -m g along z)."""
         d = self.data
-        n = int(d.nefc)
-        equality = d.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
-        rows = equality & np.isin(d.efc_id[:n], self._hold_ids)
+        n = int(d.ne)  # equality constraint rows come first
+        ids = d.efc_id[:n]
+        rows = (ids == self._hold_ids[0]) | (ids == self._hold_ids[1])
         return d.efc_force[:n][rows].reshape(-1, 3).sum(axis=0)
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
