@@ -97,8 +97,9 @@ REACHED: dict[str, tuple[str, str | None, tuple[str, ...]]] = {
     "E/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F3", "holeblock.F7")),
 }
 NOT_YET = {
-    "E/VS": "no built-in script yet lays the cable through a concave corner (the hole's bottom corner): "
-    "pushing the stiff peg_in_hole cable further down into the corner keeps the tip there (V/VS)",
+    "E/VS": "no built-in script yet lays the cable through a concave corner: a cable lowered down the "
+    "hole's vertical corner gave E/E^LS[holeblock.F5,holeblock.F9] with the tip V/VS in the bottom corner, "
+    "and pushing further down (to bend the cable in the corner) over-stretched the last segment (diverged)",
     "E/VT": "no built-in scene has a concave corner with a nearly flat pair of faces (e.g. a wall at the "
     "end of the 175° valley) and no script drives the cable through one",
     "V/E^LT": "no built-in script yet presses the tip into the 175° valley",
