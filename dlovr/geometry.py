@@ -47,7 +47,7 @@ from dlovr.topology import Contact, EnvPrimitive, Situation, situation_from_poin
 if TYPE_CHECKING:
     from dlovr.scene import Scene
 
-DECOMP_VERSION = "exact-v1"
+DECOMP_VERSION = "exact-v2"  # bump whenever decompose() may return other pieces for a mesh
 _ANGLE_TOL = 1e-5  # rad: triangles whose normals differ less are coplanar (one face)
 
 
@@ -479,6 +479,15 @@ def decompose(mesh: trimesh.Trimesh, *, use_cache: bool = True) -> tuple[list[np
     return pieces, approximate
 
 
+def scene_pieces(scene: Scene, *, use_cache: bool = True) -> dict[str, tuple[list[np.ndarray], bool]]:
+    """The convex decomposition of every object of a scene: name -> (pieces in the local frame,
+    approximate?). The simulator and the geometry must use the same one (piece k is MuJoCo's geom
+    ``<obj>.P<k>``), and a recording keeps it so that replay does not depend on the algorithm."""
+    from dlovr.scene import object_local_mesh
+
+    return {o.name: decompose(object_local_mesh(o), use_cache=use_cache) for o in scene.objects}
+
+
 # --------------------------------------------------------------------------------------------------
 # Convex pieces
 # --------------------------------------------------------------------------------------------------
@@ -693,11 +702,16 @@ def build_object(
     transform: np.ndarray | None = None,
     *,
     use_cache: bool = True,
+    pieces: tuple[list[np.ndarray], bool] | None = None,
 ) -> GeomObject:
-    """An object from its mesh in its own frame and its pose (4x4). Face names from the local frame."""
+    """An object from its mesh in its own frame and its pose (4x4). Face names from the local frame.
+
+    ``pieces``: its convex decomposition (local frame, approximate?) if already known (e.g. the one a
+    recording was made with); else :func:`decompose` computes it.
+    """
     transform = np.eye(4) if transform is None else np.asarray(transform, dtype=float)
     faces = object_faces(local_mesh)
-    pieces_local, approximate = decompose(local_mesh, use_cache=use_cache)
+    pieces_local, approximate = pieces if pieces is not None else decompose(local_mesh, use_cache=use_cache)
     rot, trans = transform[:3, :3], transform[:3, 3]
     world = local_mesh.copy()
     world.apply_transform(transform)
@@ -838,13 +852,23 @@ class SceneGeometry:
 
     # ---------------------------------------------------------------- construction
     @classmethod
-    def from_scene(cls, scene: Scene, *, use_cache: bool = True) -> SceneGeometry:
+    def from_scene(
+        cls,
+        scene: Scene,
+        *,
+        use_cache: bool = True,
+        pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None,
+    ) -> SceneGeometry:
+        """Geometry of a scene; ``pieces`` (see :func:`scene_pieces`) fixes the decomposition."""
         from dlovr.scene import object_local_mesh
 
         objs = [
-            build_object(o.name, object_local_mesh(o), pose_matrix(o.pos, o.quat), use_cache=use_cache)
+            build_object(
+                o.name, object_local_mesh(o), pose_matrix(o.pos, o.quat), use_cache=use_cache,
+                pieces=None if pieces is None else pieces[o.name],
+            )
             for o in scene.objects
-        ]
+        ]  # fmt: skip
         return cls(objs, scene.dlo.radius, scene.params)
 
     @classmethod

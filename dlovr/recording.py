@@ -51,6 +51,7 @@ TOPIC_TF = "/tf"
 REQUIRED_TOPICS = (TOPIC_COMMAND, TOPIC_CHECKPOINT, TOPIC_STATES)
 SCENE_PREFIX = "scene/"
 SCENE_TOML = "scene/scene.toml"
+PIECES_JSON = "model/pieces.json"
 MAX_ATTACHMENT_BYTES = 64 * 1024 * 1024
 
 
@@ -110,6 +111,38 @@ class SceneBundle:
         out = root / "scene.toml"
         out.write_bytes(self.toml)
         return out
+
+
+def pieces_to_json(pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]]) -> bytes:
+    """The obstacles' convex decomposition as JSON (floats written exactly)."""
+    data = {
+        name: {"approximate": bool(approx), "pieces": [np.asarray(p, dtype=float).tolist() for p in ps]}
+        for name, (ps, approx) in pieces.items()
+    }
+    return json.dumps(data, allow_nan=False).encode()
+
+
+def pieces_from_json(raw: bytes) -> dict[str, tuple[list[np.ndarray], bool]]:
+    """Parse and check :func:`pieces_to_json` output (finite (k, 3) vertex arrays, k >= 4)."""
+    try:
+        data = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"not JSON: {e}") from None
+    if not isinstance(data, dict):
+        raise ValueError("expected an object of objects")
+    out = {}
+    for name, entry in data.items():
+        try:
+            ps = [np.asarray(p, dtype=float) for p in entry["pieces"]]
+            approx = bool(entry["approximate"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"object {name}: {e}") from None
+        if not ps or any(
+            p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 or not np.all(np.isfinite(p)) for p in ps
+        ):
+            raise ValueError(f"object {name}: pieces must be finite (k, 3) vertex arrays with k >= 4")
+        out[str(name)] = (ps, approx)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -200,6 +233,7 @@ class Recorder:
         flush_interval: float = 2.0,
         frame_rate: float = 30.0,
         t0_ns: int | None = None,
+        pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None = None,
     ):
         import mujoco
 
@@ -212,7 +246,9 @@ class Recorder:
         self._fh: BinaryIO = open(self.path, "wb")
         self._w = Writer(self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD)
         self._w.start(profile=PROFILE, library=f"dlovr {__version__}")
+        pieces_json = pieces_to_json(pieces) if pieces is not None else b""
         meta = {
+            "pieces_sha256": hashlib.sha256(pieces_json).hexdigest() if pieces is not None else "",
             "format_version": FORMAT_VERSION,
             "dlovr_version": __version__,
             "mujoco_version": mujoco.__version__,
@@ -226,6 +262,8 @@ class Recorder:
         self._w.add_metadata("dlovr", meta)
         now = self.t0_ns
         self._w.add_attachment(now, now, SCENE_TOML, "application/toml", scene.toml)
+        if pieces is not None:
+            self._w.add_attachment(now, now, PIECES_JSON, "application/json", pieces_json)
         for name, data in scene.files:
             self._w.add_attachment(now, now, SCENE_PREFIX + name, "application/octet-stream", data)
         js = "jsonschema"
@@ -467,6 +505,14 @@ class Recording:
                     raise RecordingError(f"{p}: embedded file {rel} is too large")
                 files.append((rel, bytes(data)))
         self.scene = SceneBundle(bytes(attachments[SCENE_TOML]), tuple(sorted(files)))
+        self.pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None
+        if PIECES_JSON in attachments:
+            if hashlib.sha256(attachments[PIECES_JSON]).hexdigest() != self.metadata.get("pieces_sha256"):
+                raise RecordingError(f"{p}: the embedded convex decomposition was modified")
+            try:
+                self.pieces = pieces_from_json(bytes(attachments[PIECES_JSON]))
+            except ValueError as e:
+                raise RecordingError(f"{p}: bad {PIECES_JSON}: {e}") from None
         if self.scene.digest != self.metadata.get("scene_sha256"):
             raise RecordingError(
                 f"{p}: the embedded scene was modified (its sha256 does not match the metadata)"
@@ -644,8 +690,9 @@ class DemoRecorder:
         dt = float(sim.model.opt.timestep)
         self.sim, self.tracker = sim, tracker
         meta = {"hold": repr(float(tracker.hold)), **dict(kw.pop("extra_metadata", None) or {})}
+        bundle = SceneBundle.from_path(scene.path)
         self.rec = Recorder(
-            path, SceneBundle.from_path(scene.path), scene_name=scene.name, dt=dt, extra_metadata=meta, **kw
+            path, bundle, scene_name=scene.name, dt=dt, extra_metadata=meta, pieces=sim.pieces, **kw
         )
         self.path = self.rec.path
         self.start_step = int(sim.step_index)
@@ -747,13 +794,15 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
     recorded_states = rec.states()
     with tempfile.TemporaryDirectory(prefix="dlovr-replay-") as tmp:
         scene = load_embedded_scene(rec, tmp)
-        sim = Simulator(scene)
+        if rec.pieces is not None and set(rec.pieces) != {o.name for o in scene.objects}:
+            raise RecordingError(f"{rec.path}: the embedded decomposition does not match the scene's objects")
+        sim = Simulator(scene, pieces=rec.pieces)
         if abs(sim.model.opt.timestep - rec.dt) > 1e-15:
             raise RecordingError(
                 f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
             )
         tracker = ContactTracker(
-            SceneGeometry.from_scene(scene),
+            SceneGeometry.from_scene(scene, pieces=sim.pieces),
             scene.params,
             hold=float(rec.metadata.get("hold", DEFAULT_HOLD_S)),
         )

@@ -454,24 +454,17 @@ class SimState:
 # Simulator
 
 
-def obstacles_from_scene(scene: Any) -> list[Obstacle]:
-    """Convex pieces of each object of a ``dlovr.scene.Scene``.
-
-    Uses ``dlovr.geometry.decompose(dlovr.scene.object_local_mesh(obj))``, the same call (and order) as
-    ``dlovr.geometry.build_object``, so MuJoCo piece ``k`` (geom ``"<obj>.P<k>"``) is geometry's
-    ``Piece.index == k``.
-    """
-    from dlovr import geometry
-    from dlovr.scene import object_local_mesh
-
+def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
+    """Obstacles of a ``dlovr.scene.Scene`` from its convex decomposition
+    (``dlovr.geometry.scene_pieces``): MuJoCo piece ``k`` (geom ``"<obj>.P<k>"``) is geometry's
+    ``Piece.index == k``."""
     out = []
     for obj in scene.objects:
-        pieces, _approximate = geometry.decompose(object_local_mesh(obj))
         rgba = (*obj.color, 1.0) if getattr(obj, "color", None) else (0.6, 0.6, 0.65, 1.0)
         out.append(
             Obstacle(
                 name=obj.name,
-                pieces=[np.asarray(p, dtype=float) for p in pieces],
+                pieces=[np.asarray(p, dtype=float) for p in pieces[obj.name][0]],
                 pos=tuple(obj.pos),
                 quat=tuple(obj.quat),
                 rgba=rgba,
@@ -489,9 +482,10 @@ class Simulator:
 
     ``max_speed`` (m/s) and ``max_angular_speed`` (rad/s) bound the gripper's motion toward the target;
     ``max_stretch`` is the relative segment stretch beyond which the run is declared diverged.
-    ``track=True`` (scene needed) also extracts the contact states every step: ``sim.tracker`` is a
-    :class:`dlovr.contacts.ContactTracker` and each record carries its ``state`` (``.situation``,
-    ``.discrete``).
+    ``pieces`` fixes the obstacles' convex decomposition (``dlovr.geometry.scene_pieces``; computed
+    when not given; kept as ``sim.pieces``). ``track=True`` (scene needed) also extracts the contact
+    states every step: ``sim.tracker`` is a :class:`dlovr.contacts.ContactTracker` and each record
+    carries its ``state`` (``.situation``, ``.discrete``).
     """
 
     def __init__(
@@ -503,11 +497,17 @@ class Simulator:
         max_angular_speed: float = 2.0,
         max_stretch: float = 0.10,
         track: bool = False,
+        pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None,
     ):
+        self.pieces = pieces
         if built is None:
             if scene is None:
                 raise ValueError("Simulator needs a scene or a built model")
-            built = build_model(obstacles_from_scene(scene), scene.dlo, scene.gripper)
+            if self.pieces is None:
+                from dlovr.geometry import scene_pieces
+
+                self.pieces = scene_pieces(scene)
+            built = build_model(obstacles_from_scene(scene, self.pieces), scene.dlo, scene.gripper)
         self.scene = scene
         self.tracker: Any = None
         if track:
@@ -516,7 +516,8 @@ class Simulator:
             from dlovr.contacts import ContactTracker
             from dlovr.geometry import SceneGeometry
 
-            self.tracker = ContactTracker(SceneGeometry.from_scene(scene), scene.params)
+            geometry = SceneGeometry.from_scene(scene, pieces=self.pieces)
+            self.tracker = ContactTracker(geometry, scene.params)
         self.built = built
         self.model = built.model
         self.data = mujoco.MjData(self.model)

@@ -217,3 +217,26 @@ def test_demo_prints_the_fig11_style_table_and_bad_scripts_exit_2(tmp_path):
     assert r.returncode == 2 and str(bad) in r.stderr and "Traceback" not in r.stderr
     r = cli("record", "--scene", "nonexistent_scene", "--script", SCRIPT, "-o", tmp_path / "x.mcap")
     assert r.exit_code == 2 and not (tmp_path / "x.mcap").exists()
+
+
+def test_replay_uses_the_embedded_decomposition(recorded, tmp_path, monkeypatch):
+    """A recording keeps the convex pieces it was simulated with: its replay does not depend on
+    today's decomposition algorithm or on a (possibly stale) decomposition cache."""
+    from dlovr import geometry
+    from dlovr.scene import load_scene
+
+    pieces = Recording(recorded).pieces
+    today = geometry.scene_pieces(load_scene("table"))
+    assert set(pieces) == {"table"} and np.array_equal(pieces["table"][0][0], today["table"][0][0])
+
+    def no_decomposition(*a, **kw):
+        raise AssertionError("replay decomposed a mesh instead of using the recording's pieces")
+
+    monkeypatch.setattr(geometry, "decompose", no_decomposition)
+    assert replay(recorded, verify=True).divergence is None
+    bad = tmp_path / "tampered.mcap"
+    rewrite_mcap(
+        recorded, bad, attachment=lambda n, d: d.replace(b"0.5", b"0.6") if n == "model/pieces.json" else d
+    )
+    with pytest.raises(RecordingError, match="decomposition was modified"):
+        Recording(bad)

@@ -1,0 +1,74 @@
+"""The sample recordings in recordings/: exact replay, their checked-in programs, program contents."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dlovr.program import program_schema
+from dlovr.recording import Recording, compile_recording, kept_states, replay
+from dlovr.transitions import classify_step
+
+ROOT = Path(__file__).resolve().parent.parent / "recordings"
+SAMPLES = sorted(ROOT.glob("*.mcap"))
+
+
+def test_there_are_samples_of_the_built_in_demonstrations():
+    names = {p.stem for p in SAMPLES}
+    assert {"table", "edges", "peg_in_hole", "l_block"} <= names
+    for p in SAMPLES:
+        assert p.stat().st_size < 8_000_000, f"{p.name} is too large for a sample"
+
+
+@pytest.mark.parametrize("path", SAMPLES, ids=[p.stem for p in SAMPLES])
+def test_sample_replays_bit_exact(path):
+    res = replay(path, verify=True)
+    assert res.divergence is None, res.divergence
+    assert not res.warnings
+
+
+@pytest.mark.parametrize("path", SAMPLES, ids=[p.stem for p in SAMPLES])
+def test_checked_in_program_equals_a_fresh_compile(path):
+    prog = compile_recording(path)
+    js = ROOT / "programs" / f"{path.stem}.program.json"
+    txt = ROOT / "programs" / f"{path.stem}.program.txt"
+    assert js.read_text() == prog.dumps(), (
+        f"{js} is stale: recompile with dlovr compile recordings -o recordings/programs"
+    )
+    assert txt.read_text() == prog.listing()
+    import jsonschema
+
+    jsonschema.validate(json.loads(js.read_text()), program_schema())
+
+
+@pytest.mark.parametrize("path", SAMPLES, ids=[p.stem for p in SAMPLES])
+def test_program_holds_the_demonstrations_transitions_in_order(path):
+    kept = kept_states(Recording(path))
+    expected = []
+    for i in range(1, len(kept)):
+        classes = classify_step(kept[i - 1].situation, kept[i].situation)
+        if classes:
+            expected.append((classes, kept[i - 1].situation.format(), kept[i].situation.format()))
+    prog = compile_recording(path)
+    assert [(m.classes, m.from_situation, m.to_situation) for m in prog.macros] == expected
+    assert prog.summary["risky"] == sum(1 for c, _, _ in expected if {"S", "I"} & set(c))
+
+
+def test_peg_in_hole_program_tells_the_fig11_story_with_the_right_classes():
+    prog = compile_recording(ROOT / "peg_in_hole.mcap")
+    steps = [(m.label, m.to_situation) for m in prog.macros]
+
+    def index(label, contains, start=0):
+        for i in range(start, len(steps)):
+            if steps[i][0] == label and contains in steps[i][1]:
+                return i
+        raise AssertionError(f"no {label} macro into {contains} after macro {start}: {steps}")
+
+    i = index("E", "V/F[block.F1]")  # first contact with the block's top face: establishing
+    i = index("E", "E/F[block.F1]", i + 1)  # lying on it (after the tip left the face)
+    i = index("C", "E/E^P[block.F1,block.F3]", i + 1)  # over the block's edge: stable transition
+    i = index("E", "V/E^LS[block.F3,holeblock.F2]", i + 1)  # the groove with the hole block: new object
+    i = index("C", "V/VS[holeblock.F1,holeblock.F5,holeblock.F9]", i + 1)  # the tip in the hole's corner
+    assert i == len(steps) - 1 and not any(m.risky for m in prog.macros)
