@@ -1170,6 +1170,12 @@ class SceneGeometry:
             return not bool(self._inside_other(probe + 2.0 * self.radius * n, obj, 1e-9)[0])
 
         concave = continues(pa, ua, ta, na, oa.name) and continues(pb, ub, tb, nb, ob.name)
+        if not concave:
+            # the closest points found may be an end of a shared edge, where the probe leaves the face
+            # across a third face's border (a valley closed by a ramp): probe the edge's middle too
+            ma, mb = _shared_edge_middle(pa, pb, ta, tb, na, nb, cross)
+            if ma is not pa:
+                concave = continues(ma, ua, ta, na, oa.name) and continues(mb, ub, tb, nb, ob.name)
         opening = 180.0 - alpha if concave else 180.0 + alpha
         return PairFact(a, b, concave, opening, crease)  # type: ignore[arg-type]
 
@@ -1218,6 +1224,34 @@ class SceneGeometry:
                 }
             )
         return {"objects": out}
+
+
+def _shared_edge_middle(
+    pa: np.ndarray,
+    pb: np.ndarray,
+    ta: np.ndarray,
+    tb: np.ndarray,
+    na: np.ndarray,
+    nb: np.ndarray,
+    crease: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where two faces meet along an edge, the middle of that edge instead of the closest points found
+    (often an end of the edge, where a probe into the face can leave it across a third face's border).
+    Faces that do not touch, or whose common points are not one segment lying in both, keep pa, pb."""
+    scale = max(1.0, float(np.abs(ta).max()), float(np.abs(tb).max()))
+    tol = 1e-9 * scale
+    if float(np.linalg.norm(pa - pb)) > tol:
+        return pa, pb
+    verts = np.concatenate([ta.reshape(-1, 3), tb.reshape(-1, 3)])
+    on = (np.abs((verts - pa) @ na) <= tol) & (np.abs((verts - pa) @ nb) <= tol)
+    if on.sum() < 2:
+        return pa, pb
+    c = _unit(crease)
+    t = (verts[on] - pa) @ c
+    mid = pa + 0.5 * (t.min() + t.max()) * c
+    if _points_in_triangles(mid[None], ta, tol)[0] and _points_in_triangles(mid[None], tb, tol)[0]:
+        return mid, mid
+    return pa, pb
 
 
 def _closest_between_triangle_sets(ta: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
