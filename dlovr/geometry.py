@@ -112,19 +112,35 @@ def _clip_polygon(poly: np.ndarray, tri: np.ndarray, normal: np.ndarray) -> np.n
     return out
 
 
+_TRI_FRAMES: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _tri_frames(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Edge start points (t,3,3) and inward in-plane edge normals (t,3,3) of triangles (cached)."""
+    hit = _TRI_FRAMES.get(id(tris))
+    if hit is not None and hit[0] is tris:
+        return hit[1], hit[2]
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    n = _unit(np.cross(b - a, c - a))  # (t,3)
+    starts, inwards = [], []
+    for u, v in ((a, b), (b, c), (c, a)):
+        inward = np.cross(n, v - u)
+        starts.append(u)
+        inwards.append(inward / np.linalg.norm(inward, axis=1, keepdims=True))
+    out = (np.stack(starts, axis=1), np.stack(inwards, axis=1))
+    if len(_TRI_FRAMES) > 4096:
+        _TRI_FRAMES.clear()
+    _TRI_FRAMES[id(tris)] = (tris, *out)
+    return out
+
+
 def _points_in_triangles(q: np.ndarray, tris: np.ndarray, tol: float) -> np.ndarray:
     """For points q (m,3) near the plane of coplanar triangles tris (t,3,3): inside any (m,) bool."""
     if len(tris) == 0 or len(q) == 0:
         return np.zeros(len(q), dtype=bool)
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    n = _unit(np.cross(b - a, c - a))  # (t,3)
-    inside = np.ones((len(q), len(tris)), dtype=bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inward = np.cross(n, v - u)  # (t,3)
-        inward = inward / np.linalg.norm(inward, axis=1, keepdims=True)
-        s = np.einsum("mtk,tk->mt", q[:, None, :] - u[None], inward)
-        inside &= s >= -tol
-    return inside.any(axis=1)
+    starts, inwards = _tri_frames(tris)
+    s = np.einsum("mtek,tek->mte", q[:, None, None, :] - starts[None], inwards)  # (m,t,3)
+    return (s >= -tol).all(axis=2).any(axis=1)
 
 
 def _closest_on_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -848,7 +864,7 @@ class SceneGeometry:
         self._face_owner = {n: (o, k) for o in self.objects for k, n in enumerate(o.face_names)}
         self._book: SceneFactBook | None = None
         self._piece_ids: dict[tuple[str, int], int] | None = None
-        self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -923,25 +939,32 @@ class SceneGeometry:
             self._piece_ids = {(p.obj, p.index): k for k, p in enumerate(self.pieces)}
         return self._piece_ids[(obj, index)]
 
-    def _padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """All pieces' planes padded to one array: normals (P,F,3), offsets (P,F), face names (P,F)
-        and ``simple`` (P,F): an external face far from every other object (never covered)."""
+    def _padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """All pieces' planes padded to one array: normals (P,F,3), offsets (P,F), face names (P,F),
+        ``external`` (P,F): the whole piece face lies on the object's surface, and the object index
+        of every piece (P,)."""
         if self._pad is None:
             fmax = max((len(p.faces) for p in self.pieces), default=1)
             n = np.zeros((len(self.pieces), fmax, 3))
             d = np.full((len(self.pieces), fmax), 1e9)
             names = np.full((len(self.pieces), fmax), None, dtype=object)
-            simple = np.zeros((len(self.pieces), fmax), dtype=bool)
-            reach = 2.0 * self.radius + 2e-3
+            external = np.zeros((len(self.pieces), fmax), dtype=bool)
+            objs = {o.name: i for i, o in enumerate(self.objects)}
+            owner = np.array([objs[p.obj] for p in self.pieces], dtype=np.int64)
             for k, p in enumerate(self.pieces):
-                others = [q for q in self.pieces if q.obj != p.obj]
                 for f, pf in enumerate(p.faces):
                     n[k, f], d[k, f], names[k, f] = pf.normal, pf.offset, pf.face
-                    lo, hi = pf.polygon.min(axis=0) - reach, pf.polygon.max(axis=0) + reach
-                    far = all(np.any(q.lo > hi) or np.any(q.hi < lo) for q in others)
-                    simple[k, f] = pf.label == "external" and far
-            self._pad = (n, d, names, simple)
+                    external[k, f] = pf.label == "external"
+            self._pad = (n, d, names, external, owner)
         return self._pad
+
+    def _covered(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
+        """(K,) True where ``probes[k]`` lies inside a piece of an object other than ``obj_index[k]``
+        (vectorised :meth:`_inside_other`)."""
+        n_all, d_all, _, _, owner = self._padded()
+        res = np.einsum("pfi,ki->kpf", n_all, probes) - d_all[None]  # (K,P,F)
+        inside = (res < -1e-9).all(axis=2) & (owner[None, :] != obj_index[:, None])
+        return inside.any(axis=1)
 
     def classify_pairs(
         self,
@@ -970,10 +993,12 @@ class SceneGeometry:
         """Contacts of given (point, piece id) pairs as arrays, sorted by point then piece:
         point indices, piece ids (into :attr:`pieces`), distances (m), face names, closest points.
 
-        A pair whose closest point lies on one external, uncovered face at least the tangential
-        tolerance away from that face's other planes is a face contact, decided here in one numpy
-        pass (the distance from the projection to any edge of the face is at least its distance to
-        the other face's plane). Points with any other pair go through :meth:`classify_points`.
+        A pair whose closest point lies inside one face, at least the tangential tolerance away from
+        that face's other planes (the distance from the projection to any edge of the face is at
+        least its distance to the other face's plane), is decided here in one numpy pass: a contact
+        with that face when it is exposed there (external, or the exposed part of a mixed face, and
+        not covered by another object), else no contact with that piece. Points with any other pair
+        (near an edge or a vertex) go through :meth:`classify_points`.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
@@ -982,7 +1007,7 @@ class SceneGeometry:
         empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)))
         if len(pi) == 0:
             return empty
-        n_all, d_all, names, simple = self._padded()
+        n_all, d_all, names, external, owner = self._padded()
         p = pts[pi]
         nrm, off = n_all[pc], d_all[pc]  # (K,F,3), (K,F)
         res = np.einsum("kfi,ki->kf", nrm, p) - off
@@ -992,12 +1017,25 @@ class SceneGeometry:
         nb = nrm[k, best]
         resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)  # residuals of the projection
         resq[k, best] = -np.inf
-        pure = (resq.max(axis=1) <= -ttol) & simple[pc, best]
-        amb_points = np.unique(pi[~pure])
+        q = p - rb[:, None] * nb  # the closest point when it lies inside the face
+        # the distance to a convex piece is at least its largest plane residual: beyond reach, no hit
+        far = rb > r + contact_tol
+        interior = (resq.max(axis=1) <= -ttol) & ~far  # inside one face, away from all its edges
+        exposed = interior & external[pc, best]
+        for j in np.nonzero(interior & ~external[pc, best])[0]:
+            pf = self.pieces[int(pc[j])].faces[int(best[j])]  # a mixed face: is q on its exposed part?
+            exposed[j] = pf.label == "mixed" and bool(_points_in_triangles(q[j : j + 1], pf.exposed, 1e-9)[0])
+        # a face covered by another object there (a box's bottom on the table) is no contact face:
+        # probe the free side as classify_points does
+        if exposed.any():
+            exposed &= ~self._covered(q + 2.0 * r * nb, owner[pc])
+        pure = exposed
+        decided = far | interior  # interior but not exposed: the piece has no contact face here
+        amb_points = np.unique(pi[~decided])
         take = pure & (rb <= r + contact_tol) & ~np.isin(pi, amb_points)
         pt, pid, dist = pi[take], pc[take], rb[take]
         faces = [(f,) for f in names[pid, best[take]].tolist()]
-        closest = p[take] - rb[take, None] * nb[take]
+        closest = q[take]
         if len(amb_points):
             extra = self.classify_points(pts[amb_points], r, contact_tol, tangential_tol)
             pt = np.concatenate([pt, amb_points[[h.point for h in extra]].astype(np.int64)])
