@@ -78,7 +78,25 @@ def meshes() -> dict[str, trimesh.Trimesh]:
     out["edge_convex270"] = to_trimesh(
         prism([(-0.15, 0.0), (0.1, 0.0), (0.1, 0.01), (0.0, 0.01), (0.0, 0.06), (-0.15, 0.06)], depth)
     )
+    # corners: a plate with a V valley along y whose end is closed by a ramp (concave corners of three
+    # faces that a cable can pass through with a small bend)
+    out["valley175"] = valley_with_ramp(2.5, 10.0)  # valley 175°: semi-stable corner (E/VT, V/VT)
+    out["valley152"] = valley_with_ramp(14.0, 10.0)  # valley 152°: stable corner (E/VS)
     return out
+
+
+def valley_with_ramp(side_deg: float, ramp_deg: float) -> trimesh.Trimesh:
+    """A 16 x 30 cm plate, 2 cm thick at its valley line x = 0 (along y); both sides rise at
+    ``side_deg`` (opening angle 180 - 2 side_deg); from y = 0.05 on, a ramp rising at ``ramp_deg`` along
+    +y closes the valley's end. The free space above is the intersection of the three half-spaces."""
+    w, d, y0, h = 0.08, 0.3, 0.05, 0.02
+    ts, tr = math.tan(math.radians(side_deg)), math.tan(math.radians(ramp_deg))
+    valley = prism([(-w, 0.0), (w, 0.0), (w, h + w * ts), (0.0, h), (-w, h + w * ts)], d)
+    # the ramp: a wedge in (y, z), extruded along x (built along y, then turned about z); it starts
+    # 2 cm before y0 below the valley's surface
+    y1, y2 = y0 - 0.02, d / 2
+    ramp = prism([(y1, 0.0), (y2, 0.0), (y2, h + (y2 - y0) * tr), (y1, h + (y1 - y0) * tr)], 2 * w)
+    return to_trimesh(valley + ramp.rotate([0.0, 0.0, 90.0]))
 
 
 def main() -> None:
