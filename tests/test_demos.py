@@ -1,7 +1,7 @@
 """Live simulation of the built-in demonstration scripts (scenes/*.script.toml): which discrete states
 they reach, the Fig. 6 edge drags, the peg-in-hole story (Fig. 11), determinism, a steady drag.
 
-Each demo is simulated once per session (module-scoped cache); the whole file runs in about a minute.
+Each demo is simulated once per session (module-scoped cache); the whole file runs in about 80 s.
 """
 
 from __future__ import annotations
@@ -95,16 +95,15 @@ REACHED: dict[str, tuple[str, str | None, tuple[str, ...]]] = {
     "V/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F3", "holeblock.F7")),
     # ... where the cable, slipping off the corner into the hole, crosses the rim's corner
     "E/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F3", "holeblock.F7")),
+    # corners: the tip set on the 175° valley line, then dragged into the corner with the 10° ramp
+    "V/E^LT": ("corners", None, ("valley175.F1", "valley175.F2")),
+    "V/VT": ("corners", None, ("valley175.F1", "valley175.F2", "valley175.F3")),
+    # ... the held end pushed along the valley into the corner: the cable point next to the held one
+    # passes through it (both valley faces and the ramp); 175° valley: semi-stable, 152°: stable
+    "E/VT": ("corners", None, ("valley175.F1", "valley175.F2", "valley175.F3")),
+    "E/VS": ("corners", None, ("valley152.F1", "valley152.F2", "valley152.F3")),
 }
-NOT_YET = {
-    "E/VS": "no built-in script yet lays the cable through a concave corner: a cable lowered down the "
-    "hole's vertical corner gave E/E^LS[holeblock.F5,holeblock.F9] with the tip V/VS in the bottom corner, "
-    "and pushing further down (to bend the cable in the corner) over-stretched the last segment (diverged)",
-    "E/VT": "no built-in scene has a concave corner with a nearly flat pair of faces (e.g. a wall at the "
-    "end of the 175° valley) and no script drives the cable through one",
-    "V/E^LT": "no built-in script yet presses the tip into the 175° valley",
-    "V/VT": "no built-in scene has a concave corner with a nearly flat pair of faces",
-}
+NOT_YET: dict[str, str] = {}
 
 
 def test_table_covers_all_fifteen_states():
@@ -133,7 +132,13 @@ def test_state_reached_live(state):
     # not (yet) reached by any built-in demo: fails, hence the strict xfail
     assert any(
         has(k.situation, state)
-        for name, script in (("edges", None), ("peg_in_hole", None), ("l_block", None), ("peg_in_hole", RIM))
+        for name, script in (
+            ("edges", None),
+            ("peg_in_hole", None),
+            ("l_block", None),
+            ("peg_in_hole", RIM),
+            ("corners", None),
+        )
         for k in demo(name, script).tracker.kept
     )
 
@@ -253,3 +258,24 @@ def test_steady_drag_along_a_face_has_no_transitions():
     assert len(settled) == 1, [k.situation.format() for k in kept]
     assert settled[0].start < 0.1 and settled[0].end > 1.8
     assert has(settled[0].situation, "E/F", ("concave90.F1",))
+
+
+# --------------------------------------------------------------------------------------------------
+# corners: the corners are concave corners of three faces, decided from the geometry
+
+
+@pytest.mark.parametrize(
+    "plate,valley,opening,largest",
+    [
+        ("valley175", ("F1", "F2"), 175.0, 175.0),  # semi-stable: the valley's opening is >= 170°
+        ("valley152", ("F2", "F3"), 152.0, 162.85),  # stable: every opening below 170°
+    ],
+)
+def test_corners_valley_and_ramp_meet_concavely(plate, valley, opening, largest):
+    geom = SceneGeometry.from_scene(load_scene("corners"))
+    faces = [f"{plate}.F{k}" for k in (1, 2, 3)]
+    facts = [geom.pair_fact(a, b) for i, a in enumerate(faces) for b in faces[i + 1 :]]
+    assert all(p.concave for p in facts), facts
+    a, b = (f"{plate}.{f}" for f in valley)
+    assert geom.pair_fact(a, b).opening_deg == pytest.approx(opening)
+    assert max(p.opening_deg for p in facts) == pytest.approx(largest, abs=0.01)
