@@ -298,13 +298,13 @@ def _recording_error(fn):
 @_recording_error
 def replay_cmd(recording: str, verify: bool) -> None:
     """Re-simulate a recording from its embedded scene and command stream."""
-    from dlovr.recording import Recording, replay
+    from dlovr.recording import replay
 
-    n = Recording(recording).count("/dlovr/command")
-    with _progress(n, "replay") as bar:
+    with _progress(1, "replay") as bar:
         done = [0]
 
-        def progress(k: int) -> None:
+        def progress(k: int, total: int) -> None:
+            bar.length = total
             bar.update(k - done[0])
             done[0] = k
 
@@ -347,6 +347,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
                 "classes": p.get("classes", []),
             }
             for p in rec.states()
+            if not p.get("end")  # the end marker repeats the last situation
         ]
     else:
         kept = kept_states(rec)

@@ -4,7 +4,7 @@ A recording holds everything needed to replay a demonstration with nothing else:
 
 - the scene (its TOML and meshes) as attachments, with a content hash in the metadata;
 - software versions (dlovr, mujoco) and the time step as metadata;
-- ``/dlovr/command``: the gripper command (target pose) of every step;
+- ``/dlovr/command``: the gripper command (target pose) of every step, 50 steps a message;
 - ``/dlovr/checkpoint``: full simulator states (``mjSTATE_INTEGRATION``) at the start and every second;
 - ``/dlovr/contact_states``: the contact situations (topological, discrete, forces, transitions) each
   time they change, written in chunks of their own so batch readers skip the bulk data;
@@ -41,7 +41,7 @@ from mcap.writer import CompressionType, Writer
 from dlovr import __version__
 from dlovr.transitions import DEFAULT_HOLD_S, classify_step
 
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2: commands in messages of 50 steps, an end marker in the states
 PROFILE = "dlovr"
 TOPIC_COMMAND = "/dlovr/command"
 TOPIC_CHECKPOINT = "/dlovr/checkpoint"
@@ -155,15 +155,18 @@ def _schema(name: str) -> bytes:
 
 
 _COMMAND_SCHEMA = {
-    "title": "dlovr.Command",
-    "description": "Gripper target pose commanded for one step: pos m (world), quat wxyz.",
+    "title": "dlovr.Commands",
+    "description": "Gripper target poses commanded for consecutive steps, starting at `step`: "
+    "pos[i] m (world) and quat[i] wxyz are applied before step `step + i`.",
     "type": "object",
     "properties": {
         "step": {"type": "integer"},
-        "pos": {"type": "array", "items": {"type": "number"}},
-        "quat": {"type": "array", "items": {"type": "number"}},
+        "pos": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
+        "quat": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
     },
 }
+COMMAND_BATCH = 50
+"""Steps per command message (0.1 s at 2 ms): one message a step would cost more than the rest."""
 _CHECKPOINT_SCHEMA = {
     "title": "dlovr.Checkpoint",
     "description": "Full simulator state (mjSTATE_INTEGRATION) after `step` steps, plus the gripper target.",
@@ -268,7 +271,7 @@ class Recorder:
             self._w.add_attachment(now, now, SCENE_PREFIX + name, "application/octet-stream", data)
         js = "jsonschema"
         ids = {
-            TOPIC_COMMAND: self._w.register_schema("dlovr.Command", js, _dumps(_COMMAND_SCHEMA)),
+            TOPIC_COMMAND: self._w.register_schema("dlovr.Commands", js, _dumps(_COMMAND_SCHEMA)),
             TOPIC_CHECKPOINT: self._w.register_schema("dlovr.Checkpoint", js, _dumps(_CHECKPOINT_SCHEMA)),
             TOPIC_STATES: self._w.register_schema("dlovr.ContactState", js, _dumps(_STATES_SCHEMA)),
             TOPIC_SCENE: self._w.register_schema("foxglove.SceneUpdate", js, _schema("foxglove.SceneUpdate")),
@@ -278,6 +281,7 @@ class Recorder:
         }
         self._ch = {topic: self._w.register_channel(topic, "json", sid) for topic, sid in ids.items()}
         self._pending_states: list[tuple[int, bytes]] = []
+        self._commands: list[tuple[int, list[float], list[float]]] = []
         self._seq = 0
         self._last_flush = time.monotonic()
         self._closed = False
@@ -294,11 +298,22 @@ class Recorder:
         self._w.add_message(self._ch[topic], ns, payload, ns, self._seq)
 
     def command(self, step: int, pos: Sequence[float], quat: Sequence[float]) -> None:
-        """The gripper target commanded for step ``step`` (applied before that step)."""
-        self._add(
-            TOPIC_COMMAND, step, _dumps({"step": int(step), "pos": _floats(pos), "quat": _floats(quat)})
-        )
+        """The gripper target commanded for step ``step`` (applied before that step); steps come in
+        order, written in messages of :data:`COMMAND_BATCH` steps."""
+        c = self._commands
+        if c and int(step) != c[0][0] + len(c):
+            raise ValueError(f"command for step {step} out of order (expected {c[0][0] + len(c)})")
+        c.append((int(step), _floats(pos), _floats(quat)))
+        if len(c) >= COMMAND_BATCH:
+            self._write_commands()
         self._maybe_flush()
+
+    def _write_commands(self) -> None:
+        c = self._commands
+        if c:
+            payload = {"step": c[0][0], "pos": [x[1] for x in c], "quat": [x[2] for x in c]}
+            self._add(TOPIC_COMMAND, c[0][0], _dumps(payload))
+            c.clear()
 
     def checkpoint(
         self, step: int, state: np.ndarray, target_pos: Sequence[float], target_quat: Sequence[float]
@@ -398,6 +413,7 @@ class Recorder:
 
     def flush(self) -> None:
         """Write everything so far to disk (complete chunks that ``dlovr recover`` can rescue)."""
+        self._write_commands()
         self._write_states()
         self._w.flush()
         os.fsync(self._fh.fileno())
@@ -417,6 +433,7 @@ class Recorder:
             return
         self._closed = True
         try:
+            self._write_commands()
             self._write_states()
             self._w.finish()
         finally:
@@ -481,6 +498,11 @@ class Recording:
         if header.profile != PROFILE or "dlovr" not in meta:
             raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
         self.metadata: dict[str, str] = meta["dlovr"]
+        version = self.metadata.get("format_version")
+        if version != FORMAT_VERSION:
+            raise RecordingError(
+                f"{p}: recording format {version}, this dlovr {__version__} reads format {FORMAT_VERSION}"
+            )
         if summary is None:
             raise RecordingError(f"{p}: recording has no summary section")
         topics = {c.topic for c in summary.channels.values()}
@@ -544,16 +566,22 @@ class Recording:
     def commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Commanded gripper targets: step numbers (k,), positions (k, 3), quaternions (k, 4)."""
         steps, pos, quat = [], [], []
-        for m in self._iter(TOPIC_COMMAND):
-            steps.append(m["step"])
-            pos.append(m["pos"])
-            quat.append(m["quat"])
+        try:
+            for m in self._iter(TOPIC_COMMAND):
+                p, q = np.asarray(m["pos"], float), np.asarray(m["quat"], float)
+                if p.ndim != 2 or p.shape[1:] != (3,) or q.shape != (len(p), 4):
+                    raise ValueError("pos/quat must be (k, 3) and (k, 4)")
+                steps.append(int(m["step"]) + np.arange(len(p)))
+                pos.append(p)
+                quat.append(q)
+        except (KeyError, TypeError, ValueError) as e:
+            raise RecordingError(f"{self.path}: bad gripper command message: {e}") from None
         if not steps:
             raise RecordingError(f"{self.path}: recording has no gripper commands")
-        s = np.asarray(steps, dtype=np.int64)
+        s = np.concatenate(steps)
         if np.any(np.diff(s) != 1):
             raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
-        return s, np.asarray(pos, float), np.asarray(quat, float)
+        return s, np.concatenate(pos), np.concatenate(quat)
 
     def frames(self) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
         """The ~30 Hz visual frames: (time s, cable points (n+1, 3), gripper pos (3,), quat wxyz (4,)).
@@ -733,6 +761,15 @@ class DemoRecorder:
         if not self.rec.closed:
             if (int(self.sim.step_index) - self.start_step) % self._cp_every:
                 self._checkpoint()
+            cur = self.tracker.current
+            if cur is not None:  # where the recording ends (the situation it ends in, unchanged)
+                end = {
+                    **cur.payload(),
+                    "step": int(self.sim.step_index),
+                    "t": float(self.sim.time),
+                    "end": True,
+                }
+                self.rec.contact_state(int(self.sim.step_index), end)
             self.rec.close()
         return self.path
 
@@ -771,7 +808,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
 
     With ``verify``, the state at every checkpoint is compared bit for bit and the contact-state
     sequence with the recorded one; the first difference is reported in ``divergence``.
-    ``progress(n)`` is called with the number of steps done so far.
+    ``progress(done, total)`` is called with the number of steps done so far and in all.
     """
     import tempfile
 
@@ -833,11 +870,11 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
                     f"recorded {want[bad]!r}, replayed {got[bad]!r}"
                 )
         if progress is not None and (i % 500 == 0 or i == len(steps) - 1):
-            progress(i + 1)
+            progress(i + 1, len(steps))
     wall = time.perf_counter() - t0
     replayed = tuple(st.payload() for st in tracker.changes)
     if verify and divergence is None:
-        divergence = _compare_states(recorded_states, replayed, dt)
+        divergence = _compare_states([p for p in recorded_states if not p.get("end")], replayed, dt)
     return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
 
 
@@ -897,10 +934,7 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
             first.setdefault((float(p["t"]), sit), p)
     except (KeyError, ValueError, TypeError) as e:
         raise RecordingError(f"{recording.path}: bad contact-state message: {e}") from None
-    end = payloads[-1]["t"]
-    n_steps = recording.count(TOPIC_COMMAND)
-    if n_steps:
-        end = max(end, (int(recording.checkpoints()[0].step) + n_steps) * recording.dt)
+    end = payloads[-1]["t"]  # the last message is written when the recording ends
     out = []
     for i, k in enumerate(deb.kept):
         p = first.get((k.start, k.situation), {})

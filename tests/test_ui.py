@@ -129,7 +129,7 @@ def test_stop_mid_recording_finishes_the_file(tmp_path: Path):
         out = srv.stop()
     assert out == path
     rec = Recording(path)  # validates the footer and summary
-    assert rec.count("/dlovr/command") > 50
+    assert len(rec.commands()[0]) > 50
     assert replay(path, verify=True).divergence is None
 
 
@@ -271,5 +271,5 @@ def test_two_clients_disconnect_mid_drag_and_stop_mid_recording(tmp_path: Path, 
         out = srv.stop()  # mid-recording
     assert out == path
     rec = Recording(path)
-    assert rec.count("/dlovr/command") > 100
+    assert len(rec.commands()[0]) > 100
     assert replay(path, verify=True).divergence is None
