@@ -17,7 +17,7 @@ SAMPLES = sorted(ROOT.glob("*.mcap"))
 
 def test_there_are_samples_of_the_built_in_demonstrations():
     names = {p.stem for p in SAMPLES}
-    assert {"table", "edges", "peg_in_hole", "l_block"} <= names
+    assert {"table", "edges", "peg_in_hole", "l_block", "corners"} <= names
     for p in SAMPLES:
         assert p.stat().st_size < 8_000_000, f"{p.name} is too large for a sample"
 
