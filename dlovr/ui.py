@@ -268,9 +268,9 @@ class Session:
     def __init__(self, scene: Scene, lock: threading.RLock):
         self.scene = scene
         self.lock = lock
-        self.sim = Simulator(scene)
-        self.geometry = SceneGeometry.from_scene(scene)
-        self.tracker = ContactTracker(self.geometry, scene.params)
+        self.sim = Simulator(scene, track=True)
+        self.tracker: ContactTracker = self.sim.tracker
+        self.geometry = self.tracker.geometry
         self.recorder: DemoRecorder | None = None
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
@@ -310,7 +310,7 @@ class Session:
                     self.record = sim.record()
                     self.note = f"simulation diverged ({e.reason}); gripper stopped, state restored"
                     return False
-                st = self.tracker.update(rec)
+                st = rec.state  # the simulator tracks the contacts (track=True)
                 if self.recorder is not None:
                     self.recorder.step(rec)
                 self.record, self.state = rec, st
