@@ -623,12 +623,12 @@ class DemoServer:
 
     def open_recording(self, path: str | Path) -> Timeline:
         """Show a recording's timeline and cable (the live simulation keeps running unseen)."""
-        tl, scene, _ = recording_timeline(path)
+        tl, scene, rec = recording_timeline(path)
         with self.lock:
             self._view = tl
             self._view_scene = scene
         if self.server is not None:
-            self._show_obstacles(SceneGeometry.from_scene(scene), scene)
+            self._show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
             self._live_btn.visible = True
             self._update_timeline_gui(force=True)
             self.scrub(tl.start)
