@@ -966,22 +966,6 @@ class SceneGeometry:
         inside = (res < -1e-9).all(axis=2) & (owner[None, :] != obj_index[:, None])
         return inside.any(axis=1)
 
-    def classify_pairs(
-        self,
-        points: np.ndarray,
-        point_idx: np.ndarray,
-        piece_idx: np.ndarray,
-        contact_tol: float = 5e-4,
-        tangential_tol: float | None = None,
-    ) -> list[PointHit]:
-        """:meth:`classify_points` restricted to given (point, piece id) pairs (see :meth:`pair_hits`)."""
-        pts = np.asarray(points, dtype=float).reshape(-1, 3)
-        pt, pid, dist, faces, closest = self.pair_hits(pts, point_idx, piece_idx, contact_tol, tangential_tol)
-        return [
-            PointHit(int(pt[i]), self.pieces[int(pid[i])], closest[i], float(dist[i]), faces[i])
-            for i in range(len(pt))
-        ]
-
     def pair_hits(
         self,
         points: np.ndarray,

@@ -814,8 +814,6 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
 
     import mujoco
 
-    from dlovr.contacts import ContactTracker
-    from dlovr.geometry import SceneGeometry
     from dlovr.sim import SimState, Simulator
 
     rec = Recording(path)
@@ -833,16 +831,13 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
         scene = load_embedded_scene(rec, tmp)
         if rec.pieces is not None and set(rec.pieces) != {o.name for o in scene.objects}:
             raise RecordingError(f"{rec.path}: the embedded decomposition does not match the scene's objects")
-        sim = Simulator(scene, pieces=rec.pieces)
+        sim = Simulator(scene, pieces=rec.pieces, track=True)  # every step updates sim.tracker
         if abs(sim.model.opt.timestep - rec.dt) > 1e-15:
             raise RecordingError(
                 f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
             )
-        tracker = ContactTracker(
-            SceneGeometry.from_scene(scene, pieces=sim.pieces),
-            scene.params,
-            hold=float(rec.metadata.get("hold", DEFAULT_HOLD_S)),
-        )
+    tracker = sim.tracker
+    tracker.hold = float(rec.metadata.get("hold", DEFAULT_HOLD_S))  # taken by restart() below
     first = cps[0]
     if len(first.state) != len(sim.get_state().mj):
         raise RecordingError(f"{rec.path}: checkpoint size does not match the embedded scene's model")
@@ -858,8 +853,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
         # the recorded targets are the exact ones used (already validated and normalised when
         # recorded): set them as they are, since normalising again may change the last bit
         sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
-        record = sim.step()
-        tracker.update(record)
+        sim.step()
         if verify and divergence is None and int(k) in by_step:
             want = by_step[int(k)].state
             got = sim.get_state().mj

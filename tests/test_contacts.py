@@ -95,13 +95,21 @@ def test_pair_fast_path_agrees_with_the_full_classifier(geom):
     n_pieces = len(geom.pieces)
     pi = np.repeat(np.arange(len(pts)), n_pieces)
     pc = np.tile(np.arange(n_pieces), len(pts))
-    fast = geom.classify_pairs(pts, pi, pc, contact_tol=1e-3)
+    pt, pid, dist, faces, _ = geom.pair_hits(pts, pi, pc, contact_tol=1e-3)
     full = geom.classify_points(pts, contact_tol=1e-3)
-
-    def key(hits):
-        return sorted((h.point, h.piece.obj, h.piece.index, h.faces, round(h.distance, 9)) for h in hits)
-
-    assert key(fast) == key(full)
+    fast = [
+        (
+            int(pt[i]),
+            geom.pieces[int(pid[i])].obj,
+            geom.pieces[int(pid[i])].index,
+            faces[i],
+            round(float(dist[i]), 9),
+        )
+        for i in range(len(pt))
+    ]
+    assert sorted(fast) == sorted(
+        (h.point, h.piece.obj, h.piece.index, h.faces, round(h.distance, 9)) for h in full
+    )
     assert len(full) > 100 and any(len(h.faces) > 1 for h in full)
 
 
