@@ -73,6 +73,13 @@ class ContactTracker:
 
     ``hold`` (s) is the flicker hold time of MODEL.md §4.2. ``changes`` lists every step at which the
     raw situation changed (what a recording stores); ``kept`` the debounced situations.
+
+    ``reuse``: a step that queries the same (point, piece) pairs as the step of the last labelling,
+    with every queried point closer to where it was then than its slack
+    (:meth:`dlovr.geometry.SceneGeometry.label_slack`), keeps those labels instead of labelling
+    again: the same result, cheaper; points that moved farther are labelled again alone.
+    ``labellings`` counts the steps that labelled every queried point, ``partial_labellings`` those
+    that labelled some.
     """
 
     geometry: SceneGeometry
@@ -81,13 +88,18 @@ class ContactTracker:
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
     changes: list[ContactState] = field(default_factory=list)
+    reuse: bool = True
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
         self._touching = np.zeros(0, dtype=np.int64)  # (point << 20 | piece id) in contact
         self._signature: tuple[Any, ...] | None = None
-        self._piece_map: tuple[Any, dict[tuple[int, int], int]] | None = None
+        self._piece_map: tuple[Any, np.ndarray] | None = None
+        self._tip: tuple[Any, list[np.ndarray]] | None = None
         self._situation: Situation | None = None
+        self._labels: _Labels | None = None
+        self.labellings = 0
+        self.partial_labellings = 0
         self.current: ContactState | None = None
 
     def restart(self, record: Any) -> ContactState:
@@ -98,6 +110,7 @@ class ContactTracker:
         self._debouncer = Debouncer(self.hold, is_transient)
         self._touching = np.zeros(0, dtype=np.int64)
         self._signature = self._situation = None
+        self._labels = None
         self.changes = []
         self.current = None
         return self.update(record)
@@ -122,7 +135,6 @@ class ContactTracker:
         labels count for the nearer point.
         """
         pts = np.asarray(points, dtype=float)
-        r = self.geometry.radius
         geom = self.geometry
         if pairs is None:
             pi = np.repeat(np.arange(len(pts)), len(geom.pieces))
@@ -141,25 +153,18 @@ class ContactTracker:
             pts_all = np.concatenate([pts, vpos])
         else:
             pts_all = pts
-        pt, pid, dist, faces, _ = geom.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
-        pt = owner[pt]
-        keys = pt << 20 | pid
-        keep = (dist <= r + self.enter_tol) | (_member(keys, self._touching) & (dist <= r + self.leave_tol))
-        self._touching = np.unique(keys[keep])
-        kept_hits = [
-            _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
-        ]
+        lab = self._reuse_labels(pts_all, pi, pc) or self._label(pts_all, pi, pc)
+        kept_hits = self._hits(lab, owner)
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
-        tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
-        tip = (
-            tip_touches(
-                pts[n] - pts[n - 1], [geom.face_normal(f) for f in tip_faces], self.params.tip_angle_deg
-            )
-            if tip_faces
-            else None
-        )
+        if self._tip is None or self._tip[0] is not kept_hits:  # the tip's faces, per labelling
+            tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
+            self._tip = (kept_hits, [geom.face_normal(f) for f in tip_faces])
+        tip_normals = self._tip[1]
+        tip = None
+        if tip_normals:
+            tip = tip_touches(pts[n] - pts[n - 1], tip_normals, self.params.tip_angle_deg)
         signature = (len(pts), tuple(kept_hits), tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
@@ -175,18 +180,107 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
-    def _piece_ids(self, arrays: Any, rows: np.ndarray) -> np.ndarray:
-        """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts ``rows``."""
+    def _label(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels:
+        """Label the queried (point, piece) pairs geometrically (which faces each touches, and on which
+        side of the enter and leave distances)."""
+        geom, r = self.geometry, self.geometry.radius
+        self.labellings += 1
+        pt, pid, dist, faces, _ = geom.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
+        enter, leave = dist <= r + self.enter_tol, dist <= r + self.leave_tol
+        lab = _Labels(pi, pc, pts_all.copy(), pt, pid, faces, enter, leave, bool((leave & ~enter).any()))
+        self._labels = lab
+        return lab
+
+    def _hits(self, lab: _Labels, owner: np.ndarray) -> list[_Hit]:
+        """The labelled pairs that touch, by cable point, with hysteresis: a pair within the enter
+        distance touches, one within the leave distance keeps touching."""
+        if lab.owner is not None and not lab.between and np.array_equal(owner, lab.owner):
+            return lab.hits  # the same owners, no pair between the distances: the same hits
+        pt = owner[lab.pt]
+        keys = pt << 20 | lab.pid
+        keep = lab.enter | (_member(keys, self._touching) & lab.leave)
+        self._touching = np.unique(keys[keep])
+        if lab.owner is not None and np.array_equal(keep, lab.keep) and np.array_equal(pt, lab.owner[lab.pt]):
+            lab.owner = owner
+            return lab.hits
+        faces = lab.faces
+        lab.hits = [
+            _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
+        ]
+        lab.owner, lab.keep = owner, keep
+        return lab.hits
+
+    def _reuse_labels(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels | None:
+        """The last labels when the same pairs are queried, brought up to date: points that moved by
+        less than their slack since they were labelled keep their labels (labelling them again would
+        give the same), the others are labelled again. ``None`` when the queried pairs changed."""
+        lab = self._labels
+        if lab is None or not self.reuse or len(pi) != len(lab.pi) or len(pts_all) != len(lab.pts):
+            return None
+        if not (np.array_equal(pi, lab.pi) and np.array_equal(pc, lab.pc)):
+            return None
+        if lab.q is None:
+            lab.q = np.unique(lab.pi)
+            lab.pos, lab.slack2 = lab.pts[lab.q], self._slack2(lab.pts, lab.pi, lab.pc, lab.q)
+        if len(lab.q) == 0:
+            return lab
+        dp = pts_all[lab.q] - lab.pos
+        moved = np.einsum("ij,ij->i", dp, dp) >= lab.slack2
+        if not moved.any():
+            return lab
+        # label the moved points again (a point's labels depend on it alone) and splice them in
+        self.partial_labellings += 1
+        again = lab.q[moved]
+        rows = _member(pi, again)
+        pt, pid, dist, faces, _ = self.geometry.pair_hits(
+            pts_all, pi[rows], pc[rows], contact_tol=self.leave_tol
+        )
+        r = self.geometry.radius
+        old = ~_member(lab.pt, again)
+        pt_all = np.concatenate([lab.pt[old], pt])
+        pid_all = np.concatenate([lab.pid[old], pid])
+        order = np.lexsort((pid_all, pt_all))
+        old_faces = [f for f, o in zip(lab.faces, old.tolist(), strict=True) if o]
+        all_faces = old_faces + faces
+        enter = np.concatenate([lab.enter[old], dist <= r + self.enter_tol])[order]
+        leave = np.concatenate([lab.leave[old], dist <= r + self.leave_tol])[order]
+        lab.pt, lab.pid, lab.enter, lab.leave = pt_all[order], pid_all[order], enter, leave
+        lab.faces = [all_faces[i] for i in order.tolist()]
+        lab.between = bool((leave & ~enter).any())
+        lab.pts = lab.pts.copy()
+        lab.pts[again] = pts_all[again]
+        lab.pos = lab.pos.copy()
+        lab.pos[moved] = pts_all[again]
+        lab.slack2 = lab.slack2.copy()
+        lab.slack2[moved] = self._slack2(pts_all, pi[rows], pc[rows], again)
+        lab.owner = None  # the hits must be made again
+        return lab
+
+    def _slack2(self, pts: np.ndarray, pi: np.ndarray, pc: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Squared slacks of query points ``q`` (``geometry.label_slack`` of their pairs)."""
+        r = self.geometry.radius
+        thresholds = (r + self.enter_tol, r + self.leave_tol)
+        slack = self.geometry.label_slack(pts, pi, pc, contact_tol=self.leave_tol, thresholds=thresholds)
+        return slack[q] ** 2
+
+    def _piece_ids(self, arrays: Any) -> np.ndarray:
+        """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts."""
         objs = arrays.names[0]
         if self._piece_map is None or self._piece_map[0] is not objs:
-            self._piece_map = (objs, {})
-        cache = self._piece_map[1]
-        obj, piece = np.asarray(arrays.obj)[rows], np.asarray(arrays.piece)[rows]
-        ids = np.empty(len(obj), dtype=np.int64)
-        for i, key in enumerate(zip(obj.tolist(), piece.tolist(), strict=True)):
-            if key not in cache:
-                cache[key] = self.geometry.piece_id(objs[key[0]], key[1])
-            ids[i] = cache[key]
+            pieces = self.geometry.pieces
+            table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
+            row = {o: i for i, o in enumerate(objs)}
+            for k, p in enumerate(pieces):
+                if p.obj in row:
+                    table[row[p.obj], p.index] = k
+            self._piece_map = (objs, table)
+        table = self._piece_map[1]
+        obj, piece = np.asarray(arrays.obj), np.asarray(arrays.piece)
+        ids = table[obj, np.minimum(piece, table.shape[1] - 1)]
+        bad = (ids < 0) | (piece >= table.shape[1])
+        if bad.any():
+            i = int(np.nonzero(bad)[0][0])
+            raise KeyError(f"the geometry has no piece {int(piece[i])} of object {objs[int(obj[i])]!r}")
         return ids
 
     def update(self, record: Any) -> ContactState:
@@ -199,7 +293,7 @@ class ContactTracker:
         point_of = np.zeros(0, dtype=np.int64)
         if arrays is not None and len(arrays.dist):
             point_of, seg_rows, seg_pos = _locate(arrays, pts)
-            ids = self._piece_ids(arrays, np.arange(len(point_of)))
+            ids = self._piece_ids(arrays)
             ok = point_of >= 0
             pairs = _unique_pairs(point_of[ok], ids[ok])
             between = (seg_pos, point_of[seg_rows], ids[seg_rows])
@@ -207,16 +301,19 @@ class ContactTracker:
             pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         prev = self.current
         topo = self.classify(pts, record.gripper_z, pairs, between)
-        if prev is not None and prev.topological == topo and _vector_independent(topo):
+        if prev is not None and (
+            prev.topological is topo  # the cached situation, vectors and all: discretize is pure
+            or (prev.topological == topo and _vector_independent(topo))
+        ):
             disc = prev.discrete
         else:
             disc = discretize(topo, self.geometry.fact_book(), self.params)
         forces = _forces(topo, arrays, point_of)
         state = ContactState(
             int(record.step), float(record.time), topo, disc, forces,
-            _tuple(getattr(record, "gripper_pos", (0.0, 0.0, 0.0))),
-            _tuple(getattr(record, "gripper_quat", (1.0, 0.0, 0.0, 0.0))),
-            _tuple(getattr(record, "gripper_force", (0.0, 0.0, 0.0))),
+            _tuple(getattr(record, "gripper_pos", _ORIGIN)),
+            _tuple(getattr(record, "gripper_quat", _IDENTITY)),
+            _tuple(getattr(record, "gripper_force", _ORIGIN)),
         )  # fmt: skip
         if prev is None or prev.discrete != disc or prev.topological != topo:
             self.changes.append(state)
@@ -249,8 +346,40 @@ def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 _LOW = (1 << 20) - 1
 
 
+_ORIGIN = (0.0, 0.0, 0.0)
+_IDENTITY = (1.0, 0.0, 0.0, 0.0)
+
+
 def _tuple(v: Any) -> Any:
+    """A vector as a tuple of Python floats."""
+    if isinstance(v, np.ndarray) and v.dtype == np.float64:
+        return tuple(v.tolist())
     return tuple(float(x) for x in v)
+
+
+@dataclass(eq=False)
+class _Labels:
+    """One geometric labelling: the queried pairs (``pi``, ``pc``) and query points ``pts`` then; per
+    hit its query point ``pt``, piece ``pid``, ``faces`` and whether it lies within the enter and the
+    leave distance (``between``: some hit lies between the two). Filled in later: the slack of the
+    queried points ``q`` (positions ``pos``, squared slacks), and the kept hits last made from it
+    with the owners and keep mask used."""
+
+    pi: np.ndarray
+    pc: np.ndarray
+    pts: np.ndarray
+    pt: np.ndarray
+    pid: np.ndarray
+    faces: list[tuple[str, ...]]
+    enter: np.ndarray
+    leave: np.ndarray
+    between: bool
+    q: np.ndarray | None = None
+    pos: np.ndarray | None = None
+    slack2: np.ndarray | None = None
+    owner: np.ndarray | None = None
+    keep: np.ndarray | None = None
+    hits: list[_Hit] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

@@ -865,6 +865,7 @@ class SceneGeometry:
         self._book: SceneFactBook | None = None
         self._piece_ids: dict[tuple[str, int], int] | None = None
         self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._outlines: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -1031,6 +1032,171 @@ class SceneGeometry:
             closest = np.concatenate([closest, np.array([h.closest for h in extra]).reshape(-1, 3)])
         order = np.lexsort((pid, pt))
         return pt[order], pid[order], dist[order], [faces[i] for i in order.tolist()], closest[order]
+
+    def label_slack(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float = 5e-4,
+        tangential_tol: float | None = None,
+        thresholds: Sequence[float] = (),
+    ) -> np.ndarray:
+        """How far (m) each point may move without changing what :meth:`pair_hits` reports for the
+        same (point, piece) pairs: which pairs touch, with which faces, and on which side of every
+        distance in ``thresholds`` each touching pair lies. (n,) array over ``points``; ``inf`` for
+        points not queried, 0 where no bound is known (a point inside a piece).
+
+        Every decision of :meth:`pair_hits` and :meth:`classify_points` compares a 1-Lipschitz
+        function of the point with a constant: plane residuals and their maximum, the distance to a
+        convex piece, the closest point on it (a projection, non-expansive) and so its distances to
+        the piece's edges, the outline of a mixed face's exposed part and the free-side probes of
+        its faces. The slack is the smallest of those
+        margins (the best-plane choice, a difference of two residuals, counts half). A point that
+        moves by less than its slack gets the same labels, so a caller may reuse them.
+        """
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
+        r = self.radius
+        ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
+        reach = r + contact_tol
+        out = np.full(len(pts), np.inf)
+        if len(pi) == 0:
+            return out
+        n_all, d_all, _, external, owner = self._padded()
+        p = pts[pi]
+        nrm, off = n_all[pc], d_all[pc]
+        res = np.einsum("kfi,ki->kf", nrm, p) - off
+        k = np.arange(len(pi))
+        best = np.argmax(res, axis=1)
+        rb = res[k, best]
+        nb = nrm[k, best]
+        second = np.partition(res, -2, axis=1)[:, -2] if res.shape[1] > 1 else np.full(len(pi), -np.inf)
+        resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)
+        resq[k, best] = -np.inf
+        rq = resq.max(axis=1)
+        far = rb > reach
+        interior = (rq <= -ttol) & ~far
+        m_reach = np.abs(rb - reach)
+        m_route = np.minimum(np.minimum(m_reach, np.abs(rq + ttol)), (rb - second) / 2.0)
+        margin = np.where(far, rb - reach, m_route)
+        ext, mixed = external[pc, best], np.zeros(len(pi), dtype=bool)
+        for j in np.nonzero(interior & ~ext)[0]:
+            mixed[j] = self.pieces[int(pc[j])].faces[int(best[j])].label == "mixed"
+        for j in np.nonzero(interior & mixed)[0]:
+            pf = self.pieces[int(pc[j])].faces[int(best[j])]
+            margin[j] = min(margin[j], self._outline_slack(pf, p[j : j + 1] - rb[j] * nb[j])[0])
+        hit = interior & (ext | mixed)
+        if hit.any():
+            rows = np.nonzero(hit)[0]
+            q = p[rows] - rb[rows, None] * nb[rows]
+            probe_slack = self._probe_slack(q + 2.0 * r * nb[rows], owner[pc[rows]])
+            margin[rows] = np.minimum(margin[rows], probe_slack)
+            for t in thresholds:
+                margin[rows] = np.minimum(margin[rows], np.abs(rb[rows] - t))
+        np.minimum.at(out, pi, margin)
+        amb = np.unique(pi[~(far | interior)])
+        if len(amb):
+            out[amb] = np.minimum(out[amb], self._classify_slack(pts[amb], reach, ttol, thresholds))
+        return out
+
+    def _outline_slack(self, pf: PieceFace, q: np.ndarray) -> np.ndarray:
+        """(m,) how far points ``q`` on a mixed piece face may move before they cross the outline of
+        its exposed part (the triangle edges not shared by two of its triangles), less the
+        tolerance of the in-triangle test."""
+        key = id(pf)
+        if key not in self._outlines:
+            count: dict[tuple[tuple[float, ...], tuple[float, ...]], int] = {}
+            for tri in np.asarray(pf.exposed).reshape(-1, 3, 3):
+                for i in range(3):
+                    a, b = tuple(tri[i].tolist()), tuple(tri[(i + 1) % 3].tolist())
+                    e = (a, b) if a <= b else (b, a)
+                    count[e] = count.get(e, 0) + 1
+            outline = [e for e, c in count.items() if c == 1]
+            self._outlines[key] = (
+                np.array([e[0] for e in outline], dtype=float).reshape(-1, 3),
+                np.array([e[1] for e in outline], dtype=float).reshape(-1, 3),
+            )
+        a, b = self._outlines[key]
+        if len(a) == 0:
+            return np.zeros(len(q))
+        _, d = _closest_on_segments(np.asarray(q, dtype=float).reshape(-1, 3), a, b)
+        return np.maximum(d.min(axis=1) - 1e-8, 0.0)
+
+    def _probe_slack(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
+        """(K,) margins of :meth:`_covered`: how far each probe may move before it enters or leaves a
+        piece of another object (the largest plane residual crossing -1e-9)."""
+        n_all, d_all, _, _, owner = self._padded()
+        res = (np.einsum("pfi,ki->kpf", n_all, probes) - d_all[None]).max(axis=2)  # (K,P)
+        m = np.abs(res + 1e-9)
+        m[owner[None, :] == obj_index[:, None]] = np.inf
+        return m.min(axis=1) if m.shape[1] else np.full(len(probes), np.inf)
+
+    def _classify_slack(
+        self, pts: np.ndarray, reach: float, ttol: float, thresholds: Sequence[float]
+    ) -> np.ndarray:
+        """Margins of :meth:`classify_points`' decisions for ``pts`` over every piece (see
+        :meth:`label_slack`)."""
+        out = np.full(len(pts), np.inf)
+        objs = {o.name: i for i, o in enumerate(self.objects)}
+        for piece in self.pieces:
+            lo, hi = piece.lo - reach, piece.hi + reach
+            outside = np.maximum(lo - pts, pts - hi).max(axis=1)  # > 0: not in the piece's box
+            out = np.minimum(out, np.where(outside > 0, outside, np.inf))
+            sel = np.nonzero(outside <= 0)[0]
+            if len(sel) == 0:
+                continue
+            p = pts[sel]
+            n, d = piece.normals, piece.offsets
+            res = p @ n.T - d
+            maxres = res.max(axis=1)
+            qe, de = _closest_on_segments(p, piece.edge_a, piece.edge_b)
+            # distance to the piece and closest point: the face or edge candidate, as classify_points
+            scale = float(np.ptp(piece.vertices, axis=0).max())
+            eps = 1e-9 * max(scale, 1e-3)
+            proj = p[:, None, :] - res[..., None] * n[None]
+            pres = np.einsum("mfk,gk->mfg", proj, n) - d[None, None]
+            valid = (pres <= eps).all(axis=2)
+            fdist = np.where(valid & (res >= -eps), res, np.inf)
+            m = len(p)
+            best_f = np.argmin(fdist, axis=1)
+            bf = fdist[np.arange(m), best_f]
+            be = de.min(axis=1) if de.shape[1] else np.full(m, np.inf)
+            use_face = bf <= be
+            q = proj[np.arange(m), best_f]
+            if de.shape[1]:
+                q = np.where(use_face[:, None], q, qe[np.arange(m), de.argmin(axis=1)])
+            dist = np.minimum(bf, be)
+            margin = np.where(maxres <= 0, 0.0, np.minimum(maxres, np.abs(dist - reach)))
+            close = (dist <= reach) & (maxres > 0)
+            if close.any():
+                rows = np.nonzero(close)[0]
+                qc = q[rows]
+                mc = margin[rows]
+                for t in thresholds:
+                    mc = np.minimum(mc, np.abs(dist[rows] - t))
+                active = np.zeros((len(rows), len(piece.faces)), dtype=bool)
+                uf = use_face[rows]
+                active[np.arange(len(rows))[uf], best_f[rows][uf]] = True
+                if len(piece.edge_faces):
+                    _, dq = _closest_on_segments(qc, piece.edge_a, piece.edge_b)
+                    mc = np.minimum(mc, np.abs(dq - ttol).min(axis=1))
+                    near = dq <= ttol
+                    for e, (fi, fj) in enumerate(piece.edge_faces):
+                        active[:, fi] |= near[:, e]
+                        active[:, fj] |= near[:, e]
+                me = objs[piece.obj]
+                for fi, pf in enumerate(piece.faces):
+                    on = np.nonzero(active[:, fi])[0]
+                    if len(on) == 0 or pf.label == "internal" or pf.face is None:
+                        continue
+                    if pf.label == "mixed":
+                        mc[on] = np.minimum(mc[on], self._outline_slack(pf, qc[on]))
+                    probes = qc[on] + 2.0 * self.radius * pf.normal
+                    mc[on] = np.minimum(mc[on], self._probe_slack(probes, np.full(len(on), me)))
+                margin[rows] = mc
+            out[sel] = np.minimum(out[sel], margin)
+        return out
 
     def classify_points(
         self,

@@ -379,6 +379,7 @@ class ContactArrays:
         )
 
 
+_NO_PAIRS = np.zeros((0, 2), int)
 _EMPTY_CONTACTS = ContactArrays(
     point=np.zeros(0, int),
     segment=np.zeros(0, int),
@@ -409,15 +410,23 @@ class StepRecord:
     step: int
     time: float
     points: np.ndarray
-    vectors: np.ndarray
     gripper_pos: np.ndarray
     gripper_quat: np.ndarray
-    gripper_z: np.ndarray
     target_pos: np.ndarray
     target_quat: np.ndarray
     contact_arrays: ContactArrays
     gripper_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
     state: Any = None  # the step's dlovr.contacts.ContactState when the simulator tracks contacts
+
+    @cached_property
+    def vectors(self) -> np.ndarray:
+        """(n, 3) DLO vectors ``P_{i+1} - P_i`` (m, world frame)."""
+        return np.diff(self.points, axis=0)
+
+    @cached_property
+    def gripper_z(self) -> np.ndarray:
+        """The gripper's z axis ``G_z`` (unit, world frame)."""
+        return quat_rotate(self.gripper_quat, np.array([0.0, 0.0, 1.0]))
 
     @property
     def situation(self) -> Any:
@@ -519,14 +528,14 @@ class Simulator:
             geometry = SceneGeometry.from_scene(scene, pieces=self.pieces)
             self.tracker = ContactTracker(geometry, scene.params)
         self.built = built
+        self.max_stretch = max_stretch
         self.model = built.model
         self.data = mujoco.MjData(self.model)
         self.max_speed = float(max_speed)
         self.max_angular_speed = float(max_angular_speed)
-        self.max_stretch = float(max_stretch)
         self.step_index = 0
         m = self.model
-        self._fatal = [int(getattr(mujoco.mjtWarning, w)) for w in _WARNINGS_FATAL]
+        self._fatal = np.array([int(getattr(mujoco.mjtWarning, w)) for w in _WARNINGS_FATAL])
         self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
         objs = tuple(dict.fromkeys(o for o, _ in built.geom_piece.values()))
         self._obj_of_geom = np.full(m.ngeom, -1, dtype=int)
@@ -536,8 +545,10 @@ class Simulator:
             self._piece_of_geom[g] = k
         self._names = (objs, self._geom_names)
         eq = mujoco.mjtObj.mjOBJ_EQUALITY
+        self._hold_rows: tuple[int, np.ndarray] | None = None
         self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
         mujoco.mj_forward(m, self.data)
+        self._reset_warnings()
         mid = built.mocap_id
         self.target_pos = self.data.mocap_pos[mid].copy()
         self.target_quat = self.data.mocap_quat[mid].copy()
@@ -572,17 +583,36 @@ class Simulator:
     def _move_mocap(self) -> None:
         d, mid, dt = self.data, self.built.mocap_id, self.model.opt.timestep
         pos = d.mocap_pos[mid]
-        delta = self.target_pos - pos
-        dist = float(np.linalg.norm(delta))
-        vmax = self.max_speed * dt
-        d.mocap_pos[mid] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
-        q = d.mocap_quat[mid].copy()
+        # a gripper already at its target stays put (the general formulas below give the same values)
+        if pos.tolist() != self.target_pos.tolist():
+            delta = self.target_pos - pos
+            dist = float(np.linalg.norm(delta))
+            vmax = self.max_speed * dt
+            d.mocap_pos[mid] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
+        q = d.mocap_quat[mid]
         tq = self.target_quat
-        angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(q, tq)))))
-        wmax = self.max_angular_speed * dt
-        d.mocap_quat[mid] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
+        if q.tolist() != tq.tolist():
+            q = q.copy()
+            angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(q, tq)))))
+            wmax = self.max_angular_speed * dt
+            d.mocap_quat[mid] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
 
     # -- stepping -----------------------------------------------------------------------------------
+
+    @property
+    def max_stretch(self) -> float:
+        """Relative segment stretch beyond which a step is declared diverged."""
+        return self._max_stretch
+
+    @max_stretch.setter
+    def max_stretch(self, value: float) -> None:
+        self._max_stretch = float(value)
+        seg = float(self.built.seg_length)
+        # squared segment lengths beyond these go to the exact test (bounds slightly inside it)
+        self._length2_bounds = (
+            (seg * (1.0 - self._max_stretch)) ** 2 * (1.0 + 1e-9),
+            (seg * (1.0 + self._max_stretch)) ** 2 * (1.0 - 1e-9),
+        )
 
     @property
     def time(self) -> float:
@@ -595,25 +625,32 @@ class Simulator:
 
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
+        m, d, tracker = self.model, self.data, self.tracker
         for k in range(n):
             self._move_mocap()
-            before = [int(self.data.warning[w].number) for w in self._fatal]
-            mujoco.mj_step(self.model, self.data)
+            mujoco.mj_step(m, d)
             self.step_index += 1
-            self._check(before)
-            if self.tracker is not None and k < n - 1:
-                self.tracker.update(self.record())
-        rec = self.record()
-        if self.tracker is not None:
-            object.__setattr__(rec, "state", self.tracker.update(rec))
+            pts = self._check()
+            if tracker is not None and k < n - 1:
+                tracker.update(self.record(pts))
+        rec = self.record(pts)
+        if tracker is not None:
+            object.__setattr__(rec, "state", tracker.update(rec))
         return rec
 
-    def _check(self, before: list[int]) -> None:
+    def _warning_count(self) -> int:
+        return int(self.data.warning.number[self._fatal].sum())
+
+    def _check(self) -> np.ndarray:
+        """Divergence checks after a step; returns the cable points (a copy)."""
         d = self.data
-        for w, n0 in zip(self._fatal, before, strict=True):
-            if int(d.warning[w].number) > n0:
-                name = mujoco.mjtWarning(w).name
-                raise SimulationDiverged(self.step_index, d.time, f"MuJoCo warning {name}")
+        count = self._warning_count()
+        if count != self._warnings:
+            now = self.data.warning.number
+            w = next(w for w, n0 in zip(self._fatal, self._warnings_each, strict=True) if now[w] > n0)
+            name = mujoco.mjtWarning(int(w)).name
+            self._reset_warnings()
+            raise SimulationDiverged(self.step_index, d.time, f"MuJoCo warning {name}")
         # a sum is NaN/inf as soon as one element is: one cheap test per array
         if not math.isfinite(float(d.qpos.sum()) + float(d.qvel.sum())):
             raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the state")
@@ -621,22 +658,42 @@ class Simulator:
         if not math.isfinite(float(pts.sum())):
             raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the cable points")
         seg = pts[1:] - pts[:-1]
-        dev = np.abs(np.sqrt(np.einsum("ij,ij->i", seg, seg)) / self.built.seg_length - 1.0)
-        stretch = float(dev.max())
-        if stretch > self.max_stretch:
-            i = int(np.argmax(dev))
-            raise SimulationDiverged(
-                self.step_index,
-                d.time,
-                f"segment {i} length off by {stretch:.1%} (bound {self.max_stretch:.0%})",
-            )
+        length2 = np.einsum("ij,ij->i", seg, seg)
+        lo, hi = self._length2_bounds
+        if length2.min() < lo or length2.max() > hi:  # rare: the exact test, naming the segment
+            dev = np.abs(np.sqrt(length2) / self.built.seg_length - 1.0)
+            stretch = float(dev.max())
+            if stretch > self.max_stretch:
+                i = int(np.argmax(dev))
+                raise SimulationDiverged(
+                    self.step_index,
+                    d.time,
+                    f"segment {i} length off by {stretch:.1%} (bound {self.max_stretch:.0%})",
+                )
+        return pts
+
+    def _reset_warnings(self) -> None:
+        """Take MuJoCo's current warning counts as the baseline of :meth:`_check`."""
+        self._warnings_each = self.data.warning.number[self._fatal].copy()
+        self._warnings = int(self._warnings_each.sum())
 
     def contact_arrays(self) -> ContactArrays:
         """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects)."""
-        m, d, b = self.model, self.data, self.built
+        d = self.data
         nc = int(d.ncon)
         if nc == 0:
             return _EMPTY_CONTACTS
+        c = d.contact
+        flex = c.flex[:nc]
+        geom = c.geom[:nc]
+        f = self.built.flex_id
+        gid = geom[:, 0]
+        if (flex[:, 1] == f).all() and (gid >= 0).all() and (self._piece_of_geom[gid] >= 0).all():
+            return self._rod_side1_contacts(c, gid)  # the usual case: every contact is obstacle vs rod
+        return self._contact_arrays_general(nc)
+
+    def _contact_arrays_general(self, nc: int) -> ContactArrays:
+        m, d, b = self.model, self.data, self.built
         c = d.contact
         flex = c.flex[:nc]
         geom = c.geom[:nc]
@@ -691,26 +748,54 @@ class Simulator:
             names=self._names,
         )
 
+    def _rod_side1_contacts(self, c: Any, gid: np.ndarray) -> ContactArrays:
+        """:meth:`contact_arrays` when every contact has an obstacle piece as side 0 and the rod as
+        side 1 (what MuJoCo reports for flex-geom pairs): the same arrays in fewer numpy calls."""
+        d = self.data
+        adr = c.efc_address
+        act = adr >= 0
+        force = np.zeros(len(gid))
+        if act.any():
+            dims = c.dim
+            k = int(dims[0])
+            ef = d.efc_force
+            if self.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and k > 1 and (dims == k).all():
+                # normal force = sum of the 2*(dim-1) pyramid edge forces (as mj_contactForce decodes it)
+                rows = np.where(act, adr, 0)[:, None] + np.arange(2 * (k - 1))
+                force = np.where(act, ef[rows].sum(axis=1), 0.0)
+            else:
+                return self._contact_arrays_general(int(d.ncon))
+        return ContactArrays(
+            point=c.vert[:, 1].astype(int),
+            segment=c.elem[:, 1].astype(int),
+            geom=gid.astype(int),
+            obj=self._obj_of_geom[gid],
+            piece=self._piece_of_geom[gid],
+            dist=c.dist.copy(),
+            normal=c.frame[:, :3].copy(),
+            pos=c.pos.copy(),
+            force=force,
+            active=act,
+            self_pairs=_NO_PAIRS,
+            names=self._names,
+        )
+
     def contacts(self) -> tuple[RodContact, ...]:
         """Raw contacts of the rod with obstacle pieces at the current step, as objects."""
         return self.contact_arrays().as_list()
 
-    def record(self) -> StepRecord:
+    def record(self, points: np.ndarray | None = None) -> StepRecord:
+        """The current step's record (``points``: the cable points if already copied)."""
         d, mid = self.data, self.built.mocap_id
-        pts = self.points()
-        q = d.mocap_quat[mid].copy()
-        ca = self.contact_arrays()
         return StepRecord(
             step=self.step_index,
             time=float(d.time),
-            points=pts,
-            vectors=np.diff(pts, axis=0),
+            points=self.points() if points is None else points,
             gripper_pos=d.mocap_pos[mid].copy(),
-            gripper_quat=q,
-            gripper_z=quat_rotate(q, np.array([0.0, 0.0, 1.0])),
+            gripper_quat=d.mocap_quat[mid].copy(),
             target_pos=self.target_pos.copy(),
             target_quat=self.target_quat.copy(),
-            contact_arrays=ca,
+            contact_arrays=self.contact_arrays(),
             gripper_force=self.gripper_force(),
         )
 
@@ -718,10 +803,12 @@ class Simulator:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
         (a hanging cable pulls with its weight, -m g along z)."""
         d = self.data
-        n = int(d.ne)  # equality constraint rows come first
-        ids = d.efc_id[:n]
-        rows = (ids == self._hold_ids[0]) | (ids == self._hold_ids[1])
-        return d.efc_force[:n][rows].reshape(-1, 3).sum(axis=0)
+        ne = int(d.ne)  # equality constraint rows come first, in a fixed layout while ne is unchanged
+        if self._hold_rows is None or self._hold_rows[0] != ne:
+            ids = d.efc_id[:ne]
+            rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
+            self._hold_rows = (ne, rows)
+        return d.efc_force[self._hold_rows[1]].reshape(-1, 3).sum(axis=0)
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
         """Play ``script`` from the current gripper pose; yield one record per step.
@@ -754,6 +841,7 @@ class Simulator:
         m, d = self.model, self.data
         mujoco.mj_setState(m, d, state.mj, mujoco.mjtState.mjSTATE_INTEGRATION)
         mujoco.mj_forward(m, d)
+        self._reset_warnings()
         self.step_index = state.step
         self.target_pos = state.target_pos.copy()
         self.target_quat = state.target_quat.copy()

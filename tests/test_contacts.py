@@ -148,3 +148,113 @@ def test_changes_and_debounced_kept_situations(geom):
     assert [c for _, c in tr.transitions()] == [(), ("E",)]
     st = tr.restart(Rec(cable(R), step=100, time=0.2))
     assert tr.changes == [st] and len(tr.kept) == 1
+
+
+def _labels(geom, pts, pi, pc, thresholds):
+    """Per point: its hits as (piece id, faces, side of every threshold)."""
+    pt, pid, dist, faces, _ = geom.pair_hits(pts, pi, pc, contact_tol=1e-3)
+    out = {i: [] for i in range(len(pts))}
+    for k in range(len(pt)):
+        out[int(pt[k])].append((int(pid[k]), faces[k], tuple(bool(dist[k] <= t) for t in thresholds)))
+    return out
+
+
+def test_label_slack_bounds_how_far_a_point_keeps_its_labels(geom):
+    rng = np.random.default_rng(7)
+    # just above the table, around the L block's edges, corners and (mixed) faces, and within reach of
+    # its edges (where the faces of edges within the tangential tolerance count)
+    a = np.concatenate([p.edge_a for p in geom.pieces if p.obj == "lblock"])
+    b = np.concatenate([p.edge_b for p in geom.pieces if p.obj == "lblock"])
+    k = rng.integers(0, len(a), 400)
+    on_edges = a[k] + rng.uniform(0, 1, (400, 1)) * (b[k] - a[k])
+    off = rng.normal(size=(400, 3))
+    off *= rng.uniform(0, R + 2e-3, (400, 1)) / np.linalg.norm(off, axis=1)[:, None]
+    pts = np.concatenate(
+        [
+            rng.uniform([-0.4, -0.4, R - 1e-3], [0.4, 0.4, R + 1.5e-3], (200, 3)),
+            rng.uniform([0.08, 0.08, -0.002], [0.32, 0.32, 0.11], (400, 3)),
+            on_edges + off,
+        ]
+    )
+    n_pieces = len(geom.pieces)
+    pi = np.repeat(np.arange(len(pts)), n_pieces)
+    pc = np.tile(np.arange(n_pieces), len(pts))
+    thresholds = (R + 5e-4, R + 1e-3)
+    slack = geom.label_slack(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
+    assert slack.shape == (len(pts),) and (slack >= 0).all()
+    assert np.median(slack[:200]) > 1e-4  # above the table's face: a real margin, not 0
+    before = _labels(geom, pts, pi, pc, thresholds)
+    moved_labels = 0
+    for _ in range(6):  # every point moved by 99.9% of its slack in a random direction
+        u = rng.normal(size=pts.shape)
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        moved = pts + u * (0.999 * np.where(np.isfinite(slack), slack, 0.0))[:, None]
+        assert _labels(geom, moved, pi, pc, thresholds) == before
+        far = pts + u * (3.0 * slack + 1e-4)[:, None]  # beyond the slack labels do change somewhere
+        moved_labels += sum(
+            a != b
+            for a, b in zip(before.values(), _labels(geom, far, pi, pc, thresholds).values(), strict=True)
+        )
+    assert moved_labels > 0
+
+
+def test_label_slack_over_a_mixed_face_queried_alone(geom):
+    """Over a piece face that is only partly the object's surface (the rest is glued to the other
+    piece), labels change where the exposed part ends: the slack must see that even when only this
+    piece is queried."""
+    rng = np.random.default_rng(11)
+    (k, pf), *_ = [(k, f) for k, p in enumerate(geom.pieces) for f in p.faces if f.label == "mixed"]
+    verts = geom.pieces[k].vertices
+    on_plane = np.abs(verts @ pf.normal - pf.offset) < 1e-9
+    lo, hi = verts[on_plane].min(axis=0), verts[on_plane].max(axis=0)
+    pts = rng.uniform(lo, hi, (600, 3)) + pf.normal * rng.uniform(R - 1e-3, R + 1.5e-3, (600, 1))
+    pi, pc = np.arange(len(pts)), np.full(len(pts), k)
+    thresholds = (R + 5e-4, R + 1e-3)
+    slack = geom.label_slack(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
+    before = _labels(geom, pts, pi, pc, thresholds)
+    assert 0 < sum(bool(v) for v in before.values()) < len(pts)  # some over the exposed part only
+    for _ in range(6):
+        u = rng.normal(size=pts.shape)
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        moved = pts + u * (0.999 * np.where(np.isfinite(slack), slack, 0.0))[:, None]
+        assert _labels(geom, moved, pi, pc, thresholds) == before
+
+
+def test_label_slack_of_a_point_over_a_face_is_its_distance_to_the_thresholds(geom):
+    table = next(k for k, p in enumerate(geom.pieces) if p.obj == "table")
+    pts = np.array([[-0.3, -0.3, R + 2e-4]])  # 0.2 mm above contact, far from every edge
+    slack = geom.label_slack(pts, np.array([0]), np.array([table]), 1e-3, thresholds=(R + 5e-4, R + 1e-3))
+    assert slack[0] == pytest.approx(3e-4)
+
+
+def test_label_reuse_gives_the_states_of_labelling_every_step(geom):
+    """A cable sliding over the table into the L block's side and wobbling in height, its pairs
+    reported as a simulator would: the tracker that reuses labels yields exactly the states of one
+    that labels every step, while labelling far less often."""
+    fast, full = ContactTracker(geom, hold=0.01), ContactTracker(geom, hold=0.01, reuse=False)
+    rng = np.random.default_rng(3)
+    block = [k for k, p in enumerate(geom.pieces) if p.obj == "lblock"]
+    for k in range(500):
+        pts = cable(R + 1.5e-3 * np.sin(k / 15.0), x0=-0.23 + 1e-4 * k) + rng.normal(0, 2e-6, (21, 3))
+        pts[:, 1] = 0.2
+        low = np.nonzero(pts[:, 2] < R + 1e-3)[0]
+        ahead = np.nonzero(pts[:, 0] > 0.09)[0]
+        rows = [arrays(low, geom, force=0.05)] + [
+            arrays(ahead, geom, piece=geom.pieces[b].index, obj=1) for b in block
+        ]
+        rec = Rec(pts, step=k, time=0.002 * k, contact_arrays=_stack(rows))
+        a, b = fast.update(rec), full.update(rec)
+        assert (a.topological, a.discrete, a.forces) == (b.topological, b.discrete, b.forces), k
+    assert fast.changes == full.changes and fast.kept == full.kept
+    assert len(fast.changes) > 6 and any("lblock" in c.discrete.format() for c in fast.changes)
+    assert full.labellings == 500 and fast.labellings < 250
+
+
+def _stack(parts):
+    return SimpleNamespace(
+        **{
+            k: np.concatenate([getattr(p, k) for p in parts])
+            for k in ("point", "segment", "geom", "obj", "piece", "dist", "normal", "pos", "force", "active")
+        },
+        names=parts[0].names,
+    )
