@@ -866,6 +866,7 @@ class SceneGeometry:
         self._piece_ids: dict[tuple[str, int], int] | None = None
         self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._outlines: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
 
     # ---------------------------------------------------------------- construction
     @classmethod
@@ -939,6 +940,15 @@ class SceneGeometry:
         if self._piece_ids is None:
             self._piece_ids = {(p.obj, p.index): k for k, p in enumerate(self.pieces)}
         return self._piece_ids[(obj, index)]
+
+    def _boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding boxes of all pieces, (P,3) lower and upper corners."""
+        if self._box is None:
+            self._box = (
+                np.array([p.lo for p in self.pieces]).reshape(-1, 3),
+                np.array([p.hi for p in self.pieces]).reshape(-1, 3),
+            )
+        return self._box
 
     def _padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """All pieces' planes padded to one array: normals (P,F,3), offsets (P,F), face names (P,F),
@@ -1139,13 +1149,14 @@ class SceneGeometry:
         :meth:`label_slack`)."""
         out = np.full(len(pts), np.inf)
         objs = {o.name: i for i, o in enumerate(self.objects)}
-        for piece in self.pieces:
-            lo, hi = piece.lo - reach, piece.hi + reach
-            outside = np.maximum(lo - pts, pts - hi).max(axis=1)  # > 0: not in the piece's box
-            out = np.minimum(out, np.where(outside > 0, outside, np.inf))
-            sel = np.nonzero(outside <= 0)[0]
-            if len(sel) == 0:
-                continue
+        lo_all, hi_all = self._boxes()
+        outside_all = np.maximum(
+            lo_all[None] - reach - pts[:, None], pts[:, None] - hi_all[None] - reach
+        ).max(axis=2)
+        out = np.where(outside_all > 0, outside_all, np.inf).min(axis=1)  # (m,P) > 0: not in the box
+        for k in np.nonzero((outside_all <= 0).any(axis=0))[0].tolist():
+            piece = self.pieces[k]
+            sel = np.nonzero(outside_all[:, k] <= 0)[0]
             p = pts[sel]
             n, d = piece.normals, piece.offsets
             res = p @ n.T - d
@@ -1216,10 +1227,11 @@ class SceneGeometry:
         ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
         reach = r + contact_tol
         hits: list[PointHit] = []
-        for piece in self.pieces:
-            sel = np.nonzero(((pts >= piece.lo - reach) & (pts <= piece.hi + reach)).all(axis=1))[0]
-            if len(sel) == 0:
-                continue
+        lo_all, hi_all = self._boxes()
+        inbox = ((pts[:, None] >= lo_all[None] - reach) & (pts[:, None] <= hi_all[None] + reach)).all(axis=2)
+        for k in np.nonzero(inbox.any(axis=0))[0].tolist():  # pieces whose box (+ reach) holds a point
+            piece = self.pieces[k]
+            sel = np.nonzero(inbox[:, k])[0]
             p = pts[sel]
             n, d = piece.normals, piece.offsets
             scale = float(np.ptp(piece.vertices, axis=0).max())
