@@ -98,6 +98,7 @@ class ContactTracker:
         self._tip: tuple[Any, list[np.ndarray]] | None = None
         self._situation: Situation | None = None
         self._labels: _Labels | None = None
+        self._pairs_memo: tuple[np.ndarray, ...] | None = None
         self.labellings = 0
         self.partial_labellings = 0
         self.current: ContactState | None = None
@@ -110,7 +111,7 @@ class ContactTracker:
         self._debouncer = Debouncer(self.hold, is_transient)
         self._touching = np.zeros(0, dtype=np.int64)
         self._signature = self._situation = None
-        self._labels = None
+        self._labels = self._pairs_memo = None
         self.changes = []
         self.current = None
         return self.update(record)
@@ -139,11 +140,21 @@ class ContactTracker:
         if pairs is None:
             pi = np.repeat(np.arange(len(pts)), len(geom.pieces))
             pc = np.tile(np.arange(len(geom.pieces)), len(pts))
-        else:
-            pi, pc = pairs
-            if len(self._touching):
-                prev_pi, prev_pc = self._touching >> 20, self._touching & _LOW
-                pi, pc = _unique_pairs(np.concatenate([pi, prev_pi]), np.concatenate([pc, prev_pc]))
+        else:  # the reported pairs and those touching at the last step, once each
+            raw_pi, raw_pc = (np.asarray(a, dtype=np.int64) for a in pairs)
+            memo, touching = self._pairs_memo, self._touching
+            if (
+                memo is not None
+                and np.array_equal(raw_pi, memo[0])
+                and np.array_equal(raw_pc, memo[1])
+                and np.array_equal(touching, memo[2])
+            ):
+                pi, pc = memo[3], memo[4]
+            else:
+                pi, pc = _unique_pairs(
+                    np.concatenate([raw_pi, touching >> 20]), np.concatenate([raw_pc, touching & _LOW])
+                )
+                self._pairs_memo = (raw_pi, raw_pc, touching, pi, pc)
         owner = np.arange(len(pts))
         if between is not None and len(between[0]):
             vpos, vowner, vpiece = between
@@ -295,7 +306,7 @@ class ContactTracker:
             point_of, seg_rows, seg_pos = _locate(arrays, pts)
             ids = self._piece_ids(arrays)
             ok = point_of >= 0
-            pairs = _unique_pairs(point_of[ok], ids[ok])
+            pairs = (point_of[ok], ids[ok])
             between = (seg_pos, point_of[seg_rows], ids[seg_rows])
         elif arrays is not None:
             pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64))
@@ -403,9 +414,12 @@ def _locate(arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     """
     point = np.asarray(arrays.point, dtype=np.int64)
     seg = np.asarray(arrays.segment, dtype=np.int64)
-    out = point.copy()
-    rows = np.nonzero((point < 0) & (seg >= 0))[0]
-    s = seg[rows]
+    if point.max() < 0 and seg.min() >= 0:  # the usual: every contact is a segment's
+        out, rows, s = seg.copy(), np.arange(len(seg)), seg
+    else:
+        out = point.copy()
+        rows = np.nonzero((point < 0) & (seg >= 0))[0]
+        s = seg[rows]
     a = pts[s]
     ab = pts[s + 1] - a
     t = np.einsum("ij,ij->i", np.asarray(arrays.pos)[rows] - a, ab) / np.maximum(
