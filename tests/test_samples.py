@@ -68,7 +68,14 @@ def test_peg_in_hole_program_tells_the_fig11_story_with_the_right_classes():
 
     i = index("E", "V/F[block.F1]")  # first contact with the block's top face: establishing
     i = index("E", "E/F[block.F1]", i + 1)  # lying on it (after the tip left the face)
-    i = index("C", "E/E^P[block.F1,block.F3]", i + 1)  # over the block's edge: stable transition
-    i = index("E", "V/E^LS[block.F3,holeblock.F2]", i + 1)  # the groove with the hole block: new object
-    i = index("C", "V/VS[holeblock.F1,holeblock.F5,holeblock.F9]", i + 1)  # the tip in the hole's corner
-    assert i == len(steps) - 1 and not any(m.risky for m in prog.macros)
+    i = index("C", "E/E^P[block.F1,block.F3]", i + 1)  # turned about the block's edge: stable transition
+    i = index("C", "E/F[block.F3]", i + 1)  # hanging down along the block's side face
+    i = index("E", "V/E^LS[block.F3,holeblock.F2]", i + 1)  # slid down into the groove with the hole block
+    i = index("I", "V/E^LI[holeblock.F2,holeblock.F5]", i + 1)  # dragged onto the hole's rim edge
+    i = index("S", "V/VI[holeblock.F2,holeblock.F3,holeblock.F5]", i + 1)  # ... and its corner
+    i = index("S", "V/N", i + 1)  # the tip drops into the hole
+    i = index("E", "V/F[holeblock.F1]", i + 1)  # onto the hole's bottom
+    i = index("C", "V/VS[holeblock.F1,holeblock.F3,holeblock.F5]", i + 1)  # pushed into its bottom corner
+    assert i == len(steps) - 1
+    # the risky macros are exactly the rim: entering the instable edge, the corner, the drop
+    assert [m.label for m in prog.macros if m.risky] == ["I", "S", "S"]
