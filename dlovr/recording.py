@@ -199,7 +199,8 @@ def _dumps(obj: Any) -> bytes:
 
 
 def _floats(a: Any) -> list[float]:
-    return [float(x) for x in np.asarray(a, dtype=float).ravel()]
+    """A vector or array as a flat list of Python floats."""
+    return np.asarray(a, dtype=float).ravel().tolist()
 
 
 @contextmanager
