@@ -977,6 +977,24 @@ class SceneGeometry:
         inside = (res < -1e-9).all(axis=2) & (owner[None, :] != obj_index[:, None])
         return inside.any(axis=1)
 
+    def _best_planes(
+        self, pts: np.ndarray, pi: np.ndarray, pc: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For (point, piece) pairs: the points (K,3), their plane residuals (K,F), the plane of the
+        largest residual (its index, residual and normal) and the residuals of the projection onto it
+        against the piece's other planes (K,F; -inf for the plane itself)."""
+        n_all, d_all, _, _, _ = self._padded()
+        p = pts[pi]
+        nrm, off = n_all[pc], d_all[pc]  # (K,F,3), (K,F)
+        res = np.einsum("kfi,ki->kf", nrm, p) - off
+        k = np.arange(len(pi))
+        best = np.argmax(res, axis=1)
+        rb = res[k, best]
+        nb = nrm[k, best]
+        resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)  # residuals of the projection
+        resq[k, best] = -np.inf
+        return p, res, best, rb, nb, resq
+
     def pair_hits(
         self,
         points: np.ndarray,
@@ -1002,16 +1020,8 @@ class SceneGeometry:
         empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)))
         if len(pi) == 0:
             return empty
-        n_all, d_all, names, external, owner = self._padded()
-        p = pts[pi]
-        nrm, off = n_all[pc], d_all[pc]  # (K,F,3), (K,F)
-        res = np.einsum("kfi,ki->kf", nrm, p) - off
-        k = np.arange(len(pi))
-        best = np.argmax(res, axis=1)
-        rb = res[k, best]
-        nb = nrm[k, best]
-        resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)  # residuals of the projection
-        resq[k, best] = -np.inf
+        _, _, names, external, owner = self._padded()
+        p, _, best, rb, nb, resq = self._best_planes(pts, pi, pc)
         q = p - rb[:, None] * nb  # the closest point when it lies inside the face
         # the distance to a convex piece is at least its largest plane residual: beyond reach, no hit
         far = rb > r + contact_tol
@@ -1061,9 +1071,9 @@ class SceneGeometry:
         function of the point with a constant: plane residuals and their maximum, the distance to a
         convex piece, the closest point on it (a projection, non-expansive) and so its distances to
         the piece's edges, the outline of a mixed face's exposed part and the free-side probes of
-        its faces. The slack is the smallest of those
-        margins (the best-plane choice, a difference of two residuals, counts half). A point that
-        moves by less than its slack gets the same labels, so a caller may reuse them.
+        its faces. The slack is the smallest of those margins (the best-plane choice, a difference
+        of two residuals, counts half). A point that moves by less than its slack gets the same
+        labels, so a caller may reuse them.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
@@ -1073,17 +1083,9 @@ class SceneGeometry:
         out = np.full(len(pts), np.inf)
         if len(pi) == 0:
             return out
-        n_all, d_all, _, external, owner = self._padded()
-        p = pts[pi]
-        nrm, off = n_all[pc], d_all[pc]
-        res = np.einsum("kfi,ki->kf", nrm, p) - off
-        k = np.arange(len(pi))
-        best = np.argmax(res, axis=1)
-        rb = res[k, best]
-        nb = nrm[k, best]
+        _, _, _, external, owner = self._padded()
+        p, res, best, rb, nb, resq = self._best_planes(pts, pi, pc)
         second = np.partition(res, -2, axis=1)[:, -2] if res.shape[1] > 1 else np.full(len(pi), -np.inf)
-        resq = res - rb[:, None] * np.einsum("kfi,ki->kf", nrm, nb)
-        resq[k, best] = -np.inf
         rq = resq.max(axis=1)
         far = rb > reach
         interior = (rq <= -ttol) & ~far
