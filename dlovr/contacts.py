@@ -243,10 +243,10 @@ class ContactTracker:
         self.partial_labellings += 1
         again = lab.q[moved]
         rows = _member(pi, again)
-        pt, pid, dist, faces, _ = self.geometry.pair_hits(
-            pts_all, pi[rows], pc[rows], contact_tol=self.leave_tol
-        )
         r = self.geometry.radius
+        pt, pid, dist, faces, _, slack = self.geometry.pair_hits_and_slack(
+            pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(r + self.enter_tol, r + self.leave_tol)
+        )
         old = ~_member(lab.pt, again)
         pt_all = np.concatenate([lab.pt[old], pt])
         pid_all = np.concatenate([lab.pid[old], pid])
@@ -263,7 +263,7 @@ class ContactTracker:
         lab.pos = lab.pos.copy()
         lab.pos[moved] = pts_all[again]
         lab.slack2 = lab.slack2.copy()
-        lab.slack2[moved] = self._slack2(pts_all, pi[rows], pc[rows], again)
+        lab.slack2[moved] = slack[again] ** 2
         lab.owner = None  # the hits must be made again
         return lab
 

@@ -969,14 +969,6 @@ class SceneGeometry:
             self._pad = (n, d, names, external, owner)
         return self._pad
 
-    def _covered(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
-        """(K,) True where ``probes[k]`` lies inside a piece of an object other than ``obj_index[k]``
-        (vectorised :meth:`_inside_other`)."""
-        n_all, d_all, _, _, owner = self._padded()
-        res = np.einsum("pfi,ki->kpf", n_all, probes) - d_all[None]  # (K,P,F)
-        inside = (res < -1e-9).all(axis=2) & (owner[None, :] != obj_index[:, None])
-        return inside.any(axis=1)
-
     def _best_planes(
         self, pts: np.ndarray, pi: np.ndarray, pc: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -1013,45 +1005,7 @@ class SceneGeometry:
         not covered by another object), else no contact with that piece. Points with any other pair
         (near an edge or a vertex) go through :meth:`classify_points`.
         """
-        pts = np.asarray(points, dtype=float).reshape(-1, 3)
-        pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
-        r = self.radius
-        ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
-        empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)))
-        if len(pi) == 0:
-            return empty
-        _, _, names, external, owner = self._padded()
-        p, _, best, rb, nb, resq = self._best_planes(pts, pi, pc)
-        q = p - rb[:, None] * nb  # the closest point when it lies inside the face
-        # the distance to a convex piece is at least its largest plane residual: beyond reach, no hit
-        far = rb > r + contact_tol
-        interior = (resq.max(axis=1) <= -ttol) & ~far  # inside one face, away from all its edges
-        exposed = interior & external[pc, best]
-        for j in np.nonzero(interior & ~external[pc, best])[0]:
-            pf = self.pieces[int(pc[j])].faces[int(best[j])]  # a mixed face: is q on its exposed part?
-            exposed[j] = pf.label == "mixed" and bool(_points_in_triangles(q[j : j + 1], pf.exposed, 1e-9)[0])
-        # a face covered by another object there (a box's bottom on the table) is no contact face:
-        # probe the free side as classify_points does
-        if exposed.any():
-            exposed &= ~self._covered(q + 2.0 * r * nb, owner[pc])
-        pure = exposed
-        decided = far | interior  # interior but not exposed: the piece has no contact face here
-        amb_points = np.unique(pi[~decided])
-        take = pure & (rb <= r + contact_tol) & ~np.isin(pi, amb_points)
-        pt, pid, dist = pi[take], pc[take], rb[take]
-        faces = [(f,) for f in names[pid, best[take]].tolist()]
-        closest = q[take]
-        if len(amb_points):
-            extra = self.classify_points(pts[amb_points], r, contact_tol, tangential_tol)
-            pt = np.concatenate([pt, amb_points[[h.point for h in extra]].astype(np.int64)])
-            pid = np.concatenate(
-                [pid, np.array([self.piece_id(h.piece.obj, h.piece.index) for h in extra], np.int64)]
-            )
-            dist = np.concatenate([dist, [h.distance for h in extra]])
-            faces = faces + [h.faces for h in extra]
-            closest = np.concatenate([closest, np.array([h.closest for h in extra]).reshape(-1, 3)])
-        order = np.lexsort((pid, pt))
-        return pt[order], pid[order], dist[order], [faces[i] for i in order.tolist()], closest[order]
+        return self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, None)[:5]
 
     def label_slack(
         self,
@@ -1073,44 +1027,110 @@ class SceneGeometry:
         the piece's edges, the outline of a mixed face's exposed part and the free-side probes of
         its faces. The slack is the smallest of those margins (the best-plane choice, a difference
         of two residuals, counts half). A point that moves by less than its slack gets the same
-        labels, so a caller may reuse them.
+        labels, so a caller may reuse them. :meth:`pair_hits_and_slack` gives both in one pass.
         """
+        return self.pair_hits_and_slack(
+            points, point_idx, piece_idx, contact_tol, tangential_tol, thresholds
+        )[5]
+
+    def pair_hits_and_slack(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float = 5e-4,
+        tangential_tol: float | None = None,
+        thresholds: Sequence[float] = (),
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray]:
+        """:meth:`pair_hits` and :meth:`label_slack` of the same pairs, computed together."""
+        out = self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, tuple(thresholds))
+        return out  # type: ignore[return-value]
+
+    def _pair_hits(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float,
+        tangential_tol: float | None,
+        thresholds: tuple[float, ...] | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray | None]:
+        """:meth:`pair_hits`, and its slack per point when ``thresholds`` is not ``None``."""
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
         r = self.radius
         ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
         reach = r + contact_tol
-        out = np.full(len(pts), np.inf)
+        slack = None if thresholds is None else np.full(len(pts), np.inf)
         if len(pi) == 0:
-            return out
-        _, _, _, external, owner = self._padded()
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)), slack
+        _, _, names, external, owner = self._padded()
         p, res, best, rb, nb, resq = self._best_planes(pts, pi, pc)
-        second = np.partition(res, -2, axis=1)[:, -2] if res.shape[1] > 1 else np.full(len(pi), -np.inf)
+        q = p - rb[:, None] * nb  # the closest point when it lies inside the face
         rq = resq.max(axis=1)
+        # the distance to a convex piece is at least its largest plane residual: beyond reach, no hit
         far = rb > reach
-        interior = (rq <= -ttol) & ~far
-        m_reach = np.abs(rb - reach)
-        m_route = np.minimum(np.minimum(m_reach, np.abs(rq + ttol)), (rb - second) / 2.0)
-        margin = np.where(far, rb - reach, m_route)
-        ext, mixed = external[pc, best], np.zeros(len(pi), dtype=bool)
+        interior = (rq <= -ttol) & ~far  # inside one face, away from all its edges
+        ext = external[pc, best]
+        exposed = interior & ext
+        mixed = np.zeros(len(pi), dtype=bool)
         for j in np.nonzero(interior & ~ext)[0]:
-            mixed[j] = self.pieces[int(pc[j])].faces[int(best[j])].label == "mixed"
-        for j in np.nonzero(interior & mixed)[0]:
-            pf = self.pieces[int(pc[j])].faces[int(best[j])]
-            margin[j] = min(margin[j], self._outline_slack(pf, p[j : j + 1] - rb[j] * nb[j])[0])
-        hit = interior & (ext | mixed)
-        if hit.any():
-            rows = np.nonzero(hit)[0]
-            q = p[rows] - rb[rows, None] * nb[rows]
-            probe_slack = self._probe_slack(q + 2.0 * r * nb[rows], owner[pc[rows]])
-            margin[rows] = np.minimum(margin[rows], probe_slack)
-            for t in thresholds:
-                margin[rows] = np.minimum(margin[rows], np.abs(rb[rows] - t))
-        np.minimum.at(out, pi, margin)
-        amb = np.unique(pi[~(far | interior)])
-        if len(amb):
-            out[amb] = np.minimum(out[amb], self._classify_slack(pts[amb], reach, ttol, thresholds))
-        return out
+            pf = self.pieces[int(pc[j])].faces[int(best[j])]  # a mixed face: is q on its exposed part?
+            mixed[j] = pf.label == "mixed"
+            exposed[j] = mixed[j] and bool(_points_in_triangles(q[j : j + 1], pf.exposed, 1e-9)[0])
+        # a face covered by another object there (a box's bottom on the table) is no contact face:
+        # probe the free side as classify_points does
+        probed = interior & (ext | mixed) if slack is not None else exposed
+        cover_res = None
+        if probed.any():
+            rows = np.nonzero(probed)[0]
+            cover_res = self._probe_residuals(q[rows] + 2.0 * r * nb[rows], owner[pc[rows]])
+            covered = np.zeros(len(pi), dtype=bool)
+            covered[rows] = (cover_res < -1e-9).any(axis=1)
+            exposed &= ~covered
+        decided = far | interior  # interior but not exposed: the piece has no contact face here
+        amb_points = np.unique(pi[~decided])
+        take = exposed & (rb <= reach) & ~np.isin(pi, amb_points)
+        pt, pid, dist = pi[take], pc[take], rb[take]
+        faces = [(f,) for f in names[pid, best[take]].tolist()]
+        closest = q[take]
+        if slack is not None:
+            second = np.partition(res, -2, axis=1)[:, -2] if res.shape[1] > 1 else np.full(len(pi), -np.inf)
+            m_route = np.minimum(np.minimum(np.abs(rb - reach), np.abs(rq + ttol)), (rb - second) / 2.0)
+            margin = np.where(far, rb - reach, m_route)
+            for j in np.nonzero(interior & mixed)[0]:
+                pf = self.pieces[int(pc[j])].faces[int(best[j])]
+                margin[j] = min(margin[j], self._outline_slack(pf, q[j : j + 1])[0])
+            if cover_res is not None:
+                rows = np.nonzero(probed)[0]
+                m = np.abs(cover_res + 1e-9).min(axis=1) if cover_res.shape[1] else np.full(len(rows), np.inf)
+                margin[rows] = np.minimum(margin[rows], m)
+                for t in thresholds or ():
+                    margin[rows] = np.minimum(margin[rows], np.abs(rb[rows] - t))
+            np.minimum.at(slack, pi, margin)
+        if len(amb_points):
+            extra, amb_slack = self._classify(pts[amb_points], r, contact_tol, ttol, thresholds)
+            pt = np.concatenate([pt, amb_points[[h.point for h in extra]].astype(np.int64)])
+            pid = np.concatenate(
+                [pid, np.array([self.piece_id(h.piece.obj, h.piece.index) for h in extra], np.int64)]
+            )
+            dist = np.concatenate([dist, [h.distance for h in extra]])
+            faces = faces + [h.faces for h in extra]
+            closest = np.concatenate([closest, np.array([h.closest for h in extra]).reshape(-1, 3)])
+            if slack is not None and amb_slack is not None:
+                slack[amb_points] = np.minimum(slack[amb_points], amb_slack)
+        order = np.lexsort((pid, pt))
+        faces = [faces[i] for i in order.tolist()]
+        return pt[order], pid[order], dist[order], faces, closest[order], slack
+
+    def _probe_residuals(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
+        """(K,P) largest plane residual of each probe in each piece of another object than
+        ``obj_index`` (+inf for the object's own pieces): a probe is inside a piece where it is below
+        -1e-9, and it can move by its distance to -1e-9 before that changes."""
+        n_all, d_all, _, _, owner = self._padded()
+        res = (np.einsum("pfi,ki->kpf", n_all, probes) - d_all[None]).max(axis=2)
+        res[owner[None, :] == obj_index[:, None]] = np.inf
+        return res
 
     def _outline_slack(self, pf: PieceFace, q: np.ndarray) -> np.ndarray:
         """(m,) how far points ``q`` on a mixed piece face may move before they cross the outline of
@@ -1135,82 +1155,6 @@ class SceneGeometry:
         _, d = _closest_on_segments(np.asarray(q, dtype=float).reshape(-1, 3), a, b)
         return np.maximum(d.min(axis=1) - 1e-8, 0.0)
 
-    def _probe_slack(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
-        """(K,) margins of :meth:`_covered`: how far each probe may move before it enters or leaves a
-        piece of another object (the largest plane residual crossing -1e-9)."""
-        n_all, d_all, _, _, owner = self._padded()
-        res = (np.einsum("pfi,ki->kpf", n_all, probes) - d_all[None]).max(axis=2)  # (K,P)
-        m = np.abs(res + 1e-9)
-        m[owner[None, :] == obj_index[:, None]] = np.inf
-        return m.min(axis=1) if m.shape[1] else np.full(len(probes), np.inf)
-
-    def _classify_slack(
-        self, pts: np.ndarray, reach: float, ttol: float, thresholds: Sequence[float]
-    ) -> np.ndarray:
-        """Margins of :meth:`classify_points`' decisions for ``pts`` over every piece (see
-        :meth:`label_slack`)."""
-        out = np.full(len(pts), np.inf)
-        objs = {o.name: i for i, o in enumerate(self.objects)}
-        lo_all, hi_all = self._boxes()
-        outside_all = np.maximum(
-            lo_all[None] - reach - pts[:, None], pts[:, None] - hi_all[None] - reach
-        ).max(axis=2)
-        out = np.where(outside_all > 0, outside_all, np.inf).min(axis=1)  # (m,P) > 0: not in the box
-        for k in np.nonzero((outside_all <= 0).any(axis=0))[0].tolist():
-            piece = self.pieces[k]
-            sel = np.nonzero(outside_all[:, k] <= 0)[0]
-            p = pts[sel]
-            n, d = piece.normals, piece.offsets
-            res = p @ n.T - d
-            maxres = res.max(axis=1)
-            qe, de = _closest_on_segments(p, piece.edge_a, piece.edge_b)
-            # distance to the piece and closest point: the face or edge candidate, as classify_points
-            scale = float(np.ptp(piece.vertices, axis=0).max())
-            eps = 1e-9 * max(scale, 1e-3)
-            proj = p[:, None, :] - res[..., None] * n[None]
-            pres = np.einsum("mfk,gk->mfg", proj, n) - d[None, None]
-            valid = (pres <= eps).all(axis=2)
-            fdist = np.where(valid & (res >= -eps), res, np.inf)
-            m = len(p)
-            best_f = np.argmin(fdist, axis=1)
-            bf = fdist[np.arange(m), best_f]
-            be = de.min(axis=1) if de.shape[1] else np.full(m, np.inf)
-            use_face = bf <= be
-            q = proj[np.arange(m), best_f]
-            if de.shape[1]:
-                q = np.where(use_face[:, None], q, qe[np.arange(m), de.argmin(axis=1)])
-            dist = np.minimum(bf, be)
-            margin = np.where(maxres <= 0, 0.0, np.minimum(maxres, np.abs(dist - reach)))
-            close = (dist <= reach) & (maxres > 0)
-            if close.any():
-                rows = np.nonzero(close)[0]
-                qc = q[rows]
-                mc = margin[rows]
-                for t in thresholds:
-                    mc = np.minimum(mc, np.abs(dist[rows] - t))
-                active = np.zeros((len(rows), len(piece.faces)), dtype=bool)
-                uf = use_face[rows]
-                active[np.arange(len(rows))[uf], best_f[rows][uf]] = True
-                if len(piece.edge_faces):
-                    _, dq = _closest_on_segments(qc, piece.edge_a, piece.edge_b)
-                    mc = np.minimum(mc, np.abs(dq - ttol).min(axis=1))
-                    near = dq <= ttol
-                    for e, (fi, fj) in enumerate(piece.edge_faces):
-                        active[:, fi] |= near[:, e]
-                        active[:, fj] |= near[:, e]
-                me = objs[piece.obj]
-                for fi, pf in enumerate(piece.faces):
-                    on = np.nonzero(active[:, fi])[0]
-                    if len(on) == 0 or pf.label == "internal" or pf.face is None:
-                        continue
-                    if pf.label == "mixed":
-                        mc[on] = np.minimum(mc[on], self._outline_slack(pf, qc[on]))
-                    probes = qc[on] + 2.0 * self.radius * pf.normal
-                    mc[on] = np.minimum(mc[on], self._probe_slack(probes, np.full(len(on), me)))
-                margin[rows] = mc
-            out[sel] = np.minimum(out[sel], margin)
-        return out
-
     def classify_points(
         self,
         points: np.ndarray,
@@ -1227,10 +1171,26 @@ class SceneGeometry:
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         r = self.radius if radius is None else float(radius)
         ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
+        return self._classify(pts, r, contact_tol, ttol, None)[0]
+
+    def _classify(
+        self, pts: np.ndarray, r: float, contact_tol: float, ttol: float, thresholds: tuple[float, ...] | None
+    ) -> tuple[list[PointHit], np.ndarray | None]:
+        """:meth:`classify_points`, and the slack of its decisions per point over every piece (see
+        :meth:`label_slack`) when ``thresholds`` is not ``None``."""
         reach = r + contact_tol
         hits: list[PointHit] = []
+        objs = {o.name: i for i, o in enumerate(self.objects)}
         lo_all, hi_all = self._boxes()
-        inbox = ((pts[:, None] >= lo_all[None] - reach) & (pts[:, None] <= hi_all[None] + reach)).all(axis=2)
+        outside_all = np.maximum(
+            lo_all[None] - reach - pts[:, None], pts[:, None] - hi_all[None] - reach
+        ).max(axis=2)
+        inbox = outside_all <= 0  # (m,P): the point lies in the piece's box (+ reach)
+        slack = None
+        if thresholds is not None:  # outside a box by d (in one coordinate): d to go before it counts
+            slack = (
+                np.where(inbox, np.inf, outside_all).min(axis=1) if len(lo_all) else np.full(len(pts), np.inf)
+            )
         for k in np.nonzero(inbox.any(axis=0))[0].tolist():  # pieces whose box (+ reach) holds a point
             piece = self.pieces[k]
             sel = np.nonzero(inbox[:, k])[0]
@@ -1259,6 +1219,10 @@ class SceneGeometry:
                 use_face[:, None], proj[np.arange(m), best_f], qe[np.arange(m), best_e] if de.shape[1] else 0
             )
             dist = np.where(use_face, bf, be)
+            margin = None
+            if slack is not None:  # inside the piece: no bound; else the distance against reach
+                maxres = res.max(axis=1)
+                margin = np.where(maxres <= 0, 0.0, np.minimum(maxres, np.abs(dist - reach)))
             # inside points: nearest face plane
             if inside.any():
                 jin = np.argmax(res, axis=1)
@@ -1268,28 +1232,45 @@ class SceneGeometry:
                 use_face = use_face | inside
             close = dist <= reach
             if not close.any():
+                if slack is not None:
+                    slack[sel] = np.minimum(slack[sel], margin)
                 continue
             idx = np.nonzero(close)[0]
             q, dist, use_face, best_f = q[idx], dist[idx], use_face[idx], best_f[idx]
             active = np.zeros((len(idx), len(piece.faces)), dtype=bool)
             active[np.arange(len(idx))[use_face], best_f[use_face]] = True
+            mc = None if margin is None else margin[idx]
             if len(piece.edge_faces):
                 _, dq = _closest_on_segments(q, piece.edge_a, piece.edge_b)
                 near = dq <= ttol
                 for e, (fi, fj) in enumerate(piece.edge_faces):
                     active[:, fi] |= near[:, e]
                     active[:, fj] |= near[:, e]
+                if mc is not None:
+                    mc = np.minimum(mc, np.abs(dq - ttol).min(axis=1))
             real = np.zeros_like(active)
             for fi, pf in enumerate(piece.faces):
                 rows = np.nonzero(active[:, fi])[0]
                 if len(rows):
                     real[rows, fi] = self._exposed(pf, piece.obj, q[rows], max(eps, 1e-9))
+                    if mc is not None and pf.label != "internal" and pf.face is not None:
+                        if pf.label == "mixed":
+                            mc[rows] = np.minimum(mc[rows], self._outline_slack(pf, q[rows]))
+                        probes = q[rows] + 2.0 * self.radius * pf.normal
+                        cover = self._probe_residuals(probes, np.full(len(rows), objs[piece.obj]))
+                        m_cover = np.abs(cover + 1e-9).min(axis=1) if cover.shape[1] else np.inf
+                        mc[rows] = np.minimum(mc[rows], m_cover)
+            if slack is not None and margin is not None and mc is not None:
+                for t in thresholds or ():
+                    mc = np.minimum(mc, np.abs(dist - t))
+                margin[idx] = mc
+                slack[sel] = np.minimum(slack[sel], margin)
             for k in range(len(idx)):
                 names = tuple(sorted({piece.faces[fi].face for fi in np.nonzero(real[k])[0]}))  # type: ignore[type-var]
                 if names:
                     hits.append(PointHit(int(sel[idx[k]]), piece, q[k], float(dist[k]), names))  # type: ignore[arg-type]
         hits.sort(key=lambda h: (h.point, h.piece.obj, h.piece.index))
-        return hits
+        return hits, slack
 
     def point_primitives(
         self,
