@@ -277,7 +277,7 @@ def build_model(
             name1=GRIPPER,
             name2=f"{ROD}_{i}",
             solref=list(EQ_SOLREF),
-            solimp=list(EQ_SOLIMP),
+            solimp=list(edge_solimp(int(dlo.segments))),  # as stiff as the rod's edges: see edge_solimp
         )
         eq.data[0:3] = anchor
     eq = spec.add_equality(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -315,3 +316,10 @@ def test_a_finer_rod_does_not_stretch_more_under_its_weight() -> None:
 
     at40, at80 = hanging(40), hanging(80)
     assert at80 < 1.25 * at40 and at80 < 0.08
+    # the gripper's two holding constraints get the same impedance: they carry the cable's moment
+    # over one segment's length, and so load more as segments shorten
+    fine = Simulator.from_parts(
+        [], dc_replace(DLO, segments=80), GripperPose((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))
+    )
+    hold = [mujoco.mj_name2id(fine.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"hold_{i}") for i in range(2)]
+    np.testing.assert_allclose(fine.model.eq_solimp[hold], [edge_solimp(80)] * 2)
