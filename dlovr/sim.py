@@ -700,106 +700,70 @@ class Simulator:
 
     def contact_arrays(self) -> ContactArrays:
         """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects)."""
-        d = self.data
+        d, f = self.data, self.built.flex_id
         nc = int(d.ncon)
         if nc == 0:
             return _EMPTY_CONTACTS
         c = d.contact
         flex = c.flex[:nc]
         geom = c.geom[:nc]
-        f = self.built.flex_id
         gid = geom[:, 0]
+        rows: Any
+        side: Any
         if (flex[:, 1] == f).all() and (gid >= 0).all() and (self._piece_of_geom[gid] >= 0).all():
-            return self._rod_side1_contacts(c, gid)  # the usual case: every contact is obstacle vs rod
-        return self._contact_arrays_general(nc)
-
-    def _contact_arrays_general(self, nc: int) -> ContactArrays:
-        m, d, b = self.model, self.data, self.built
-        c = d.contact
-        flex = c.flex[:nc]
-        geom = c.geom[:nc]
-        f = b.flex_id
-        selfm = (flex[:, 0] == f) & (flex[:, 1] == f)
-        side1 = (flex[:, 1] == f) & (geom[:, 0] >= 0)  # obstacle is geom[0], rod is side 1
-        side0 = (flex[:, 0] == f) & (geom[:, 1] >= 0) & ~side1
-        sel = np.nonzero(side0 | side1)[0]
-        s1 = side1[sel]
-        gid = np.where(s1, geom[sel, 0], geom[sel, 1])
-        known = self._piece_of_geom[gid] >= 0
-        sel, s1, gid = sel[known], s1[known], gid[known]
-        side = np.where(s1, 1, 0)
-        sign = np.where(s1, 1.0, -1.0)[:, None]  # frame normal points from side 0 toward side 1
-        normal = sign * c.frame[sel, :3]
-        dist = c.dist[sel].copy()
-        pos = c.pos[sel].copy()
-        adr = c.efc_address[sel]
-        force = np.zeros(len(sel))
+            # the usual case: every contact has an obstacle piece as side 0 and the rod as side 1
+            rows, side, self_pairs = slice(None), 1, _NO_PAIRS
+            normal = c.frame[:, :3].copy()
+        else:
+            selfm = (flex[:, 0] == f) & (flex[:, 1] == f)
+            side1 = (flex[:, 1] == f) & (geom[:, 0] >= 0)  # obstacle is geom[0], rod is side 1
+            side0 = (flex[:, 0] == f) & (geom[:, 1] >= 0) & ~side1
+            sel = np.nonzero(side0 | side1)[0]
+            s1 = side1[sel]
+            gid = np.where(s1, geom[sel, 0], geom[sel, 1])
+            known = self._piece_of_geom[gid] >= 0
+            rows, s1, gid = sel[known], s1[known], gid[known]
+            side = np.where(s1, 1, 0)
+            sign = np.where(s1, 1.0, -1.0)[:, None]  # frame normal points from side 0 toward side 1
+            normal = sign * c.frame[rows, :3]
+            self_pairs = np.sort(c.elem[:nc][selfm], axis=1).astype(int)
+        adr = c.efc_address[rows]
         act = adr >= 0
-        if np.any(act):
-            if m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL:
-                # normal force = sum of the 2*(dim-1) pyramid edge forces (as mj_contactForce decodes it)
-                dims = c.dim[sel][act]
-                a = adr[act]
-                ef = d.efc_force
-                k = int(dims[0])
-                if k > 1 and np.all(dims == k):
-                    force[act] = ef[a[:, None] + np.arange(2 * (k - 1))].sum(axis=1)
-                else:
-                    force[act] = [
-                        float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
-                        for i, n in zip(a, dims, strict=True)
-                    ]
-            else:
-                force[act] = d.efc_force[adr[act]]
-        elem = c.elem[sel, side]
-        vert = c.vert[sel, side]
-        sp = np.sort(c.elem[:nc][selfm], axis=1)
         return ContactArrays(
-            point=vert.astype(int),
-            segment=elem.astype(int),
+            point=c.vert[rows, side].astype(int),
+            segment=c.elem[rows, side].astype(int),
             geom=gid.astype(int),
             obj=self._obj_of_geom[gid],
             piece=self._piece_of_geom[gid],
-            dist=dist,
+            dist=c.dist[rows].copy(),
             normal=normal,
-            pos=pos,
-            force=force,
+            pos=c.pos[rows].copy(),
+            force=self._normal_forces(c.dim[rows], adr, act),
             active=act,
-            self_pairs=sp.astype(int),
+            self_pairs=self_pairs,
             names=self._names,
         )
 
-    def _rod_side1_contacts(self, c: Any, gid: np.ndarray) -> ContactArrays:
-        """:meth:`contact_arrays` when every contact has an obstacle piece as side 0 and the rod as
-        side 1 (what MuJoCo reports for flex-geom pairs): the same arrays in fewer numpy calls."""
-        d = self.data
-        adr = c.efc_address
-        act = adr >= 0
-        force = np.zeros(len(gid))
-        if act.any():
-            dims = c.dim
-            k = int(dims[0])
-            ef = d.efc_force
-            if self.model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL and k > 1 and (dims == k).all():
-                # normal force = sum of the 2*(dim-1) pyramid edge forces (as mj_contactForce decodes it)
-                rows = np.where(act, adr, 0)[:, None] + np.arange(2 * (k - 1))
-                force = np.where(act, ef[rows].sum(axis=1), 0.0)
-            else:
-                return self._contact_arrays_general(int(d.ncon))
-        return ContactArrays(
-            point=c.vert[:, 1].astype(int),
-            segment=c.elem[:, 1].astype(int),
-            geom=gid.astype(int),
-            obj=self._obj_of_geom[gid],
-            piece=self._piece_of_geom[gid],
-            dist=c.dist.copy(),
-            normal=c.frame[:, :3].copy(),
-            pos=c.pos.copy(),
-            force=force,
-            active=act,
-            self_pairs=_NO_PAIRS,
-            names=self._names,
-        )
+    def _normal_forces(self, dims: np.ndarray, adr: np.ndarray, act: np.ndarray) -> np.ndarray:
+        """Normal force (N) of contacts with constraint rows at ``adr`` (0 where not ``act``ive), as
+        ``mj_contactForce`` decodes it: with pyramidal cones the sum of the 2*(dim-1) edge forces."""
+        ef = self.data.efc_force
+        force = np.zeros(len(adr))
+        if not act.any():
+            return force
+        if self.model.opt.cone != mujoco.mjtCone.mjCONE_PYRAMIDAL:
+            force[act] = ef[adr[act]]
+            return force
+        dims, a = dims[act], adr[act]
+        k = int(dims[0])
+        if k > 1 and (dims == k).all():
+            force[act] = ef[a[:, None] + np.arange(2 * (k - 1))].sum(axis=1)
+        else:
+            force[act] = [
+                float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
+                for i, n in zip(a, dims, strict=True)
+            ]
+        return force
 
     def contacts(self) -> tuple[RodContact, ...]:
         """Raw contacts of the rod with obstacle pieces at the current step, as objects."""
