@@ -191,13 +191,19 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
+    @property
+    def _thresholds(self) -> tuple[float, float]:
+        """The centerline distances (m) at which a pair enters contact and leaves it."""
+        r = self.geometry.radius
+        return r + self.enter_tol, r + self.leave_tol
+
     def _label(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels:
         """Label the queried (point, piece) pairs geometrically (which faces each touches, and on which
         side of the enter and leave distances)."""
-        geom, r = self.geometry, self.geometry.radius
         self.labellings += 1
-        pt, pid, dist, faces, _ = geom.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
-        enter, leave = dist <= r + self.enter_tol, dist <= r + self.leave_tol
+        pt, pid, dist, faces, _ = self.geometry.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
+        t_enter, t_leave = self._thresholds
+        enter, leave = dist <= t_enter, dist <= t_leave
         lab = _Labels(pi, pc, pts_all.copy(), pt, pid, faces, enter, leave, bool((leave & ~enter).any()))
         self._labels = lab
         return lab
@@ -232,10 +238,13 @@ class ContactTracker:
             return None
         if lab.q is None:
             lab.q = np.unique(lab.pi)
-            lab.pos, lab.slack2 = lab.pts[lab.q], self._slack2(lab.pts, lab.pi, lab.pc, lab.q)
+            slack = self.geometry.label_slack(
+                lab.pts, lab.pi, lab.pc, self.leave_tol, thresholds=self._thresholds
+            )
+            lab.slack2 = slack[lab.q] ** 2
         if len(lab.q) == 0:
             return lab
-        dp = pts_all[lab.q] - lab.pos
+        dp = pts_all[lab.q] - lab.pts[lab.q]
         moved = np.einsum("ij,ij->i", dp, dp) >= lab.slack2
         if not moved.any():
             return lab
@@ -243,9 +252,9 @@ class ContactTracker:
         self.partial_labellings += 1
         again = lab.q[moved]
         rows = _member(pi, again)
-        r = self.geometry.radius
+        t_enter, t_leave = self._thresholds
         pt, pid, dist, faces, _, slack = self.geometry.pair_hits_and_slack(
-            pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(r + self.enter_tol, r + self.leave_tol)
+            pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(t_enter, t_leave)
         )
         old = ~_member(lab.pt, again)
         pt_all = np.concatenate([lab.pt[old], pt])
@@ -253,26 +262,15 @@ class ContactTracker:
         order = np.lexsort((pid_all, pt_all))
         old_faces = [f for f, o in zip(lab.faces, old.tolist(), strict=True) if o]
         all_faces = old_faces + faces
-        enter = np.concatenate([lab.enter[old], dist <= r + self.enter_tol])[order]
-        leave = np.concatenate([lab.leave[old], dist <= r + self.leave_tol])[order]
+        enter = np.concatenate([lab.enter[old], dist <= t_enter])[order]
+        leave = np.concatenate([lab.leave[old], dist <= t_leave])[order]
         lab.pt, lab.pid, lab.enter, lab.leave = pt_all[order], pid_all[order], enter, leave
         lab.faces = [all_faces[i] for i in order.tolist()]
         lab.between = bool((leave & ~enter).any())
-        lab.pts = lab.pts.copy()
-        lab.pts[again] = pts_all[again]
-        lab.pos = lab.pos.copy()
-        lab.pos[moved] = pts_all[again]
-        lab.slack2 = lab.slack2.copy()
+        lab.pts[again] = pts_all[again]  # lab.pts is the labelling's own copy
         lab.slack2[moved] = slack[again] ** 2
         lab.owner = None  # the hits must be made again
         return lab
-
-    def _slack2(self, pts: np.ndarray, pi: np.ndarray, pc: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Squared slacks of query points ``q`` (``geometry.label_slack`` of their pairs)."""
-        r = self.geometry.radius
-        thresholds = (r + self.enter_tol, r + self.leave_tol)
-        slack = self.geometry.label_slack(pts, pi, pc, contact_tol=self.leave_tol, thresholds=thresholds)
-        return slack[q] ** 2
 
     def _piece_ids(self, arrays: Any) -> np.ndarray:
         """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts."""
@@ -372,9 +370,9 @@ def _tuple(v: Any) -> Any:
 class _Labels:
     """One geometric labelling: the queried pairs (``pi``, ``pc``) and query points ``pts`` then; per
     hit its query point ``pt``, piece ``pid``, ``faces`` and whether it lies within the enter and the
-    leave distance (``between``: some hit lies between the two). Filled in later: the slack of the
-    queried points ``q`` (positions ``pos``, squared slacks), and the kept hits last made from it
-    with the owners and keep mask used."""
+    leave distance (``between``: some hit lies between the two). Filled in later: the queried points
+    ``q`` with their squared slacks (``pts`` then holds, for each, where it was last labelled), and
+    the kept hits last made from it with the owners and keep mask used."""
 
     pi: np.ndarray
     pc: np.ndarray
@@ -386,7 +384,6 @@ class _Labels:
     leave: np.ndarray
     between: bool
     q: np.ndarray | None = None
-    pos: np.ndarray | None = None
     slack2: np.ndarray | None = None
     owner: np.ndarray | None = None
     keep: np.ndarray | None = None

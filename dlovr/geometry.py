@@ -1082,11 +1082,11 @@ class SceneGeometry:
         # probe the free side as classify_points does
         probed = interior & (ext | mixed) if slack is not None else exposed
         cover_res = None
-        if probed.any():
-            rows = np.nonzero(probed)[0]
-            cover_res = self._probe_residuals(q[rows] + 2.0 * r * nb[rows], owner[pc[rows]])
+        probe_rows = np.nonzero(probed)[0]
+        if len(probe_rows):
+            cover_res = self._probe_residuals(q[probe_rows] + 2.0 * r * nb[probe_rows], owner[pc[probe_rows]])
             covered = np.zeros(len(pi), dtype=bool)
-            covered[rows] = (cover_res < -1e-9).any(axis=1)
+            covered[probe_rows] = (cover_res < -1e-9).any(axis=1)
             exposed &= ~covered
         decided = far | interior  # interior but not exposed: the piece has no contact face here
         amb_points = np.unique(pi[~decided])
@@ -1102,7 +1102,7 @@ class SceneGeometry:
                 pf = self.pieces[int(pc[j])].faces[int(best[j])]
                 margin[j] = min(margin[j], self._outline_slack(pf, q[j : j + 1])[0])
             if cover_res is not None:
-                rows = np.nonzero(probed)[0]
+                rows = probe_rows
                 m = np.abs(cover_res + 1e-9).min(axis=1) if cover_res.shape[1] else np.full(len(rows), np.inf)
                 margin[rows] = np.minimum(margin[rows], m)
                 for t in thresholds or ():
@@ -1180,7 +1180,7 @@ class SceneGeometry:
         :meth:`label_slack`) when ``thresholds`` is not ``None``."""
         reach = r + contact_tol
         hits: list[PointHit] = []
-        objs = {o.name: i for i, o in enumerate(self.objects)}
+        owner = self._padded()[4]  # object index of every piece
         lo_all, hi_all = self._boxes()
         outside_all = np.maximum(
             lo_all[None] - reach - pts[:, None], pts[:, None] - hi_all[None] - reach
@@ -1257,7 +1257,7 @@ class SceneGeometry:
                         if pf.label == "mixed":
                             mc[rows] = np.minimum(mc[rows], self._outline_slack(pf, q[rows]))
                         probes = q[rows] + 2.0 * self.radius * pf.normal
-                        cover = self._probe_residuals(probes, np.full(len(rows), objs[piece.obj]))
+                        cover = self._probe_residuals(probes, np.full(len(rows), owner[k]))
                         m_cover = np.abs(cover + 1e-9).min(axis=1) if cover.shape[1] else np.inf
                         mc[rows] = np.minimum(mc[rows], m_cover)
             if slack is not None and margin is not None and mc is not None:
@@ -1265,10 +1265,10 @@ class SceneGeometry:
                     mc = np.minimum(mc, np.abs(dist - t))
                 margin[idx] = mc
                 slack[sel] = np.minimum(slack[sel], margin)
-            for k in range(len(idx)):
-                names = tuple(sorted({piece.faces[fi].face for fi in np.nonzero(real[k])[0]}))  # type: ignore[type-var]
+            for j in range(len(idx)):
+                names = tuple(sorted({piece.faces[fi].face for fi in np.nonzero(real[j])[0]}))  # type: ignore[type-var]
                 if names:
-                    hits.append(PointHit(int(sel[idx[k]]), piece, q[k], float(dist[k]), names))  # type: ignore[arg-type]
+                    hits.append(PointHit(int(sel[idx[j]]), piece, q[j], float(dist[j]), names))  # type: ignore[arg-type]
         hits.sort(key=lambda h: (h.point, h.piece.obj, h.piece.index))
         return hits, slack
 
