@@ -37,9 +37,28 @@ class ScriptError(ValueError):
 # -- quaternions (wxyz) ---------------------------------------------------------------------------
 
 
+def dot(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
+    """Dot product of two short vectors, summed left to right in Python floats.
+
+    The gripper's motion feeds MuJoCo, so it must round the same on every machine: ``np.dot`` and
+    ``np.linalg.norm`` go through BLAS, whose kernel (and so its rounding, with or without fused
+    multiply-adds) depends on the processor, and a recording made on one machine then replays a
+    last bit differently on another.
+    """
+    total = 0.0
+    for x, y in zip(np.asarray(a, dtype=float).tolist(), np.asarray(b, dtype=float).tolist(), strict=True):
+        total += x * y
+    return total
+
+
+def norm(v: Sequence[float] | np.ndarray) -> float:
+    """Euclidean length of a short vector, the same on every machine (see :func:`dot`)."""
+    return math.sqrt(dot(v, v))
+
+
 def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
-    return q / np.linalg.norm(q)
+    return q / norm(q)
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -73,12 +92,12 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
     """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz."""
     q0 = quat_normalize(q0)
     q1 = quat_normalize(q1)
-    dot = float(np.dot(q0, q1))
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:
+    c = dot(q0, q1)
+    if c < 0.0:
+        q1, c = -q1, -c
+    if c > 0.9995:
         return quat_normalize(q0 + s * (q1 - q0))
-    th = math.acos(min(1.0, dot))
+    th = math.acos(min(1.0, c))
     sin = math.sin(th)
     return (math.sin((1 - s) * th) / sin) * q0 + (math.sin(s * th) / sin) * q1
 

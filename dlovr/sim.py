@@ -48,7 +48,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from dlovr.script import Script, quat_normalize, quat_rotate, slerp
+from dlovr.script import Script, dot, norm, quat_normalize, quat_rotate, slerp
 
 #: Name of the rod (flexcomp) and prefix of its generated bodies/joints (``dlo_<i>``, ``dlo_twist_<i>``).
 ROD = "dlo"
@@ -597,7 +597,7 @@ class Simulator:
         self.target_pos = p.copy()
         if quat is not None:
             q = np.asarray(quat, dtype=float)
-            if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or norm(q) < 1e-9:
                 raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
             self.target_quat = quat_normalize(q)
 
@@ -607,14 +607,14 @@ class Simulator:
         # a gripper already at its target stays put (the general formulas below give the same values)
         if pos.tolist() != self.target_pos.tolist():
             delta = self.target_pos - pos
-            dist = float(np.linalg.norm(delta))
+            dist = norm(delta)  # not np.linalg.norm: this feeds MuJoCo (see dlovr.script.dot)
             vmax = self.max_speed * dt
             d.mocap_pos[mid] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
         q = d.mocap_quat[mid]
         tq = self.target_quat
         if q.tolist() != tq.tolist():
             q = q.copy()
-            angle = 2.0 * math.acos(min(1.0, abs(float(np.dot(q, tq)))))
+            angle = 2.0 * math.acos(min(1.0, abs(dot(q, tq))))
             wmax = self.max_angular_speed * dt
             d.mocap_quat[mid] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
 

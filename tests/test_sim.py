@@ -135,6 +135,35 @@ def test_run_script_is_deterministic_and_replayable() -> None:
         assert np.array_equal(sim.step().points, b[k - 1])
 
 
+def test_gripper_motion_rounds_the_same_on_every_processor(monkeypatch) -> None:
+    """What moves the gripper feeds MuJoCo, so it must not go through BLAS (np.dot, np.linalg.norm):
+    BLAS picks its kernel, and so its rounding, by processor, and a recording made on one machine
+    then replays a last bit differently on another (seen: an AMD EPYC against an AVX-512 Xeon)."""
+    from dlovr import script as script_mod
+
+    sim = on_table(max_speed=0.25, max_angular_speed=2.0)
+
+    def no_blas(*a, **k):
+        raise AssertionError("BLAS on the gripper's motion path")
+
+    monkeypatch.setattr(np, "dot", no_blas)
+    monkeypatch.setattr(np.linalg, "norm", no_blas)
+    monkeypatch.setattr(np, "vdot", no_blas)
+    monkeypatch.setattr(np, "inner", no_blas)
+    # a rotating, translating target: the position, angle and slerp paths all run
+    sim.set_target((0.0, 0.1, 0.9), (0.9, 0.1, -0.3, 0.2))
+    for _ in range(20):
+        sim.step()
+    pos, quat = SCRIPT.target_at(0.05, (-0.15, 0.0, TABLE_TOP + 0.0055), Q_X)
+    sim.set_target(pos, quat)
+    sim.step()
+    monkeypatch.undo()
+    # the helpers it uses add left to right in Python floats
+    a, b = [0.1, 0.7, -0.3, 1e-17], [0.3, -0.2, 0.9, 1.0]
+    assert script_mod.dot(a, b) == ((0.0 + 0.1 * 0.3) + 0.7 * -0.2) + -0.3 * 0.9 + 1e-17 * 1.0
+    assert script_mod.norm([3.0, 4.0]) == 5.0
+
+
 def test_divergence_nan_names_the_step() -> None:
     sim = on_table()
     sim.step(10)
