@@ -145,9 +145,9 @@ class ContactTracker:
             memo, touching = self._pairs_memo, self._touching
             if (
                 memo is not None
-                and np.array_equal(raw_pi, memo[0])
-                and np.array_equal(raw_pc, memo[1])
-                and np.array_equal(touching, memo[2])
+                and _same(raw_pi, memo[0])
+                and _same(raw_pc, memo[1])
+                and _same(touching, memo[2])
             ):
                 pi, pc = memo[3], memo[4]
             else:
@@ -171,11 +171,12 @@ class ContactTracker:
         # cache the situation by both
         if self._tip is None or self._tip[0] is not kept_hits:  # the tip's faces, per labelling
             tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
-            self._tip = (kept_hits, [geom.face_normal(f) for f in tip_faces])
+            normals = [np.asarray(geom.face_normal(f), dtype=float).tolist() for f in tip_faces]
+            self._tip = (kept_hits, normals)
         tip_normals = self._tip[1]
         tip = None
         if tip_normals:
-            tip = tip_touches(pts[n] - pts[n - 1], tip_normals, self.params.tip_angle_deg)
+            tip = tip_touches((pts[n] - pts[n - 1]).tolist(), tip_normals, self.params.tip_angle_deg)
         signature = (len(pts), tuple(kept_hits), tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
@@ -211,13 +212,13 @@ class ContactTracker:
     def _hits(self, lab: _Labels, owner: np.ndarray) -> list[_Hit]:
         """The labelled pairs that touch, by cable point, with hysteresis: a pair within the enter
         distance touches, one within the leave distance keeps touching."""
-        if lab.owner is not None and not lab.between and np.array_equal(owner, lab.owner):
+        if lab.owner is not None and not lab.between and _same(owner, lab.owner):
             return lab.hits  # the same owners, no pair between the distances: the same hits
         pt = owner[lab.pt]
         keys = pt << 20 | lab.pid
         keep = lab.enter | (_member(keys, self._touching) & lab.leave)
         self._touching = np.unique(keys[keep])
-        if lab.owner is not None and np.array_equal(keep, lab.keep) and np.array_equal(pt, lab.owner[lab.pt]):
+        if lab.owner is not None and _same(keep, lab.keep) and _same(pt, lab.owner[lab.pt]):
             lab.owner = owner
             return lab.hits
         faces = lab.faces
@@ -234,7 +235,7 @@ class ContactTracker:
         lab = self._labels
         if lab is None or not self.reuse or len(pi) != len(lab.pi) or len(pts_all) != len(lab.pts):
             return None
-        if not (np.array_equal(pi, lab.pi) and np.array_equal(pc, lab.pc)):
+        if not (_same(pi, lab.pi) and _same(pc, lab.pc)):
             return None
         if lab.q is None:
             lab.q = np.unique(lab.pi)
@@ -338,6 +339,13 @@ class ContactTracker:
         ]
 
 
+def _same(a: np.ndarray, b: np.ndarray | None) -> bool:
+    """Whether two integer or boolean arrays are equal, shape, dtype and all (cheaper than
+    ``np.array_equal`` for the small arrays here; a dtype mismatch reads as a difference, which
+    only costs a recomputation)."""
+    return b is not None and a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
 def _member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
     """``np.isin(a, sorted_b)`` for a sorted ``sorted_b`` (cheaper for the small arrays here)."""
     if len(sorted_b) == 0:
@@ -411,19 +419,23 @@ def _locate(arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     """
     point = np.asarray(arrays.point, dtype=np.int64)
     seg = np.asarray(arrays.segment, dtype=np.int64)
-    if point.max() < 0 and seg.min() >= 0:  # the usual: every contact is a segment's
-        out, rows, s = seg.copy(), np.arange(len(seg)), seg
+    pos = np.asarray(arrays.pos, dtype=float)
+    usual = point.max() < 0 and seg.min() >= 0  # every contact is a segment's
+    if usual:
+        rows, s = np.arange(len(seg)), seg
     else:
-        out = point.copy()
         rows = np.nonzero((point < 0) & (seg >= 0))[0]
-        s = seg[rows]
+        s, pos = seg[rows], pos[rows]
     a = pts[s]
     ab = pts[s + 1] - a
-    t = np.einsum("ij,ij->i", np.asarray(arrays.pos)[rows] - a, ab) / np.maximum(
-        np.einsum("ij,ij->i", ab, ab), 1e-18
-    )
-    t = np.clip(t, 0.0, 1.0)
-    out[rows] = np.where(t < 0.5, s, s + 1)
+    t = np.einsum("ij,ij->i", pos - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)  # on the segment
+    nearer = np.where(t < 0.5, s, s + 1)
+    if usual:
+        out = nearer
+    else:
+        out = point.copy()
+        out[rows] = nearer
     return out, rows, a + t[:, None] * ab
 
 

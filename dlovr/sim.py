@@ -401,6 +401,9 @@ class ContactArrays:
 
 
 _NO_PAIRS = np.zeros((0, 2), int)
+_PYRAMIDAL = int(mujoco.mjtCone.mjCONE_PYRAMIDAL)
+_EDGES = [np.arange(2 * (k - 1)) for k in range(7)]  # a pyramidal cone's edge rows, by contact dim
+
 _EMPTY_CONTACTS = ContactArrays(
     point=np.zeros(0, int),
     segment=np.zeros(0, int),
@@ -748,16 +751,22 @@ class Simulator:
         """Normal force (N) of contacts with constraint rows at ``adr`` (0 where not ``act``ive), as
         ``mj_contactForce`` decodes it: with pyramidal cones the sum of the 2*(dim-1) edge forces."""
         ef = self.data.efc_force
+        if len(adr) and act.all():  # the usual: every contact has constraint rows
+            if self.model.opt.cone != _PYRAMIDAL:
+                return ef[adr]
+            k = int(dims[0])
+            if k > 1 and (dims == k).all():
+                return ef[adr[:, None] + _EDGES[k]].sum(axis=1)
         force = np.zeros(len(adr))
         if not act.any():
             return force
-        if self.model.opt.cone != mujoco.mjtCone.mjCONE_PYRAMIDAL:
+        if self.model.opt.cone != _PYRAMIDAL:
             force[act] = ef[adr[act]]
             return force
         dims, a = dims[act], adr[act]
         k = int(dims[0])
         if k > 1 and (dims == k).all():
-            force[act] = ef[a[:, None] + np.arange(2 * (k - 1))].sum(axis=1)
+            force[act] = ef[a[:, None] + _EDGES[k]].sum(axis=1)
         else:
             force[act] = [
                 float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
