@@ -27,7 +27,7 @@ import mujoco
 
 from dlovr.scene import load_scene, scenes_dir
 from dlovr.script import load_script
-from dlovr.sim import SimulationDiverged, Simulator
+from dlovr.sim import DEFAULT_MAX_STRETCH, SimulationDiverged, Simulator
 
 
 def _commands(scene, script, max_stretch):
@@ -61,7 +61,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="peg_in_hole")
     ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
-    ap.add_argument("--max-stretch", type=float, default=0.10, help="divergence bound on segment stretch")
+    ap.add_argument(
+        "--max-stretch", type=float, default=DEFAULT_MAX_STRETCH, help="divergence bound on segment stretch"
+    )
     ap.add_argument("--segments", type=int, nargs="+", default=[40, 80])
     ap.add_argument("--repeat", type=int, default=2, help="interleaved rounds; the best of each is kept")
     args = ap.parse_args()

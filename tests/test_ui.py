@@ -262,7 +262,7 @@ def test_two_clients_disconnect_mid_drag_and_stop_mid_recording(tmp_path: Path, 
         # b still sees the simulation running (its time advances)
         t_b = b.get_by_text("t = ").first.inner_text()
         time.sleep(0.5)
-        assert b.get_by_text("t = ").first.inner_text() != t_b
+        assert b.get_by_text("t = ").first.inner_text() != t_b, srv.session.note
         # b takes over the gizmo
         drag(b, [g1 + np.array([0.02, 0.0, 0.0])])
         wait_for(lambda: srv.status()["gripper_pos"][0] > g1[0] + 0.015, what="b's drag")
