@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.discrete import DiscreteSituation, ModelParams, discretize
-from dlovr.geometry import SceneGeometry, primitives_per_point
+from dlovr.geometry import LabelBudgets, SceneGeometry, primitives_per_point
 from dlovr.topology import Situation, situation_from_points, tip_touches
 from dlovr.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
 
@@ -239,22 +239,29 @@ class ContactTracker:
             return None
         if lab.q is None:
             lab.q = np.unique(lab.pi)
-            slack = self.geometry.label_slack(
+            *_, slack, budgets = self.geometry.pair_hits_and_slack(
                 lab.pts, lab.pi, lab.pc, self.leave_tol, thresholds=self._thresholds
             )
             lab.slack2 = slack[lab.q] ** 2
+            lab.budgets = _own(budgets)
         if len(lab.q) == 0:
             return lab
         dp = pts_all[lab.q] - lab.pts[lab.q]
         moved = np.einsum("ij,ij->i", dp, dp) >= lab.slack2
         if not moved.any():
             return lab
+        # beyond its slack in some direction: within its budgets along and across its faces?
+        rows = _member(pi, lab.q[moved])
+        moving = pi[rows]
+        kept = lab.budgets.keeps(rows, pts_all[moving] - lab.pts[moving])
+        if kept.all():
+            return lab
         # label the moved points again (a point's labels depend on it alone) and splice them in
         self.partial_labellings += 1
-        again = lab.q[moved]
+        again = np.unique(moving[~kept])
         rows = _member(pi, again)
         t_enter, t_leave = self._thresholds
-        pt, pid, dist, faces, _, slack = self.geometry.pair_hits_and_slack(
+        pt, pid, dist, faces, _, slack, budgets = self.geometry.pair_hits_and_slack(
             pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(t_enter, t_leave)
         )
         old = ~_member(lab.pt, again)
@@ -268,8 +275,10 @@ class ContactTracker:
         lab.pt, lab.pid, lab.enter, lab.leave = pt_all[order], pid_all[order], enter, leave
         lab.faces = [all_faces[i] for i in order.tolist()]
         lab.between = bool((leave & ~enter).any())
-        lab.pts[again] = pts_all[again]  # lab.pts is the labelling's own copy
-        lab.slack2[moved] = slack[again] ** 2
+        lab.pts[again] = pts_all[again]  # lab.pts and the budgets are the labelling's own
+        lab.slack2[_member(lab.q, again)] = slack[again] ** 2
+        for mine, new in zip(_fields(lab.budgets), _fields(budgets), strict=True):
+            mine[rows] = new
         lab.owner = None  # the hits must be made again
         return lab
 
@@ -346,6 +355,15 @@ def _same(a: np.ndarray, b: np.ndarray | None) -> bool:
     return b is not None and a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
+def _fields(b: LabelBudgets) -> tuple[np.ndarray, ...]:
+    return b.normal, b.along, b.across, b.any
+
+
+def _own(b: LabelBudgets) -> LabelBudgets:
+    """Budgets with arrays of their own (a partial relabel writes rows of them in place)."""
+    return LabelBudgets(*(np.array(a, dtype=float) for a in _fields(b)))
+
+
 def _member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
     """``np.isin(a, sorted_b)`` for a sorted ``sorted_b`` (cheaper for the small arrays here)."""
     if len(sorted_b) == 0:
@@ -393,6 +411,7 @@ class _Labels:
     between: bool
     q: np.ndarray | None = None
     slack2: np.ndarray | None = None
+    budgets: LabelBudgets | None = None
     owner: np.ndarray | None = None
     keep: np.ndarray | None = None
     hits: list[_Hit] = field(default_factory=list)

@@ -650,6 +650,30 @@ def _build_piece(
 
 
 @dataclass(frozen=True)
+class LabelBudgets:
+    """How far the point of each queried (point, piece) pair may move, split by direction, before
+    what :meth:`SceneGeometry.pair_hits` reports for the pair could change (see
+    :meth:`SceneGeometry.label_budgets`). Rows are the pairs as queried. ``normal``: (K,3) unit
+    normal (world frame) of the pair's nearest face plane; ``along`` (m): budget for the move's
+    component along it; ``across`` (m): for its component in that plane; ``any`` (m): for the whole
+    move. A move keeps the labels when it is under all three (:meth:`keeps`)."""
+
+    normal: np.ndarray
+    along: np.ndarray
+    across: np.ndarray
+    any: np.ndarray
+
+    def keeps(self, rows: np.ndarray, moves: np.ndarray) -> np.ndarray:
+        """Whether moving the points of pairs ``rows`` by ``moves`` ((m,3), m) keeps their labels."""
+        d2 = np.einsum("ij,ij->i", moves, moves)
+        dn = np.einsum("ij,ij->i", moves, self.normal[rows])
+        dn2 = dn * dn
+        return (
+            (d2 < self.any[rows] ** 2) & (dn2 < self.along[rows] ** 2) & (d2 - dn2 < self.across[rows] ** 2)
+        )
+
+
+@dataclass(frozen=True)
 class EdgeInfo:
     """An edge of an object: two faces meeting, convex or concave, free-space opening angle."""
 
@@ -1033,6 +1057,28 @@ class SceneGeometry:
             points, point_idx, piece_idx, contact_tol, tangential_tol, thresholds
         )[5]
 
+    def label_budgets(
+        self,
+        points: np.ndarray,
+        point_idx: np.ndarray,
+        piece_idx: np.ndarray,
+        contact_tol: float = 5e-4,
+        tangential_tol: float | None = None,
+        thresholds: Sequence[float] = (),
+    ) -> LabelBudgets:
+        """:meth:`label_slack` per queried pair and split by direction: a point over the inside of a
+        face keeps its labels while it moves less than the distance and threshold margins along
+        the face's normal and less than its margins to the face's edges, outline and cover across
+        it, however far the other way (a cable sliding along a face, or a segment's contact point
+        jumping along it). The decisions about the face plane's residual depend on the move along
+        the normal alone, those about the projection onto it on the move across it alone; which
+        plane is nearest stays put while the whole move is under half the gap to the next.
+        Points near an edge or vertex, and pairs beyond reach, get their slack in every direction.
+        :meth:`pair_hits_and_slack` gives these budgets too, as its last element."""
+        return self.pair_hits_and_slack(
+            points, point_idx, piece_idx, contact_tol, tangential_tol, thresholds
+        )[6]
+
     def pair_hits_and_slack(
         self,
         points: np.ndarray,
@@ -1041,8 +1087,11 @@ class SceneGeometry:
         contact_tol: float = 5e-4,
         tangential_tol: float | None = None,
         thresholds: Sequence[float] = (),
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray]:
-        """:meth:`pair_hits` and :meth:`label_slack` of the same pairs, computed together."""
+    ) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray, LabelBudgets
+    ]:
+        """:meth:`pair_hits`, :meth:`label_slack` and :meth:`label_budgets` of the same pairs,
+        computed together."""
         out = self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, tuple(thresholds))
         return out  # type: ignore[return-value]
 
@@ -1054,8 +1103,17 @@ class SceneGeometry:
         contact_tol: float,
         tangential_tol: float | None,
         thresholds: tuple[float, ...] | None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray | None]:
-        """:meth:`pair_hits`, and its slack per point when ``thresholds`` is not ``None``."""
+    ) -> tuple[
+        np.ndarray,
+        np.ndarray,
+        np.ndarray,
+        list[tuple[str, ...]],
+        np.ndarray,
+        np.ndarray | None,
+        LabelBudgets | None,
+    ]:
+        """:meth:`pair_hits`, and its slack per point and budgets per pair when ``thresholds`` is not
+        ``None``."""
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         pi, pc = np.asarray(point_idx, dtype=np.int64), np.asarray(piece_idx, dtype=np.int64)
         r = self.radius
@@ -1063,7 +1121,16 @@ class SceneGeometry:
         reach = r + contact_tol
         slack = None if thresholds is None else np.full(len(pts), np.inf)
         if len(pi) == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], np.zeros((0, 3)), slack
+            none = None if slack is None else LabelBudgets(np.zeros((0, 3)), *(np.zeros(0) for _ in range(3)))
+            return (
+                np.zeros(0, np.int64),
+                np.zeros(0, np.int64),
+                np.zeros(0),
+                [],
+                np.zeros((0, 3)),
+                slack,
+                none,
+            )
         _, _, names, external, owner = self._padded()
         p, res, best, rb, nb, resq = self._best_planes(pts, pi, pc)
         q = p - rb[:, None] * nb  # the closest point when it lies inside the face
@@ -1094,20 +1161,26 @@ class SceneGeometry:
         pt, pid, dist = pi[take], pc[take], rb[take]
         faces = [(f,) for f in names[pid, best[take]].tolist()]
         closest = q[take]
+        budgets = None
         if slack is not None:
+            # margins by what they depend on: the best plane's residual moves with the move along its
+            # normal, the projection q (and its edges, outline and probes) with the move across it
             second = np.partition(res, -2, axis=1)[:, -2] if res.shape[1] > 1 else np.full(len(pi), -np.inf)
-            m_route = np.minimum(np.minimum(np.abs(rb - reach), np.abs(rq + ttol)), (rb - second) / 2.0)
-            margin = np.where(far, rb - reach, m_route)
+            along = np.where(far, np.inf, np.abs(rb - reach))
+            across = np.where(far, np.inf, np.abs(rq + ttol))
+            whole = np.where(far, rb - reach, (rb - second) / 2.0)
             for j in np.nonzero(interior & mixed)[0]:
                 pf = self.pieces[int(pc[j])].faces[int(best[j])]
-                margin[j] = min(margin[j], self._outline_slack(pf, q[j : j + 1])[0])
+                across[j] = min(across[j], self._outline_slack(pf, q[j : j + 1])[0])
             if cover_res is not None:
                 rows = probe_rows
                 m = np.abs(cover_res + 1e-9).min(axis=1) if cover_res.shape[1] else np.full(len(rows), np.inf)
-                margin[rows] = np.minimum(margin[rows], m)
+                across[rows] = np.minimum(across[rows], m)
                 for t in thresholds or ():
-                    margin[rows] = np.minimum(margin[rows], np.abs(rb[rows] - t))
+                    along[rows] = np.minimum(along[rows], np.abs(rb[rows] - t))
+            margin = np.minimum(np.minimum(along, across), whole)
             np.minimum.at(slack, pi, margin)
+            budgets = (along, across, whole)
         if len(amb_points):
             extra, amb_slack = self._classify(pts[amb_points], r, contact_tol, ttol, thresholds)
             pt = np.concatenate([pt, amb_points[[h.point for h in extra]].astype(np.int64)])
@@ -1119,9 +1192,16 @@ class SceneGeometry:
             closest = np.concatenate([closest, np.array([h.closest for h in extra]).reshape(-1, 3)])
             if slack is not None and amb_slack is not None:
                 slack[amb_points] = np.minimum(slack[amb_points], amb_slack)
+        pair_budgets = None
+        if slack is not None and budgets is not None:
+            along, across, whole = budgets
+            if len(amb_points):  # near an edge or vertex: the point's slack, in every direction
+                amb = np.isin(pi, amb_points)
+                along[amb], across[amb], whole[amb] = np.inf, np.inf, slack[pi[amb]]
+            pair_budgets = LabelBudgets(nb, along, across, whole)
         order = np.lexsort((pid, pt))
         faces = [faces[i] for i in order.tolist()]
-        return pt[order], pid[order], dist[order], faces, closest[order], slack
+        return pt[order], pid[order], dist[order], faces, closest[order], slack, pair_budgets
 
     def _probe_residuals(self, probes: np.ndarray, obj_index: np.ndarray) -> np.ndarray:
         """(K,P) largest plane residual of each probe in each piece of another object than

@@ -220,6 +220,53 @@ def test_label_slack_over_a_mixed_face_queried_alone(geom):
         assert _labels(geom, moved, pi, pc, thresholds) == before
 
 
+def test_label_budgets_bound_moves_along_and_across_the_faces(geom):
+    """Per pair, a move under its budget along the nearest face's normal, across it and in all keeps
+    the labels, though it goes far beyond the point's slack in some directions (sliding on a face)."""
+    rng = np.random.default_rng(5)
+    a = np.concatenate([p.edge_a for p in geom.pieces if p.obj == "lblock"])
+    b = np.concatenate([p.edge_b for p in geom.pieces if p.obj == "lblock"])
+    k = rng.integers(0, len(a), 300)
+    off = rng.normal(size=(300, 3))
+    off *= rng.uniform(0, R + 2e-3, (300, 1)) / np.linalg.norm(off, axis=1)[:, None]
+    pts = np.concatenate(
+        [
+            rng.uniform([-0.4, -0.4, R - 1e-3], [0.4, 0.4, R + 1.5e-3], (300, 3)),  # over the table
+            rng.uniform([0.08, 0.08, -0.002], [0.32, 0.32, 0.11], (300, 3)),  # around the L block
+            a[k] + rng.uniform(0, 1, (300, 1)) * (b[k] - a[k]) + off,  # near its edges
+        ]
+    )
+    n_pieces = len(geom.pieces)
+    pi = np.repeat(np.arange(len(pts)), n_pieces)
+    pc = np.tile(np.arange(n_pieces), len(pts))
+    thresholds = (R + 5e-4, R + 1e-3)
+    budgets = geom.label_budgets(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
+    slack = geom.label_slack(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
+    # the slack is the budgets' smallest, per point
+    least = np.minimum(np.minimum(budgets.along, budgets.across), budgets.any)
+    per_point = np.full(len(pts), np.inf)
+    np.minimum.at(per_point, pi, least)
+    assert np.array_equal(per_point, slack)
+    before = _labels(geom, pts, pi, pc, thresholds)
+    beyond = 0
+    for _ in range(6):  # each point moved in a random direction as far as all its pairs' budgets allow
+        u = rng.normal(size=pts.shape)
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        un = np.abs(np.einsum("ij,ij->i", u[pi], budgets.normal))
+        ut = np.sqrt(np.maximum(1.0 - un**2, 0.0))
+        with np.errstate(divide="ignore"):
+            reach = np.minimum(np.minimum(budgets.along / un, budgets.across / ut), budgets.any)
+        step = np.full(len(pts), np.inf)
+        np.minimum.at(step, pi, reach)
+        step = 0.999 * np.where(np.isfinite(step), step, 0.0)
+        moved = pts + u * step[:, None]
+        some = step[pi] > 0  # a zero budget (a point inside a piece) keeps nothing, not even no move
+        assert budgets.keeps(np.arange(len(pi)), (moved - pts)[pi])[some].all()
+        assert _labels(geom, moved, pi, pc, thresholds) == before
+        beyond += int((step > 2.0 * slack).sum())
+    assert beyond > 300  # many moves went well past the slack
+
+
 def test_label_slack_of_a_point_over_a_face_is_its_distance_to_the_thresholds(geom):
     table = next(k for k, p in enumerate(geom.pieces) if p.obj == "table")
     pts = np.array([[-0.3, -0.3, R + 2e-4]])  # 0.2 mm above contact, far from every edge
