@@ -652,11 +652,20 @@ def _build_piece(
 @dataclass(frozen=True)
 class LabelBudgets:
     """How far the point of each queried (point, piece) pair may move, split by direction, before
-    what :meth:`SceneGeometry.pair_hits` reports for the pair could change (see
-    :meth:`SceneGeometry.label_budgets`). Rows are the pairs as queried. ``normal``: (K,3) unit
-    normal (world frame) of the pair's nearest face plane; ``along`` (m): budget for the move's
-    component along it; ``across`` (m): for its component in that plane; ``any`` (m): for the whole
-    move. A move keeps the labels when it is under all three (:meth:`keeps`)."""
+    what :meth:`SceneGeometry.pair_hits` reports for the pair could change: the
+    :meth:`SceneGeometry.label_slack` of each pair, split by direction
+    (:meth:`SceneGeometry.pair_hits_and_slack` gives them). Rows are the pairs as queried.
+    ``normal``: (K,3) unit normal (world frame) of the pair's nearest face plane; ``along`` (m):
+    budget for the move's component along it; ``across`` (m): for its component in that plane;
+    ``any`` (m): for the whole move. A move keeps the labels when it is under all three
+    (:meth:`keeps`).
+
+    A point over the inside of a face keeps its labels however far it moves across the face (a
+    cable sliding on it, or a segment's contact point jumping along it) until it nears the face's
+    edges, outline or cover: the decisions about the face plane's residual depend on the move along
+    the normal alone, those about the projection onto it on the move across it alone, and which
+    plane is nearest stays put while the whole move is under half the gap to the next. Points near
+    an edge or vertex, and pairs beyond reach, get their slack in every direction."""
 
     normal: np.ndarray
     along: np.ndarray
@@ -1057,28 +1066,6 @@ class SceneGeometry:
             points, point_idx, piece_idx, contact_tol, tangential_tol, thresholds
         )[5]
 
-    def label_budgets(
-        self,
-        points: np.ndarray,
-        point_idx: np.ndarray,
-        piece_idx: np.ndarray,
-        contact_tol: float = 5e-4,
-        tangential_tol: float | None = None,
-        thresholds: Sequence[float] = (),
-    ) -> LabelBudgets:
-        """:meth:`label_slack` per queried pair and split by direction: a point over the inside of a
-        face keeps its labels while it moves less than the distance and threshold margins along
-        the face's normal and less than its margins to the face's edges, outline and cover across
-        it, however far the other way (a cable sliding along a face, or a segment's contact point
-        jumping along it). The decisions about the face plane's residual depend on the move along
-        the normal alone, those about the projection onto it on the move across it alone; which
-        plane is nearest stays put while the whole move is under half the gap to the next.
-        Points near an edge or vertex, and pairs beyond reach, get their slack in every direction.
-        :meth:`pair_hits_and_slack` gives these budgets too, as its last element."""
-        return self.pair_hits_and_slack(
-            points, point_idx, piece_idx, contact_tol, tangential_tol, thresholds
-        )[6]
-
     def pair_hits_and_slack(
         self,
         points: np.ndarray,
@@ -1090,8 +1077,8 @@ class SceneGeometry:
     ) -> tuple[
         np.ndarray, np.ndarray, np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray, LabelBudgets
     ]:
-        """:meth:`pair_hits`, :meth:`label_slack` and :meth:`label_budgets` of the same pairs,
-        computed together."""
+        """:meth:`pair_hits`, :meth:`label_slack` and the same slack per pair split by direction
+        (:class:`LabelBudgets`), computed together."""
         out = self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, tuple(thresholds))
         return out  # type: ignore[return-value]
 
@@ -1193,7 +1180,7 @@ class SceneGeometry:
             if slack is not None and amb_slack is not None:
                 slack[amb_points] = np.minimum(slack[amb_points], amb_slack)
         pair_budgets = None
-        if slack is not None and budgets is not None:
+        if budgets is not None:  # given with the slack
             along, across, whole = budgets
             if len(amb_points):  # near an edge or vertex: the point's slack, in every direction
                 amb = np.isin(pi, amb_points)

@@ -757,27 +757,26 @@ class Simulator:
         """Normal force (N) of contacts with constraint rows at ``adr`` (0 where not ``act``ive), as
         ``mj_contactForce`` decodes it: with pyramidal cones the sum of the 2*(dim-1) edge forces."""
         ef = self.data.efc_force
-        if len(adr) and act.all():  # the usual: every contact has constraint rows
-            if self.model.opt.cone != _PYRAMIDAL:
-                return ef[adr]
-            k = int(dims[0])
-            if k > 1 and (dims == k).all():
-                return ef[adr[:, None] + _EDGES[k]].sum(axis=1)
-        force = np.zeros(len(adr))
-        if not act.any():
-            return force
-        if self.model.opt.cone != _PYRAMIDAL:
-            force[act] = ef[adr[act]]
-            return force
-        dims, a = dims[act], adr[act]
+        every = len(adr) > 0 and bool(act.all())  # the usual: every contact has constraint rows
+        if not every and not act.any():
+            return np.zeros(len(adr))
+        dims, a = (dims, adr) if every else (dims[act], adr[act])
         k = int(dims[0])
-        if k > 1 and (dims == k).all():
-            force[act] = ef[a[:, None] + _EDGES[k]].sum(axis=1)
+        if self.model.opt.cone != _PYRAMIDAL:
+            f = ef[a]
+        elif k > 1 and (dims == k).all():
+            f = ef[a[:, None] + _EDGES[k]].sum(axis=1)
         else:
-            force[act] = [
-                float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
-                for i, n in zip(a, dims, strict=True)
-            ]
+            f = np.array(
+                [
+                    float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
+                    for i, n in zip(a, dims, strict=True)
+                ]
+            )
+        if every:
+            return f
+        force = np.zeros(len(adr))
+        force[act] = f
         return force
 
     def contacts(self) -> tuple[RodContact, ...]:

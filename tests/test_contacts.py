@@ -240,7 +240,7 @@ def test_label_budgets_bound_moves_along_and_across_the_faces(geom):
     pi = np.repeat(np.arange(len(pts)), n_pieces)
     pc = np.tile(np.arange(n_pieces), len(pts))
     thresholds = (R + 5e-4, R + 1e-3)
-    budgets = geom.label_budgets(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
+    budgets = geom.pair_hits_and_slack(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)[6]
     slack = geom.label_slack(pts, pi, pc, contact_tol=1e-3, thresholds=thresholds)
     # the slack is the budgets' smallest, per point
     least = np.minimum(np.minimum(budgets.along, budgets.across), budgets.any)
