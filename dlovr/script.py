@@ -17,6 +17,7 @@ naming the file, the waypoint and the key.
 
 from __future__ import annotations
 
+import bisect
 import math
 import tomllib
 from collections.abc import Sequence
@@ -134,29 +135,74 @@ class Script:
         """Gripper target (pos, quat wxyz) at time ``t`` s after the script starts.
 
         Without a start pose the first waypoint is the start (held until it is "reached").
-        Before 0 the start pose, after the end the last waypoint.
+        Before 0 the start pose, after the end the last waypoint. For many calls from one start pose
+        build the :meth:`plan` once.
         """
+        return self.plan(start_pos, start_quat).at(t)
+
+    def plan(
+        self, start_pos: Sequence[float] | None = None, start_quat: Sequence[float] | None = None
+    ) -> Plan:
+        """The script's legs from a start pose (see :meth:`target_at`), precomputed for lookups."""
         w0 = self.waypoints[0]
-        p_prev = np.asarray(start_pos if start_pos is not None else w0.pos, dtype=float)
+        p_prev = np.asarray(start_pos if start_pos is not None else w0.pos, dtype=float).copy()
         if start_quat is not None:
             q_prev = quat_normalize(start_quat)
         else:
             q_prev = quat_normalize(w0.quat if w0.quat is not None else (1.0, 0.0, 0.0, 0.0))
-        if t <= 0.0:
-            return p_prev.copy(), q_prev
+        start = (p_prev, q_prev)
+        ends: list[float] = []
+        legs: list[_Leg] = []
         tc = 0.0
         for w in self.waypoints:
             p = np.asarray(w.pos, dtype=float)
             q = q_prev if w.quat is None else quat_normalize(w.quat)
-            if t < tc + w.duration:
-                s = (t - tc) / w.duration
-                return p_prev + s * (p - p_prev), slerp(q_prev, q, s)
+            legs.append(_Leg(tc, w.duration, p_prev, p, q_prev, q))
             tc += w.duration
-            if t < tc + w.hold:
-                return p.copy(), q
+            ends.append(tc)  # the move ends (its hold starts) here
             tc += w.hold
+            ends.append(tc)
             p_prev, q_prev = p, q
-        return p_prev.copy(), q_prev
+        return Plan(start, tuple(ends), tuple(legs), (p_prev, q_prev))
+
+
+@dataclass(frozen=True)
+class _Leg:
+    """The move to one waypoint: from ``(p0, q0)`` at ``t0`` s to ``(p1, q1)`` over ``duration`` s."""
+
+    t0: float
+    duration: float
+    p0: np.ndarray
+    p1: np.ndarray
+    q0: np.ndarray
+    q1: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A script's legs from one start pose, for O(log n) lookups of the gripper target.
+
+    ``ends``: the times (s) at which each waypoint's move and then its hold end, in order; ``start``
+    and ``end``: the poses before 0 and after the last waypoint.
+    """
+
+    start: tuple[np.ndarray, np.ndarray]
+    ends: tuple[float, ...]
+    legs: tuple[_Leg, ...]
+    end: tuple[np.ndarray, np.ndarray]
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Gripper target (pos m world, quat wxyz; fresh arrays) at time ``t`` s (see Script.target_at)."""
+        if t <= 0.0:
+            return self.start[0].copy(), self.start[1].copy()
+        j = bisect.bisect_right(self.ends, t)  # the first phase that ends after t
+        if j == len(self.ends):
+            return self.end[0].copy(), self.end[1].copy()
+        leg = self.legs[j // 2]
+        if j % 2:  # holding at the waypoint
+            return leg.p1.copy(), leg.q1.copy()
+        s = (t - leg.t0) / leg.duration
+        return leg.p0 + s * (leg.p1 - leg.p0), slerp(leg.q0, leg.q1, s)
 
 
 def _num(value: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:

@@ -816,12 +816,11 @@ class Simulator:
         ``duration``. ``settle`` extra seconds are simulated at the last waypoint at the end.
         """
         mid = self.built.mocap_id
-        start_pos = self.data.mocap_pos[mid].copy()
-        start_quat = self.data.mocap_quat[mid].copy()
+        plan = script.plan(self.data.mocap_pos[mid], self.data.mocap_quat[mid])
         dt = self.model.opt.timestep
         nsteps = round((script.total_duration + settle) / dt)
         for k in range(1, nsteps + 1):
-            pos, quat = script.target_at(k * dt, start_pos=start_pos, start_quat=start_quat)
+            pos, quat = plan.at(k * dt)
             self.set_target(pos, quat)
             yield self.step()
 

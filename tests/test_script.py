@@ -106,3 +106,46 @@ def test_parse_script_is_a_value_error() -> None:
 def test_builtin_scripts_are_valid(path: Path) -> None:
     s = load_script(path)
     assert s.scene and s.total_duration > 0
+
+
+def test_plan_phases_at_their_boundaries_and_returns_fresh_arrays() -> None:
+    s = parse_script(
+        {
+            "waypoints": [
+                {"pos": [1.0, 0.0, 0.0], "duration": 1.0},  # no hold: the next move starts at once
+                {"pos": [1.0, 2.0, 0.0], "duration": 2.0, "hold": 1.0},
+                {"pos": [0.0, 2.0, 0.0], "quat": [0.0, 0.0, 0.0, 2.0], "duration": 1.0},
+            ]
+        }
+    )
+    plan = s.plan((0.0, 0.0, 0.0), (2.0, 0.0, 0.0, 0.0))
+    assert plan.ends == (1.0, 1.0, 3.0, 4.0, 5.0, 5.0)
+    expect = {
+        -1.0: [0, 0, 0],
+        0.0: [0, 0, 0],
+        0.5: [0.5, 0, 0],
+        1.0: [1, 0, 0],  # first waypoint reached: the second move starts
+        2.0: [1, 1, 0],
+        3.0: [1, 2, 0],  # holding
+        3.5: [1, 2, 0],
+        4.0: [1, 2, 0],  # the hold ends: the third move starts
+        4.5: [0.5, 2, 0],
+        5.0: [0, 2, 0],
+        9.0: [0, 2, 0],
+    }
+    for t, pos in expect.items():
+        p, q = plan.at(t)
+        assert p.tolist() == pos, t
+        assert math.isclose(float(np.linalg.norm(q)), 1.0)
+    assert plan.at(3.5)[1].tolist() == [1.0, 0.0, 0.0, 0.0]  # start quat, normalised, kept
+    assert plan.at(9.0)[1].tolist() == [0.0, 0.0, 0.0, 1.0]
+    # the returned arrays are the caller's: changing them does not change the plan
+    for t in (-1.0, 3.5, 9.0):
+        p, q = plan.at(t)
+        p[:] = 7.0
+        q[:] = 7.0
+        assert plan.at(t)[0].tolist() == expect[t]
+        assert 7.0 not in plan.at(t)[1].tolist()
+    # at the end of a move the waypoint is held exactly (interpolating would give 0.09999999999999998)
+    held = parse_script({"waypoints": [{"pos": [0.1, 0.0, 0.0], "duration": 1.0, "hold": 0.5}]})
+    assert held.plan((0.7, 0.0, 0.0)).at(1.0)[0].tolist() == [0.1, 0.0, 0.0]
