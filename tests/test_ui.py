@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import shutil
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -131,6 +132,29 @@ def test_stop_mid_recording_finishes_the_file(tmp_path: Path):
     rec = Recording(path)  # validates the footer and summary
     assert len(rec.commands()[0]) > 50
     assert replay(path, verify=True).divergence is None
+
+
+def test_a_client_leaving_as_the_server_stops_moves_nothing(tmp_path: Path):
+    """viser disconnects every client as it stops; one that had just dragged must not make the server
+    hold the gripper then (that would write the gizmo of a stopped server)."""
+    from types import SimpleNamespace
+
+    srv = DemoServer("table", port=None, recordings_dir=tmp_path).start()
+    real_stop = srv.server.stop
+    p0, q0 = srv.target()
+    srv.set_target(p0 + np.array([0.0, 0.0, 0.05]), q0)  # the gripper is on its way there as it stops
+    target = srv.target()
+
+    def stop_then_disconnect() -> None:
+        real_stop()
+        srv._dragging[7] = time.perf_counter()  # client 7 ended a drag just now
+        srv._on_disconnect(SimpleNamespace(client_id=7))
+
+    srv.server.stop = stop_then_disconnect
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        srv.stop()
+    assert all(np.array_equal(a, b) for a, b in zip(srv.target(), target, strict=True))
 
 
 # --------------------------------------------------------------------------------------------------
