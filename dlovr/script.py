@@ -150,7 +150,6 @@ class Script:
             q_prev = quat_normalize(start_quat)
         else:
             q_prev = quat_normalize(w0.quat if w0.quat is not None else (1.0, 0.0, 0.0, 0.0))
-        start = (p_prev, q_prev)
         ends: list[float] = []
         legs: list[_Leg] = []
         tc = 0.0
@@ -163,7 +162,7 @@ class Script:
             tc += w.hold
             ends.append(tc)
             p_prev, q_prev = p, q
-        return Plan(start, tuple(ends), tuple(legs), (p_prev, q_prev))
+        return Plan(tuple(ends), tuple(legs))
 
 
 @dataclass(frozen=True)
@@ -182,24 +181,22 @@ class _Leg:
 class Plan:
     """A script's legs from one start pose, for O(log n) lookups of the gripper target.
 
-    ``ends``: the times (s) at which each waypoint's move and then its hold end, in order; ``start``
-    and ``end``: the poses before 0 and after the last waypoint.
+    ``ends``: the times (s) at which each waypoint's move and then its hold end, in order; ``legs``:
+    one per waypoint (a script has at least one). Before 0 the first leg's start pose holds, after the
+    last end the last waypoint.
     """
 
-    start: tuple[np.ndarray, np.ndarray]
     ends: tuple[float, ...]
     legs: tuple[_Leg, ...]
-    end: tuple[np.ndarray, np.ndarray]
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Gripper target (pos m world, quat wxyz; fresh arrays) at time ``t`` s (see Script.target_at)."""
         if t <= 0.0:
-            return self.start[0].copy(), self.start[1].copy()
+            first = self.legs[0]
+            return first.p0.copy(), first.q0.copy()
         j = bisect.bisect_right(self.ends, t)  # the first phase that ends after t
-        if j == len(self.ends):
-            return self.end[0].copy(), self.end[1].copy()
-        leg = self.legs[j // 2]
-        if j % 2:  # holding at the waypoint
+        leg = self.legs[j // 2] if j < len(self.ends) else self.legs[-1]
+        if j % 2 or j == len(self.ends):  # holding at the waypoint, or past the last one
             return leg.p1.copy(), leg.q1.copy()
         s = (t - leg.t0) / leg.duration
         return leg.p0 + s * (leg.p1 - leg.p0), slerp(leg.q0, leg.q1, s)
