@@ -1043,7 +1043,7 @@ class DemoServer:
         ended = self._dragging.pop(client.client_id, -1.0)
         if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
             return
-        if ended is None or (ended is not None and ended >= 0 and time.perf_counter() - ended < 1.0):
+        if ended is None or (ended >= 0 and time.perf_counter() - ended < 1.0):
             self.hold()  # it went away mid-drag: the gripper stays where it is now
 
 
