@@ -18,12 +18,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from dlovr.contacts import ContactTracker
 from dlovr.geometry import SceneGeometry
 from dlovr.recording import DemoRecorder, replay
 from dlovr.scene import load_scene, scenes_dir
 from dlovr.script import load_script
 from dlovr.sim import Simulator
+from dlovr.sim.tracker import ContactTracker
 
 
 def simulate(scene_name: str, script_path: Path, out: Path | None) -> float:

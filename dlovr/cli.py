@@ -32,7 +32,7 @@ def _load_facts(path: str) -> tuple[object, dict[int, tuple[float, float, float]
     """Read a facts JSON file: face normals, face-pair relations and DLO vectors by point index."""
     import json
 
-    from dlovr.discrete import FaceFact, FactBook, PairFact
+    from dlovr.model.discrete import FaceFact, FactBook, PairFact
 
     try:
         with open(path, encoding="utf-8") as fh:
@@ -76,9 +76,9 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
     import dataclasses
     import json
 
-    from dlovr.discrete import DiscreteSituation, ModelParams, discretize, parse_any
-    from dlovr.topology import NotationError, Situation
-    from dlovr.transitions import classify_sequence
+    from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize, parse_any
+    from dlovr.model.topology import NotationError, Situation
+    from dlovr.model.transitions import classify_sequence
 
     try:
         with open(file, encoding="utf-8") as fh:
@@ -334,8 +334,8 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     import io
     import json
 
+    from dlovr.model.transitions import classify_step
     from dlovr.recording import Recording, kept_states
-    from dlovr.transitions import classify_step
 
     rec = Recording(recording)
     if raw:

@@ -11,7 +11,7 @@ Pure: numpy, scipy, trimesh, manifold3d and (as a fallback) coacd. No simulator,
 - :class:`SceneGeometry`: world-frame convex pieces with labelled faces (external / internal / mixed,
   mapped to object face names), the per-object edge table, classification of cable points into
   environment primitives (closest point, distance, active faces by a *tangential* tolerance), and the
-  :class:`~dlovr.discrete.FactBook` (face normals, concave/convex and opening angles of face pairs).
+  :class:`~dlovr.model.discrete.FactBook` (face normals, concave/convex and opening angles of face pairs).
 
 Typical use by the simulation::
 
@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import trimesh
 
-from dlovr.discrete import (
+from dlovr.model.discrete import (
     ContactFacts,
     DiscreteSituation,
     FaceFact,
@@ -42,7 +42,8 @@ from dlovr.discrete import (
     PairFact,
     discretize,
 )
-from dlovr.topology import Contact, EnvPrimitive, Situation, situation_from_points
+from dlovr.model.topology import Contact, EnvPrimitive, Situation, situation_from_points
+from dlovr.transforms import pose_matrix
 
 if TYPE_CHECKING:
     from dlovr.scene import Scene
@@ -60,26 +61,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=float)
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n == 0.0, 1.0, n)
-
-
-def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
-    """Rotation matrix of a quaternion given as (w, x, y, z); normalised first."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def pose_matrix(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
-    """4x4 homogeneous transform from a position and a (w, x, y, z) quaternion."""
-    t = np.eye(4)
-    t[:3, :3] = quat_to_matrix(quat)
-    t[:3, 3] = np.asarray(pos, dtype=float)
-    return t
 
 
 def _polygon_area(poly: np.ndarray) -> float:
@@ -1363,7 +1344,7 @@ class SceneGeometry:
         """Topological situation of a cable polyline (point 0 = V_S, last = V_E).
 
         ``V_S`` touches the gripper when ``gripped``; the end-vertex rule (MODEL.md §2) is applied by
-        :func:`dlovr.topology.situation_from_points`.
+        :func:`dlovr.model.topology.situation_from_points`.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         if len(pts) < 2:
@@ -1576,7 +1557,7 @@ __all__ = [
     "decompose",
     "decompose_exact",
     "object_faces",
-    "pose_matrix",
+
     "prism_mesh",
-    "quat_to_matrix",
+
 ]

@@ -39,7 +39,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
-from dlovr.transitions import DEFAULT_HOLD_S, classify_step
+from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
 
 FORMAT_VERSION = "2"  # 2: commands in messages of 50 steps, an end marker in the states
 PROFILE = "dlovr"
@@ -710,7 +710,7 @@ CHECKPOINT_EVERY_S = 1.0
 class DemoRecorder:
     """Records a running demonstration: call :meth:`step` after every simulation step.
 
-    ``sim`` is a :class:`dlovr.sim.Simulator`, ``tracker`` its :class:`dlovr.contacts.ContactTracker`;
+    ``sim`` is a :class:`dlovr.sim.Simulator`, ``tracker`` its :class:`dlovr.sim.tracker.ContactTracker`;
     the scene is embedded from ``scene.path``. The first checkpoint is written at construction (so a
     recording may start at any moment of a session), then one every second of simulated time.
     """
@@ -897,7 +897,7 @@ def situation_from_payload(payload: Mapping[str, Any]) -> Any:
     """The discrete situation of a contact-state message, with its contact vectors."""
     from dataclasses import replace
 
-    from dlovr.discrete import DiscreteSituation, parse_discrete_situation
+    from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
 
     sit = parse_discrete_situation(payload["discrete"])
     contacts = payload.get("contacts") or []
@@ -913,8 +913,8 @@ def situation_from_payload(payload: Mapping[str, Any]) -> Any:
 
 def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
     """The recording's contact situations debounced as in MODEL.md §4.2, as ``TimedSituation``s."""
-    from dlovr.program import TimedSituation
-    from dlovr.transitions import Debouncer, is_transient
+    from dlovr.model.program import TimedSituation
+    from dlovr.model.transitions import Debouncer, is_transient
 
     payloads = recording.states()
     if not payloads:
@@ -943,7 +943,7 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
 
 def compile_recording(path: str | Path, hold: float | None = None) -> Any:
     """Compile a recording into a program (MODEL.md §5); reads only the contact-state channel."""
-    from dlovr.program import PoseTrack, compile_program
+    from dlovr.model.program import PoseTrack, compile_program
 
     rec = Recording(path)
     states = kept_states(rec, hold)

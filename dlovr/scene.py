@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from dlovr.discrete import ModelParams
+from dlovr.model.discrete import ModelParams
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]

@@ -27,80 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.transforms import quat_normalize, slerp
+
 _TOP_KEYS = {"scene", "waypoints", "description"}
 _WP_KEYS = {"pos", "quat", "duration", "hold", "note"}
 
 
 class ScriptError(ValueError):
     """A script file is invalid; the message is one line: ``file: waypoints[i].key: what is wrong``."""
-
-
-# -- quaternions (wxyz) ---------------------------------------------------------------------------
-
-
-def dot(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
-    """Dot product of two short vectors, summed left to right in Python floats.
-
-    The gripper's motion feeds MuJoCo, so it must round the same on every machine: ``np.dot`` and
-    ``np.linalg.norm`` go through BLAS, whose kernel (and so its rounding, with or without fused
-    multiply-adds) depends on the processor, and a recording made on one machine then replays a
-    last bit differently on another.
-    """
-    total = 0.0
-    for x, y in zip(np.asarray(a, dtype=float).tolist(), np.asarray(b, dtype=float).tolist(), strict=True):
-        total += x * y
-    return total
-
-
-def norm(v: Sequence[float] | np.ndarray) -> float:
-    """Euclidean length of a short vector, the same on every machine (see :func:`dot`)."""
-    return math.sqrt(dot(v, v))
-
-
-def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
-    q = np.asarray(q, dtype=float)
-    return q / norm(q)
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
-
-
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vector ``v`` by unit quaternion ``q`` (wxyz)."""
-    w, x, y, z = (float(c) for c in q)
-    vx, vy, vz = (float(c) for c in v)
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return np.array(
-        [
-            vx + w * tx + (y * tz - z * ty),
-            vy + w * ty + (z * tx - x * tz),
-            vz + w * tz + (x * ty - y * tx),
-        ]
-    )
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
-    """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz."""
-    q0 = quat_normalize(q0)
-    q1 = quat_normalize(q1)
-    c = dot(q0, q1)
-    if c < 0.0:
-        q1, c = -q1, -c
-    if c > 0.9995:
-        return quat_normalize(q0 + s * (q1 - q0))
-    th = math.acos(min(1.0, c))
-    sin = math.sin(th)
-    return (math.sin((1 - s) * th) / sin) * q0 + (math.sin(s * th) / sin) * q1
 
 
 # -- scripts ----------------------------------------------------------------------------------------

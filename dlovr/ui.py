@@ -1,7 +1,7 @@
 """Browser teleoperation UI (``dlovr serve``): a viser server around a real-time simulation.
 
 The only module that imports viser. :class:`DemoServer` owns one :class:`dlovr.sim.Simulator`, its
-:class:`dlovr.contacts.ContactTracker` and, while recording, a :class:`dlovr.recording.DemoRecorder`.
+:class:`dlovr.sim.tracker.ContactTracker` and, while recording, a :class:`dlovr.recording.DemoRecorder`.
 A background thread steps the simulation at its own rate (500 Hz of simulated time) paced to the
 wall clock and publishes the cable, the gripper and the contact feedback at ~40 Hz, each update in
 one ``server.atomic()`` block followed by ``server.flush()``. Every connected tab sees the same
@@ -31,14 +31,14 @@ import numpy as np
 import trimesh
 import viser
 
-from dlovr.contacts import ContactState, ContactTracker
-from dlovr.discrete import Stability
 from dlovr.geometry import SceneGeometry
+from dlovr.model.discrete import Stability
+from dlovr.model.transitions import classify_step, format_classes
 from dlovr.recording import DemoRecorder, Recording, RecordingError, compile_recording, kept_states
 from dlovr.scene import Scene, SceneError, builtin_scenes, load_scene
-from dlovr.script import quat_mul
 from dlovr.sim import SimulationDiverged, Simulator
-from dlovr.transitions import classify_step, format_classes
+from dlovr.sim.tracker import ContactState, ContactTracker
+from dlovr.transforms import quat_mul
 
 PUBLISH_HZ = 40.0
 JOG_STEP = 0.005  # m per key press

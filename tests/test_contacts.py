@@ -1,4 +1,4 @@
-"""Per-step contact extraction (dlovr.contacts): hysteresis, the pair fast path, forces, debouncing.
+"""Per-step contact extraction (dlovr.sim.tracker): hysteresis, the pair fast path, forces, debouncing.
 
 Pure: a SceneGeometry built from meshes and synthetic simulator records, no MuJoCo.
 """
@@ -12,8 +12,9 @@ import manifold3d as M
 import numpy as np
 import pytest
 
-from dlovr.contacts import ContactTracker
-from dlovr.geometry import SceneGeometry, _to_trimesh, box_mesh, pose_matrix
+from dlovr.geometry import SceneGeometry, _to_trimesh, box_mesh
+from dlovr.sim.tracker import ContactTracker
+from dlovr.transforms import pose_matrix
 
 R = 0.005
 

@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlovr.contacts import ContactTracker
-from dlovr.discrete import STATES, DiscreteSituation
 from dlovr.geometry import SceneGeometry
+from dlovr.model.discrete import STATES, DiscreteSituation
+from dlovr.model.transitions import classify_step
 from dlovr.scene import load_scene
 from dlovr.script import Script, Waypoint, load_script
 from dlovr.sim import Simulator
-from dlovr.transitions import classify_step
+from dlovr.sim.tracker import ContactTracker
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 

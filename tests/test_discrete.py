@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dlovr.discrete import (
+from dlovr.model.discrete import (
     AUX_STATES,
     STATES,
     ContactFacts,
@@ -27,7 +27,7 @@ from dlovr.discrete import (
     parse_discrete_situation,
     state,
 )
-from dlovr.topology import NotationError, parse_situation
+from dlovr.model.topology import NotationError, parse_situation
 
 # Fig. 8 as printed in the paper: state -> (card, stability)
 FIG8 = {

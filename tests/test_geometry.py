@@ -16,9 +16,9 @@ from dlovr.geometry import (
     build_object,
     decompose,
     object_faces,
-    pose_matrix,
     prism_mesh,
 )
+from dlovr.transforms import pose_matrix
 
 
 @pytest.fixture(autouse=True)

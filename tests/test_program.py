@@ -10,16 +10,15 @@ import jsonschema
 import numpy as np
 import pytest
 
-from dlovr.discrete import parse_discrete_situation as P
-from dlovr.program import (
+from dlovr.model.discrete import parse_discrete_situation as P
+from dlovr.model.program import (
     DETECTORS,
     PoseTrack,
     TimedSituation,
     compile_program,
-    matrix_to_rotvec,
     program_schema,
-    quat_to_matrix,
 )
+from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
 FIG11 = Path(__file__).parent / "data" / "fig11.txt"
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from dlovr.program import program_schema
+from dlovr.model.program import program_schema
+from dlovr.model.transitions import classify_step
 from dlovr.recording import Recording, compile_recording, kept_states, replay
-from dlovr.transitions import classify_step
 
 ROOT = Path(__file__).resolve().parent.parent / "recordings"
 SAMPLES = sorted(ROOT.glob("*.mcap"))

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlovr.script import ScriptError, load_script, parse_script, quat_rotate, slerp
+from dlovr.script import ScriptError, load_script, parse_script
+from dlovr.transforms import quat_rotate, slerp
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 

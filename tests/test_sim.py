@@ -332,9 +332,9 @@ def test_label_reuse_changes_no_state_in_a_live_demo(scene_name, steps):
     faces, the corners' concave edges and vertices), with far fewer labellings."""
     from pathlib import Path
 
-    from dlovr.contacts import ContactTracker
     from dlovr.scene import load_scene
     from dlovr.script import load_script
+    from dlovr.sim.tracker import ContactTracker
 
     scene = load_scene(scene_name)
     script = load_script(Path(__file__).resolve().parent.parent / "scenes" / f"{scene_name}.script.toml")

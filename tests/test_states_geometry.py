@@ -1,6 +1,6 @@
 # ruff: noqa: RUF005  (numpy array + list is vector addition here, not list concatenation)
 """End-to-end: each of the 15 discrete states from a hand-placed static cable polyline in a scene,
-classified through geometry (dlovr.geometry) and the model (dlovr.discrete)."""
+classified through geometry (dlovr.geometry) and the model (dlovr.model.discrete)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from dlovr.discrete import STATES
-from dlovr.geometry import SceneGeometry, box_mesh, pose_matrix, prism_mesh
+from dlovr.geometry import SceneGeometry, box_mesh, prism_mesh
+from dlovr.model.discrete import STATES
+from dlovr.transforms import pose_matrix
 
 R = 0.005
 S5, C5 = math.sin(math.radians(5)), math.cos(math.radians(5))

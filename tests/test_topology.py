@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dlovr.topology import (
+from dlovr.model.topology import (
     Contact,
     DloPrimitive,
     EnvPrimitive,

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from dlovr.discrete import parse_discrete_contact
-from dlovr.discrete import parse_discrete_situation as P
-from dlovr.transitions import (
+from dlovr.model.discrete import parse_discrete_contact
+from dlovr.model.discrete import parse_discrete_situation as P
+from dlovr.model.transitions import (
     RULES,
     Change,
     Debouncer,

@@ -1,7 +1,7 @@
 """Program generation (paper §VI, MODEL.md §5): a demonstration becomes a sequence of macros.
 
 Pure Python + numpy. Input: the demonstration's kept contact situations with their times (see
-:class:`dlovr.transitions.Debouncer`) and the gripper pose trajectory. Each transition that has a
+:class:`dlovr.model.transitions.Debouncer`) and the gripper pose trajectory. Each transition that has a
 class becomes a **macro**: a guarded motion of the gripper (the demonstrated displacement over that
 stretch) that ends when the detection algorithm of its class sees the expected transition.
 
@@ -20,8 +20,15 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.discrete import DiscreteContact, DiscreteSituation
-from dlovr.transitions import CLASS_NAMES, classify_step, format_classes, principal, successional_contacts
+from dlovr.model.discrete import DiscreteContact, DiscreteSituation
+from dlovr.model.transitions import (
+    CLASS_NAMES,
+    classify_step,
+    format_classes,
+    principal,
+    successional_contacts,
+)
+from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
 PROGRAM_VERSION = 1
 """Version of the program JSON format (``version`` field); bump on incompatible changes."""
@@ -62,35 +69,6 @@ class PoseTrack:
         """Pose at time ``t`` (the last sample at or before ``t``; the first one before the track)."""
         i = max(int(np.searchsorted(self.t, t, side="right")) - 1, 0)
         return self.pos[i], self.quat[i]
-
-
-def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
-    """Rotation matrix of a unit quaternion ``wxyz``."""
-    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
-    """Rotation vector (axis * angle, rad) of a rotation matrix."""
-    cos = max(-1.0, min(1.0, (float(np.trace(r)) - 1.0) / 2.0))
-    angle = math.acos(cos)
-    if angle < 1e-12:
-        return np.zeros(3)
-    if math.pi - angle < 1e-6:
-        # near 180°: axis from the diagonal
-        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
-        k = int(np.argmax(axis))
-        axis[(k + 1) % 3] = math.copysign(axis[(k + 1) % 3], r[k, (k + 1) % 3])
-        axis[(k + 2) % 3] = math.copysign(axis[(k + 2) % 3], r[k, (k + 2) % 3])
-        return axis / np.linalg.norm(axis) * angle
-    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2 * math.sin(angle))
-    return axis * angle
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from dlovr.topology import (
+from dlovr.model.topology import (
     Contact,
     NotationError,
     Situation,

@@ -15,7 +15,7 @@ from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from dlovr.discrete import DiscreteContact, DiscreteSituation, Stability
+from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 
 CLASS_ORDER = ("S", "I", "T", "E", "C")
 """Order in which the classes of a multi-class step are written (``S,E``)."""

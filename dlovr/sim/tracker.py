@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.geometry import LabelBudgets, SceneGeometry, primitives_per_point
-from dlovr.topology import Situation, situation_from_points, tip_touches
-from dlovr.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
+from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
+from dlovr.model.topology import Situation, situation_from_points, tip_touches
+from dlovr.model.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
 
 
 @dataclass(frozen=True)

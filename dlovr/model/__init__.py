@@ -1,0 +1,13 @@
+"""The paper's contact model, pure: no simulator, no mesh library, no UI, no file format.
+
+- :mod:`dlovr.model.topology`: topological contact situations (paper §III): primitives, contacts,
+  contraction, notation.
+- :mod:`dlovr.model.discrete`: discrete contact states (§IV): card (eq. 3), contact vectors (eq. 2),
+  stability.
+- :mod:`dlovr.model.transitions`: principal contacts, matching and transition classes (§V), and the
+  debouncing of a simulated sequence.
+- :mod:`dlovr.model.program`: macro programs compiled from a demonstration (§VI).
+
+Everything here imports only the standard library and numpy (a test checks), so the model is tested
+and reused without a simulator. See ``docs/model.md`` for the rules in words.
+"""

@@ -1,0 +1,129 @@
+"""Quaternions, rotations and poses: the one place for them (pure Python + numpy).
+
+Quaternions are ``[w, x, y, z]`` (MuJoCo's order; Foxglove's is xyzw). Rotation vectors are
+axis * angle in radians. The helpers that feed the simulation (:func:`dot`, :func:`norm`,
+:func:`quat_normalize`, :func:`quat_mul`, :func:`quat_rotate`, :func:`slerp`) round the same on every
+processor: they avoid BLAS, so a recording replays bit for bit on another machine.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+
+def dot(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
+    """Dot product of two short vectors, summed left to right in Python floats.
+
+    The gripper's motion feeds MuJoCo, so it must round the same on every machine: ``np.dot`` and
+    ``np.linalg.norm`` go through BLAS, whose kernel (and so its rounding, with or without fused
+    multiply-adds) depends on the processor, and a recording made on one machine then replays a
+    last bit differently on another.
+    """
+    total = 0.0
+    for x, y in zip(np.asarray(a, dtype=float).tolist(), np.asarray(b, dtype=float).tolist(), strict=True):
+        total += x * y
+    return total
+
+
+def norm(v: Sequence[float] | np.ndarray) -> float:
+    """Euclidean length of a short vector, the same on every machine (see :func:`dot`)."""
+    return math.sqrt(dot(v, v))
+
+
+def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
+    q = np.asarray(q, dtype=float)
+    return q / norm(q)
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vector ``v`` by unit quaternion ``q`` (wxyz)."""
+    w, x, y, z = (float(c) for c in q)
+    vx, vy, vz = (float(c) for c in v)
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return np.array(
+        [
+            vx + w * tx + (y * tz - z * ty),
+            vy + w * ty + (z * tx - x * tz),
+            vz + w * tz + (x * ty - y * tx),
+        ]
+    )
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz."""
+    q0 = quat_normalize(q0)
+    q1 = quat_normalize(q1)
+    c = dot(q0, q1)
+    if c < 0.0:
+        q1, c = -q1, -c
+    if c > 0.9995:
+        return quat_normalize(q0 + s * (q1 - q0))
+    th = math.acos(min(1.0, c))
+    sin = math.sin(th)
+    return (math.sin((1 - s) * th) / sin) * q0 + (math.sin(s * th) / sin) * q1
+
+
+def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
+    """Rotation matrix of a quaternion given as (w, x, y, z); normalised first."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def pose_matrix(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
+    """4x4 homogeneous transform from a position and a (w, x, y, z) quaternion."""
+    t = np.eye(4)
+    t[:3, :3] = quat_to_matrix(quat)
+    t[:3, 3] = np.asarray(pos, dtype=float)
+    return t
+
+
+def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
+    """Rotation vector (axis * angle, rad) of a rotation matrix."""
+    cos = max(-1.0, min(1.0, (float(np.trace(r)) - 1.0) / 2.0))
+    angle = math.acos(cos)
+    if angle < 1e-12:
+        return np.zeros(3)
+    if math.pi - angle < 1e-6:
+        # near 180°: axis from the diagonal
+        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        axis[(k + 1) % 3] = math.copysign(axis[(k + 1) % 3], r[k, (k + 1) % 3])
+        axis[(k + 2) % 3] = math.copysign(axis[(k + 2) % 3], r[k, (k + 2) % 3])
+        return axis / np.linalg.norm(axis) * angle
+    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (2 * math.sin(angle))
+    return axis * angle
+
+
+__all__ = [
+    "dot",
+    "matrix_to_rotvec",
+    "norm",
+    "pose_matrix",
+    "quat_mul",
+    "quat_normalize",
+    "quat_rotate",
+    "quat_to_matrix",
+    "slerp",
+]
