@@ -139,7 +139,7 @@ def test_gripper_motion_rounds_the_same_on_every_processor(monkeypatch) -> None:
     """What moves the gripper feeds MuJoCo, so it must not go through BLAS (np.dot, np.linalg.norm):
     BLAS picks its kernel, and so its rounding, by processor, and a recording made on one machine
     then replays a last bit differently on another (seen: an AMD EPYC against an AVX-512 Xeon)."""
-    from dlovr import script as script_mod
+    from dlovr import transforms
 
     sim = on_table(max_speed=0.25, max_angular_speed=2.0)
 
@@ -160,8 +160,8 @@ def test_gripper_motion_rounds_the_same_on_every_processor(monkeypatch) -> None:
     monkeypatch.undo()
     # the helpers it uses add left to right in Python floats
     a, b = [0.1, 0.7, -0.3, 1e-17], [0.3, -0.2, 0.9, 1.0]
-    assert script_mod.dot(a, b) == ((0.0 + 0.1 * 0.3) + 0.7 * -0.2) + -0.3 * 0.9 + 1e-17 * 1.0
-    assert script_mod.norm([3.0, 4.0]) == 5.0
+    assert transforms.dot(a, b) == ((0.0 + 0.1 * 0.3) + 0.7 * -0.2) + -0.3 * 0.9 + 1e-17 * 1.0
+    assert transforms.norm([3.0, 4.0]) == 5.0
 
 
 def test_divergence_nan_names_the_step() -> None:
