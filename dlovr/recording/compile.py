@@ -1,0 +1,113 @@
+"""Compiling recordings into programs: one recording (:func:`compile_recording`, reading only its
+contact-state channel) and batches of them with a content-hash cache (``dlovr compile``)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dlovr.recording.format import RecordingError
+from dlovr.recording.reader import Recording, kept_states
+
+
+def compile_recording(path: str | Path, hold: float | None = None) -> Any:
+    """Compile a recording into a program (MODEL.md §5); reads only the contact-state channel."""
+    from dlovr.model.program import PoseTrack, compile_program
+
+    rec = Recording(path)
+    states = kept_states(rec, hold)
+    payloads = rec.states()
+    t = np.array([float(p["t"]) for p in payloads])
+    pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+    quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+    return compile_program(states, PoseTrack(t, pos, quat), name=Path(path).stem, source=Path(path).name)
+
+
+# --------------------------------------------------------------------------------------------------
+# Batch compilation
+# --------------------------------------------------------------------------------------------------
+
+CACHE_NAME = ".dlovr-compile-cache.json"
+
+
+@dataclass(frozen=True)
+class CompileResult:
+    """Outcome for one recording: ``error`` is None on success; ``skipped`` when unchanged."""
+
+    path: str
+    json_path: str | None
+    macros: int = 0
+    risky: int = 0
+    skipped: bool = False
+    error: str | None = None
+
+
+def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
+    """Recordings named by files or found (``*.mcap``, recursively) in directories, sorted, unique."""
+    out: set[Path] = set()
+    for i in inputs:
+        p = Path(i)
+        if p.is_dir():
+            out.update(q for q in p.rglob("*.mcap") if q.is_file())
+        else:
+            out.add(p)
+    return sorted(out)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileResult:
+    """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job)."""
+    p = Path(path)
+    out = Path(out_dir) if out_dir else p.parent
+    try:
+        digest = _sha256(p)
+    except OSError as e:
+        return CompileResult(str(p), None, error=f"{p}: cannot read: {e.strerror}")
+    jpath, tpath = out / f"{p.stem}.program.json", out / f"{p.stem}.program.txt"
+    cache_file = out / CACHE_NAME
+    try:
+        cache = json.loads(cache_file.read_text()) if cache_file.is_file() else {}
+    except (OSError, ValueError):
+        cache = {}
+    if not force and cache.get(p.name) == digest and jpath.is_file() and tpath.is_file():
+        data = json.loads(jpath.read_text())
+        s = data.get("summary", {})
+        return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
+    try:
+        prog = compile_recording(p)
+    except RecordingError as e:
+        return CompileResult(str(p), None, error=str(e))
+    out.mkdir(parents=True, exist_ok=True)
+    jpath.write_text(prog.dumps())
+    tpath.write_text(prog.listing())
+    return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"])
+
+
+def record_compiled(results: Sequence[CompileResult], out_dir: str | None) -> None:
+    """Remember the content hashes of successfully compiled recordings (in the parent process)."""
+    by_dir: dict[Path, dict[str, str]] = {}
+    for r in results:
+        if r.error is None and r.json_path is not None:
+            d = Path(r.json_path).parent
+            by_dir.setdefault(d, {})[Path(r.path).name] = _sha256(Path(r.path))
+    for d, entries in by_dir.items():
+        f = d / CACHE_NAME
+        try:
+            cache = json.loads(f.read_text()) if f.is_file() else {}
+        except (OSError, ValueError):
+            cache = {}
+        cache.update(entries)
+        f.write_text(json.dumps(dict(sorted(cache.items())), indent=1) + "\n")

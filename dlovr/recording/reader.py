@@ -1,0 +1,258 @@
+"""Reading recordings: :class:`Recording` opens and validates a file and reads its channels;
+:func:`kept_states` turns its contact-state messages into the debounced situations a program is
+compiled from (reading only the states channel)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+
+from dlovr import __version__
+from dlovr.model.transitions import DEFAULT_HOLD_S
+from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
+from dlovr.recording.format import (
+    FORMAT_VERSION,
+    MAX_ATTACHMENT_BYTES,
+    MCAP_MAGIC,
+    PIECES_JSON,
+    PROFILE,
+    REQUIRED_TOPICS,
+    SCENE_PREFIX,
+    SCENE_TOML,
+    TOPIC_CHECKPOINT,
+    TOPIC_COMMAND,
+    TOPIC_SCENE,
+    TOPIC_STATES,
+    TOPIC_TF,
+    RecordingError,
+)
+from dlovr.recording.foxglove import stamp_ns
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    step: int
+    state: np.ndarray
+    target_pos: np.ndarray
+    target_quat: np.ndarray
+
+
+class Recording:
+    """A validated recording opened for reading. Raises :class:`RecordingError` on any problem."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        p = self.path
+        try:
+            size = p.stat().st_size
+        except OSError as e:
+            raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
+        if p.is_dir():
+            raise RecordingError(f"{p}: is a directory, not a recording")
+        if size == 0:
+            raise RecordingError(f"{p}: empty file, not an MCAP recording")
+        with open(p, "rb") as fh:
+            head = fh.read(len(MCAP_MAGIC))
+            fh.seek(max(0, size - len(MCAP_MAGIC)))
+            tail = fh.read()
+        if head != MCAP_MAGIC:
+            raise RecordingError(f"{p}: not an MCAP file (bad magic bytes)")
+        if tail != MCAP_MAGIC:
+            raise RecordingError(
+                f"{p}: truncated recording (no MCAP footer: the writer was killed?); "
+                f"try `dlovr recover {p} -o FIXED.mcap`"
+            )
+        try:
+            with open(p, "rb") as fh:
+                reader = make_reader(fh, validate_crcs=True)
+                header = reader.get_header()
+                summary = reader.get_summary()
+                meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+                attachments = {a.name: a.data for a in reader.iter_attachments()}
+        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
+            raise RecordingError(f"{p}: corrupt MCAP data: {_one_line(e)}") from None
+        if header.profile != PROFILE or "dlovr" not in meta:
+            raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
+        self.metadata: dict[str, str] = meta["dlovr"]
+        version = self.metadata.get("format_version")
+        if version != FORMAT_VERSION:
+            raise RecordingError(
+                f"{p}: recording format {version}, this dlovr {__version__} reads format {FORMAT_VERSION}"
+            )
+        if summary is None:
+            raise RecordingError(f"{p}: recording has no summary section")
+        topics = {c.topic for c in summary.channels.values()}
+        missing = [t for t in REQUIRED_TOPICS if t not in topics]
+        if missing:
+            raise RecordingError(f"{p}: recording has no channel {missing[0]}")
+        self._counts = {
+            summary.channels[cid].topic: n for cid, n in (summary.statistics.channel_message_counts.items()
+                                                         if summary.statistics else [])
+        }  # fmt: skip
+        if SCENE_TOML not in attachments:
+            raise RecordingError(f"{p}: recording has no embedded scene ({SCENE_TOML})")
+        files = []
+        for name, data in attachments.items():
+            if name.startswith(SCENE_PREFIX) and name != SCENE_TOML:
+                rel = name[len(SCENE_PREFIX) :]
+                try:
+                    safe_relpath(rel)
+                except RecordingError as e:
+                    raise RecordingError(f"{p}: {e}") from None
+                if len(data) > MAX_ATTACHMENT_BYTES:
+                    raise RecordingError(f"{p}: embedded file {rel} is too large")
+                files.append((rel, bytes(data)))
+        self.scene = SceneBundle(bytes(attachments[SCENE_TOML]), tuple(sorted(files)))
+        self.pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None
+        if PIECES_JSON in attachments:
+            if hashlib.sha256(attachments[PIECES_JSON]).hexdigest() != self.metadata.get("pieces_sha256"):
+                raise RecordingError(f"{p}: the embedded convex decomposition was modified")
+            try:
+                self.pieces = pieces_from_json(bytes(attachments[PIECES_JSON]))
+            except ValueError as e:
+                raise RecordingError(f"{p}: bad {PIECES_JSON}: {e}") from None
+        if self.scene.digest != self.metadata.get("scene_sha256"):
+            raise RecordingError(
+                f"{p}: the embedded scene was modified (its sha256 does not match the metadata)"
+            )
+        try:
+            self.dt = float(self.metadata["timestep"])
+            self.t0_ns = int(self.metadata["t0_ns"])
+        except (KeyError, ValueError):
+            raise RecordingError(f"{p}: metadata lacks a valid timestep / t0_ns") from None
+        if not (0 < self.dt < 1):
+            raise RecordingError(f"{p}: implausible timestep {self.dt}")
+
+    def count(self, topic: str) -> int:
+        return self._counts.get(topic, 0)
+
+    def _iter(self, topic: str) -> Iterator[dict[str, Any]]:
+        try:
+            with open(self.path, "rb") as fh:
+                reader = make_reader(fh, validate_crcs=True)
+                for _, _, msg in reader.iter_messages(topics=[topic]):
+                    yield json.loads(msg.data)
+        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
+            raise RecordingError(f"{self.path}: corrupt data in {topic}: {_one_line(e)}") from None
+
+    def states(self) -> list[dict[str, Any]]:
+        """The contact-state messages (reads only their chunks)."""
+        return list(self._iter(TOPIC_STATES))
+
+    def commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Commanded gripper targets: step numbers (k,), positions (k, 3), quaternions (k, 4)."""
+        steps, pos, quat = [], [], []
+        try:
+            for m in self._iter(TOPIC_COMMAND):
+                p, q = np.asarray(m["pos"], float), np.asarray(m["quat"], float)
+                if p.ndim != 2 or p.shape[1:] != (3,) or q.shape != (len(p), 4):
+                    raise ValueError("pos/quat must be (k, 3) and (k, 4)")
+                steps.append(int(m["step"]) + np.arange(len(p)))
+                pos.append(p)
+                quat.append(q)
+        except (KeyError, TypeError, ValueError) as e:
+            raise RecordingError(f"{self.path}: bad gripper command message: {e}") from None
+        if not steps:
+            raise RecordingError(f"{self.path}: recording has no gripper commands")
+        s = np.concatenate(steps)
+        if np.any(np.diff(s) != 1):
+            raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
+        return s, np.concatenate(pos), np.concatenate(quat)
+
+    def frames(self) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
+        """The ~30 Hz visual frames: (time s, cable points (n+1, 3), gripper pos (3,), quat wxyz (4,)).
+
+        Read from the Foxglove channels (this decompresses the bulk chunks: slower than states()).
+        """
+        poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for m in self._iter(TOPIC_TF):
+            for tf in m.get("transforms", []):
+                tr, ro = tf["translation"], tf["rotation"]
+                poses[stamp_ns(tf["timestamp"])] = (
+                    np.array([tr["x"], tr["y"], tr["z"]], dtype=float),
+                    np.array([ro["w"], ro["x"], ro["y"], ro["z"]], dtype=float),
+                )
+        for m in self._iter(TOPIC_SCENE):
+            for ent in m.get("entities", []):
+                if ent.get("id") != "cable" or not ent.get("lines"):
+                    continue
+                ns = stamp_ns(ent["timestamp"])
+                pts = np.array([[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]], dtype=float)
+                gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
+                yield (ns - self.t0_ns) / 1e9, pts, gp, gq
+
+    def checkpoints(self) -> list[Checkpoint]:
+        out = [
+            Checkpoint(int(m["step"]), np.asarray(m["state"], float), np.asarray(m["target_pos"], float),
+                       np.asarray(m["target_quat"], float))
+            for m in self._iter(TOPIC_CHECKPOINT)
+        ]  # fmt: skip
+        if not out:
+            raise RecordingError(f"{self.path}: recording has no checkpoints")
+        return out
+
+
+def _one_line(e: BaseException) -> str:
+    s = str(e).strip().splitlines()
+    return (s[0] if s else type(e).__name__)[:200]
+
+
+# --------------------------------------------------------------------------------------------------
+# From recorded contact states to kept situations (reads only the states channel)
+# --------------------------------------------------------------------------------------------------
+
+
+def situation_from_payload(payload: Mapping[str, Any]) -> Any:
+    """The discrete situation of a contact-state message, with its contact vectors."""
+    from dataclasses import replace
+
+    from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
+
+    sit = parse_discrete_situation(payload["discrete"])
+    contacts = payload.get("contacts") or []
+    if len(contacts) == len(sit.contacts):
+        sit = DiscreteSituation(
+            tuple(
+                replace(c, vector=tuple(m["vector"])) if m.get("vector") is not None else c
+                for c, m in zip(sit.contacts, contacts, strict=True)
+            )
+        )
+    return sit
+
+
+def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
+    """The recording's contact situations debounced as in MODEL.md §4.2, as ``TimedSituation``s."""
+    from dlovr.model.program import TimedSituation
+    from dlovr.model.transitions import Debouncer, is_transient
+
+    payloads = recording.states()
+    if not payloads:
+        raise RecordingError(f"{recording.path}: recording has no contact states")
+    hold = float(recording.metadata.get("hold", DEFAULT_HOLD_S)) if hold is None else hold
+    deb: Debouncer[Any] = Debouncer(hold, is_transient)
+    first: dict[Any, Mapping[str, Any]] = {}
+    try:
+        for p in payloads:
+            sit = situation_from_payload(p)
+            deb.push(float(p["t"]), sit)
+            first.setdefault((float(p["t"]), sit), p)
+    except (KeyError, ValueError, TypeError) as e:
+        raise RecordingError(f"{recording.path}: bad contact-state message: {e}") from None
+    end = payloads[-1]["t"]  # the last message is written when the recording ends
+    out = []
+    for i, k in enumerate(deb.kept):
+        p = first.get((k.start, k.situation), {})
+        stop = k.end if i + 1 < len(deb.kept) else end
+        force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
+        out.append(
+            TimedSituation(k.start, round(stop - k.start, 9), k.situation, p.get("topological"), force)
+        )
+    return out

@@ -1,0 +1,313 @@
+"""Writing recordings: :class:`Recorder` (the MCAP file) and :class:`DemoRecorder` (a running
+demonstration, step by step); see :mod:`dlovr.recording.format` for what a file holds."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+from dlovr import __version__
+from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
+from dlovr.recording import foxglove
+from dlovr.recording.bundle import SceneBundle, pieces_to_json
+from dlovr.recording.format import (
+    CHECKPOINT_SCHEMA,
+    COMMAND_BATCH,
+    COMMAND_SCHEMA,
+    FORMAT_VERSION,
+    PIECES_JSON,
+    PROFILE,
+    SCENE_PREFIX,
+    SCENE_TOML,
+    STATES_SCHEMA,
+    TOPIC_CHECKPOINT,
+    TOPIC_COMMAND,
+    TOPIC_SCENE,
+    TOPIC_STATES,
+    TOPIC_TF,
+    dumps,
+    floats,
+)
+
+
+@contextmanager
+def finish_on_sigterm() -> Iterator[None]:
+    """Turn SIGTERM into ``SystemExit`` while inside, so ``with Recorder(...)`` finishes the file."""
+    try:
+        previous = signal.getsignal(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(143)))
+    except ValueError:  # not the main thread: nothing to install
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class Recorder:
+    """Writes one demonstration to an MCAP file (see :mod:`dlovr.recording.format` for its contents).
+
+    Use as a context manager: the file is finished on normal exit and on exceptions (and on SIGTERM
+    inside :func:`finish_on_sigterm`). It is flushed every ``flush_interval`` seconds of wall time so
+    that a killed writer loses at most that much (``dlovr recover``).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        scene: SceneBundle,
+        *,
+        scene_name: str,
+        dt: float,
+        extra_metadata: Mapping[str, str] | None = None,
+        flush_interval: float = 2.0,
+        frame_rate: float = 30.0,
+        t0_ns: int | None = None,
+        pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None = None,
+    ):
+        import mujoco
+
+        self.path = Path(path)
+        self.dt = float(dt)
+        self.dt_ns = round(self.dt * 1e9)
+        self.t0_ns = time.time_ns() if t0_ns is None else int(t0_ns)
+        self.flush_interval = float(flush_interval)
+        self.frame_every = max(1, round(1.0 / (frame_rate * self.dt)))
+        self._fh: BinaryIO = open(self.path, "wb")
+        self._w = Writer(self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD)
+        self._w.start(profile=PROFILE, library=f"dlovr {__version__}")
+        pieces_json = pieces_to_json(pieces) if pieces is not None else b""
+        meta = {
+            "pieces_sha256": hashlib.sha256(pieces_json).hexdigest() if pieces is not None else "",
+            "format_version": FORMAT_VERSION,
+            "dlovr_version": __version__,
+            "mujoco_version": mujoco.__version__,
+            "scene_name": scene_name,
+            "scene_sha256": scene.digest,
+            "timestep": repr(self.dt),
+            "t0_ns": str(self.t0_ns),
+            "hold": repr(DEFAULT_HOLD_S),
+            **dict(extra_metadata or {}),
+        }
+        self._w.add_metadata("dlovr", meta)
+        now = self.t0_ns
+        self._w.add_attachment(now, now, SCENE_TOML, "application/toml", scene.toml)
+        if pieces is not None:
+            self._w.add_attachment(now, now, PIECES_JSON, "application/json", pieces_json)
+        for name, data in scene.files:
+            self._w.add_attachment(now, now, SCENE_PREFIX + name, "application/octet-stream", data)
+        js = "jsonschema"
+        ids = {
+            TOPIC_COMMAND: self._w.register_schema("dlovr.Commands", js, dumps(COMMAND_SCHEMA)),
+            TOPIC_CHECKPOINT: self._w.register_schema("dlovr.Checkpoint", js, dumps(CHECKPOINT_SCHEMA)),
+            TOPIC_STATES: self._w.register_schema("dlovr.ContactState", js, dumps(STATES_SCHEMA)),
+            TOPIC_SCENE: self._w.register_schema(
+                "foxglove.SceneUpdate", js, foxglove.schema("foxglove.SceneUpdate")
+            ),
+            TOPIC_TF: self._w.register_schema(
+                "foxglove.FrameTransforms", js, foxglove.schema("foxglove.FrameTransforms")
+            ),
+        }
+        self._ch = {topic: self._w.register_channel(topic, "json", sid) for topic, sid in ids.items()}
+        self._pending_states: list[tuple[int, bytes]] = []
+        self._commands: list[tuple[int, list[float], list[float]]] = []
+        self._seq = 0
+        self._last_flush = time.monotonic()
+        self._closed = False
+        self._w.flush()
+
+    # -- messages -----------------------------------------------------------------------------------
+
+    def _ns(self, step: int) -> int:
+        return self.t0_ns + int(step) * self.dt_ns
+
+    def _add(self, topic: str, step: int, payload: bytes) -> None:
+        self._seq += 1
+        ns = self._ns(step)
+        self._w.add_message(self._ch[topic], ns, payload, ns, self._seq)
+
+    def command(self, step: int, pos: Sequence[float], quat: Sequence[float]) -> None:
+        """The gripper target commanded for step ``step`` (applied before that step); steps come in
+        order, written in messages of :data:`COMMAND_BATCH` steps."""
+        c = self._commands
+        if c and int(step) != c[0][0] + len(c):
+            raise ValueError(f"command for step {step} out of order (expected {c[0][0] + len(c)})")
+        c.append((int(step), floats(pos), floats(quat)))
+        if len(c) >= COMMAND_BATCH:
+            self._write_commands()
+        self._maybe_flush()
+
+    def _write_commands(self) -> None:
+        c = self._commands
+        if c:
+            payload = {"step": c[0][0], "pos": [x[1] for x in c], "quat": [x[2] for x in c]}
+            self._add(TOPIC_COMMAND, c[0][0], dumps(payload))
+            c.clear()
+
+    def checkpoint(
+        self, step: int, state: np.ndarray, target_pos: Sequence[float], target_quat: Sequence[float]
+    ) -> None:
+        """A full simulator state after ``step`` steps."""
+        payload = {
+            "step": int(step),
+            "state": floats(state),
+            "target_pos": floats(target_pos),
+            "target_quat": floats(target_quat),
+        }
+        self._add(TOPIC_CHECKPOINT, step, dumps(payload))
+
+    def contact_state(self, step: int, payload: Mapping[str, Any]) -> None:
+        """A contact situation that began at ``step`` (buffered; written in chunks of its own)."""
+        self._pending_states.append((int(step), dumps(dict(payload))))
+
+    def frame(
+        self,
+        step: int,
+        points: np.ndarray,
+        gripper_pos: Sequence[float],
+        gripper_quat: Sequence[float],
+        radius: float,
+        obstacles: Sequence[tuple[str, np.ndarray]] = (),
+    ) -> None:
+        """Foxglove scene (cable, gripper, and on the first call the obstacles) and gripper frame.
+
+        ``obstacles``: (name, triangles (k, 3, 3) world frame) pairs, sent once (they persist).
+        """
+        st = foxglove.timestamp(self._ns(step))
+        scene = foxglove.scene_update(st, points, radius, obstacles)
+        tf = foxglove.frame_transforms(st, gripper_pos, gripper_quat)
+        self._add(TOPIC_SCENE, step, dumps(scene))
+        self._add(TOPIC_TF, step, dumps(tf))
+
+    # -- flushing and closing -----------------------------------------------------------------------
+
+    def _write_states(self) -> None:
+        """End the bulk chunk, write the buffered contact states, end their chunk."""
+        if not self._pending_states:
+            return
+        self._w.flush()
+        for step, payload in self._pending_states:
+            self._add(TOPIC_STATES, step, payload)
+        self._pending_states.clear()
+        self._w.flush()
+
+    def flush(self) -> None:
+        """Write everything so far to disk (complete chunks that ``dlovr recover`` can rescue)."""
+        self._write_commands()
+        self._write_states()
+        self._w.flush()
+        os.fsync(self._fh.fileno())
+        self._last_flush = time.monotonic()
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_interval:
+            self.flush()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        """Finish the file (summary and footer). Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._write_commands()
+            self._write_states()
+            self._w.finish()
+        finally:
+            self._fh.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+CHECKPOINT_EVERY_S = 1.0
+
+
+class DemoRecorder:
+    """Records a running demonstration: call :meth:`step` after every simulation step.
+
+    ``sim`` is a :class:`dlovr.sim.Simulator`, ``tracker`` its :class:`dlovr.sim.tracker.ContactTracker`;
+    the scene is embedded from ``scene.path``. The first checkpoint is written at construction (so a
+    recording may start at any moment of a session), then one every second of simulated time.
+    """
+
+    def __init__(self, path: str | Path, scene: Any, sim: Any, tracker: Any, **kw: Any):
+        dt = float(sim.model.opt.timestep)
+        self.sim, self.tracker = sim, tracker
+        meta = {"hold": repr(float(tracker.hold)), **dict(kw.pop("extra_metadata", None) or {})}
+        bundle = SceneBundle.from_path(scene.path)
+        self.rec = Recorder(
+            path, bundle, scene_name=scene.name, dt=dt, extra_metadata=meta, pieces=sim.pieces, **kw
+        )
+        self.path = self.rec.path
+        self.start_step = int(sim.step_index)
+        self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
+        self._radius = float(scene.dlo.radius)
+        self._obstacles = [(o.name, np.asarray(o.mesh.triangles)) for o in tracker.geometry.objects]
+        self._checkpoint()
+        start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
+        self._prev = start.discrete
+        self._n_changes = len(tracker.changes)
+        self.rec.contact_state(self.start_step, start.payload())
+
+    def _checkpoint(self) -> None:
+        st = self.sim.get_state()
+        self.rec.checkpoint(st.step, st.mj, st.target_pos, st.target_quat)
+
+    def step(self, record: Any) -> None:
+        """Log the step just taken (its command, and on schedule checkpoints, states and frames)."""
+        k = int(record.step)
+        self.rec.command(k, record.target_pos, record.target_quat)
+        for st in self.tracker.changes[self._n_changes :]:
+            classes = classify_step(self._prev, st.discrete) if self._prev is not None else ()
+            self.rec.contact_state(st.step, st.payload(classes))
+            self._prev = st.discrete
+        self._n_changes = len(self.tracker.changes)
+        since = k - self.start_step
+        if since % self._cp_every == 0:
+            self._checkpoint()
+        if since % self.rec.frame_every == 0:
+            first = since == self.rec.frame_every
+            self.rec.frame(
+                k, record.points, record.gripper_pos, record.gripper_quat, self._radius,
+                self._obstacles if first else (),
+            )  # fmt: skip
+
+    def close(self) -> Path:
+        """Finish the file (with a final checkpoint at the last step); return its path. Idempotent."""
+        if not self.rec.closed:
+            if (int(self.sim.step_index) - self.start_step) % self._cp_every:
+                self._checkpoint()
+            cur = self.tracker.current
+            if cur is not None:  # where the recording ends (the situation it ends in, unchanged)
+                end = {
+                    **cur.payload(),
+                    "step": int(self.sim.step_index),
+                    "t": float(self.sim.time),
+                    "end": True,
+                }
+                self.rec.contact_state(int(self.sim.step_index), end)
+            self.rec.close()
+        return self.path
+
+    def __enter__(self) -> DemoRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
