@@ -1,0 +1,59 @@
+"""The state panel: the markdown at the top of the GUI with the live contact situation (discrete and
+topological), the last transition class, the forces and the simulation clock, or the timeline moment
+being scrubbed."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from dlovr.sim.tracker import ContactState
+
+if TYPE_CHECKING:
+    import viser
+
+
+def status_markdown(
+    state: ContactState | None,
+    last_class: str,
+    *,
+    t: float,
+    rtf: float,
+    paused: bool,
+    note: str = "",
+) -> str:
+    if state is None:
+        return "Situation: (starting)"
+    fx, fy, fz = state.gripper_force
+    run = "paused" if paused else f"running, {rtf:.2f}x real time"
+    lines = [
+        f"**Discrete:** `{state.discrete.format()}`",
+        f"**Topological:** `{state.topological.format()}`",
+        f"**Last transition:** `{last_class or '-'}`",
+        f"**Gripper force:** {math.hypot(fx, fy, fz):.2f} N ({fx:+.2f}, {fy:+.2f}, {fz:+.2f})",
+        f"**Contact force on the cable:** {sum(state.forces):.2f} N",
+        f"t = {t:.2f} s, {run}",
+    ]
+    if note:
+        lines.append(f"**{note}**")
+    return "\n\n".join(lines)
+
+
+class StatePanel:
+    """The situation markdown; :meth:`show_live` skips a text already shown live."""
+
+    def __init__(self) -> None:
+        self._last_text = ""
+
+    def build(self, gui: viser.GuiApi) -> None:
+        self.markdown = gui.add_markdown("Situation: (starting)")
+
+    def show_live(self, text: str) -> None:
+        """Show the live status (a :func:`status_markdown` text) unless it is the last one shown live."""
+        if text != self._last_text:
+            self.markdown.content = text
+            self._last_text = text
+
+    def show(self, text: str) -> None:
+        """Show another text (a timeline moment)."""
+        self.markdown.content = text

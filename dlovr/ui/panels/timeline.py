@@ -1,0 +1,128 @@
+"""The timeline panel: the kept situations as coloured bands, a time slider to scrub the cable
+through them (live or a recording file), and opening a recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from dlovr.geometry import SceneGeometry
+from dlovr.model.transitions import format_classes
+from dlovr.recording import RecordingError
+from dlovr.scene import SceneError
+from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline
+
+if TYPE_CHECKING:
+    import viser
+
+    from dlovr.ui.server import DemoServer
+
+
+class TimelinePanel:
+    """The "Timeline" folder and the commands behind it (:meth:`DemoServer.open_recording`,
+    :meth:`DemoServer.scrub`, :meth:`DemoServer.live`). The timeline being viewed is the server's
+    ``_view`` (None: the live view), its scene ``_view_scene`` (None: the live scene)."""
+
+    def __init__(self, app: DemoServer) -> None:
+        self.app = app
+        self._key: Any = None
+
+    def build(self, gui: viser.GuiApi) -> None:
+        app = self.app
+        with gui.add_folder("Timeline"):
+            self.timeline_html = gui.add_html("")
+            self.slider = gui.add_slider("Time [s]", min=0.0, max=1.0, step=0.01, initial_value=0.0)
+            self.live_btn = gui.add_button("Back to live", visible=False)
+            self.open_dd = gui.add_dropdown("Recording file", options=self.recording_files())
+            self.open_btn = gui.add_button("Open recording")
+            self.open_md = gui.add_markdown("")
+
+        @self.slider.on_update
+        def _(event: Any) -> None:
+            if event.client is not None:
+                app.scrub(float(self.slider.value))
+
+        self.live_btn.on_click(lambda _e: app.live())
+
+        @self.open_btn.on_click
+        def _(_e: Any) -> None:
+            name = self.open_dd.value
+            if not name:
+                self.open_md.content = "no recording selected"
+                return
+            try:
+                tl = app.open_recording(app.recordings_dir / name)
+                self.open_md.content = f"opened `{name}`: {len(tl.bands)} situations"
+            except (RecordingError, SceneError, OSError) as e:
+                self.open_md.content = f"cannot open: {e}"
+
+    def open_recording(self, path: str | Path) -> Timeline:
+        app = self.app
+        tl, scene, rec = recording_timeline(path)
+        with app.lock:
+            app._view = tl
+            app._view_scene = scene
+        if app.server is not None:
+            app.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
+            self.live_btn.visible = True
+            self.update(force=True)
+            app.scrub(tl.start)
+        return tl
+
+    def scrub(self, t: float) -> Snapshot | None:
+        app = self.app
+        with app.lock:
+            if app._view is None:
+                app._view = app.session.timeline
+                app._view_scene = None
+            tl = app._view
+            snap = tl.at(t)
+        if app.server is None or snap is None:
+            return snap
+        band = tl.band_at(t)
+        srv = app.server
+        view = app.viewport
+        with app._draw_lock, srv.atomic():
+            view.draw_cable(snap.points, snap.colors, np.zeros((0, 2, 3)))
+            view.body.position, view.body.wxyz = tuple(snap.gripper_pos), tuple(snap.gripper_quat)
+            cls = format_classes(band.classes) if band and band.classes else "-"
+            app.state_panel.show(
+                f"**Timeline ({tl.source}) at {t:.2f} s**\n\n**Discrete:** `{snap.text}`\n\n"
+                f"**Transition into it:** `{cls}`"
+            )
+        srv.flush()
+        self.live_btn.visible = True
+        return snap
+
+    def live(self) -> None:
+        app = self.app
+        with app.lock:
+            was_other = app._view_scene is not None
+            app._view = None
+            app._view_scene = None
+        if app.server is not None:
+            if was_other:
+                app.viewport.show_obstacles(app.session.geometry, app.session.scene)
+            self.live_btn.visible = False
+
+    def recording_files(self) -> list[str]:
+        d = self.app.recordings_dir
+        files = sorted((p.name for p in d.glob("*.mcap")), reverse=True) if d.is_dir() else []
+        return files or [""]
+
+    def update(self, force: bool = False) -> None:
+        """Redraw the bands and the slider's range when the viewed timeline changed (or ``force``)."""
+        app = self.app
+        tl = app._view or app.session.timeline
+        key = (id(tl), len(tl.bands), round(tl.end))
+        if not force and key == self._key:
+            return
+        self._key = key
+        self.timeline_html.content = tl.html()
+        self.slider.min = round(tl.start, 2)
+        self.slider.max = round(max(tl.end, tl.start + 0.01), 2)
+        files = self.recording_files()
+        if tuple(files) != tuple(self.open_dd.options):
+            self.open_dd.options = files

@@ -1,0 +1,326 @@
+"""The ``dlovr serve`` server: a viser server around a real-time simulation.
+
+:class:`DemoServer` owns one :class:`dlovr.sim.Simulator` (in a :class:`dlovr.ui.session.Session`),
+its :class:`dlovr.sim.tracker.ContactTracker` and, while recording, a
+:class:`dlovr.recording.DemoRecorder`. A background thread (:mod:`dlovr.ui.loop`) steps the simulation
+at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the cable, the gripper
+and the contact feedback at ~40 Hz, each update in one ``server.atomic()`` block followed by
+``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
+server-wide): the 3D scene is drawn by :class:`dlovr.ui.viewport.Viewport`, the GUI is built by the
+panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation).
+
+The gripper gizmo only sets the *target* pose; the simulated gripper follows it with bounded speed
+(:class:`dlovr.sim.Simulator`). A tab that disconnects mid-drag leaves the gripper where it was; a
+recording in progress is independent of the tabs and is finished by :meth:`DemoServer.stop`.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import viser
+
+from dlovr.scene import Scene, load_scene
+from dlovr.transforms import quat_mul
+from dlovr.ui.drawing import contact_arrows, point_classes, point_colors
+from dlovr.ui.loop import realtime_loop
+from dlovr.ui.panels import RecordingPanel, SimulationPanel, StatePanel, TimelinePanel, status_markdown
+from dlovr.ui.session import Session
+from dlovr.ui.timeline import Snapshot, Timeline
+from dlovr.ui.viewport import Viewport
+
+PUBLISH_HZ = 40.0
+
+
+HEADLESS_CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-dev-shm-usage",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
+"""Flags under which headless Chromium renders the UI with software WebGL on a machine with no GPU and
+no network (used by the browser tests and benchmarks/bench_ui.py)."""
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that is free right now on ``host``."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+class DemoServer:
+    """The ``dlovr serve`` server: ``DemoServer(scene).start()``, then :meth:`stop`.
+
+    ``port=None`` picks a free port. ``recordings_dir`` is where recordings are written (created on
+    the first recording). ``realtime=False`` steps as fast as possible (tests, benchmarks).
+    """
+
+    def __init__(
+        self,
+        scene: str | Path = "table",
+        *,
+        host: str = "127.0.0.1",
+        port: int | None = 8080,
+        recordings_dir: str | Path = "recordings",
+        publish_hz: float = PUBLISH_HZ,
+        verbose: bool = False,
+    ):
+        self.host = host
+        self._port_wanted = free_port(host) if port is None else int(port)
+        self.recordings_dir = Path(recordings_dir)
+        self.publish_hz = float(publish_hz)
+        self.verbose = verbose
+        self.lock = threading.RLock()
+        self.session = Session(load_scene(scene), self.lock)
+        self.server: viser.ViserServer | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._paused = False
+        self._target: tuple[np.ndarray, np.ndarray] | None = None
+        self._target_dirty = False
+        self._dragging: dict[int, float | None] = {}  # client id -> drag end time (None: dragging)
+        self._draw_lock = threading.RLock()
+        self._view: Timeline | None = None  # a timeline being scrubbed (None: live view)
+        self._view_scene: Scene | None = None
+        self.program_text = ""
+        self.last_recording: Path | None = None
+        self.publish_count = 0
+        self._rtf = 1.0
+        self.viewport = Viewport(self)
+        self.state_panel = StatePanel()
+        self.recording_panel = RecordingPanel(self)
+        self.timeline_panel = TimelinePanel(self)
+        self.simulation_panel = SimulationPanel(self)
+
+    # -- lifecycle ----------------------------------------------------------------------------------
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port() if self.server is not None else self._port_wanted
+
+    @property
+    def url(self) -> str:
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        return f"http://{host}:{self.port}"
+
+    def start(self) -> DemoServer:
+        srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
+        self.server = srv
+        srv.gui.configure_theme(show_share_button=False, control_width="large")
+        srv.scene.configure_environment_map(None)
+        srv.scene.add_light_ambient("/ambient", intensity=1.2)
+        srv.scene.add_light_directional("/sun", intensity=1.5, position=(1.0, -1.0, 2.0))
+        srv.scene.set_up_direction("+z")
+        self._build_gui()
+        self._build_scene()
+        srv.on_client_connect(self._on_connect)
+        srv.on_client_disconnect(self._on_disconnect)
+        self._stop.clear()
+        self._thread = threading.Thread(target=realtime_loop, args=(self,), name="dlovr-sim", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> Path | None:
+        """Stop the simulation thread, finish any recording (returned) and stop the server."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+            self._thread = None
+        path = self.session.stop_recording()
+        if path is not None:
+            self.last_recording = path
+        compiling = self.recording_panel.compile_thread
+        if compiling is not None:
+            compiling.join(timeout=30)
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        return path
+
+    def __enter__(self) -> DemoServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- commands (GUI callbacks and tests) --------------------------------------------------------
+
+    def set_target(self, pos: Any, quat: Any | None = None, *, move_gizmo: bool = True) -> None:
+        """Command the gripper pose (what the gizmo does); the sim follows with bounded speed."""
+        p = np.asarray(pos, dtype=float)
+        q = np.asarray(quat, dtype=float) if quat is not None else self.target()[1]
+        self._target = (p, q)
+        self._target_dirty = True
+        self._wake.set()
+        if move_gizmo and self.server is not None:
+            self.viewport.gizmo.position = tuple(p)
+            self.viewport.gizmo.wxyz = tuple(q)
+
+    def target(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._target is not None:
+            return self._target
+        with self.lock:
+            s = self.session.sim
+            return s.target_pos.copy(), s.target_quat.copy()
+
+    def jog(self, dx: float = 0.0, dy: float = 0.0, dz: float = 0.0, yaw: float = 0.0) -> None:
+        p, q = self.target()
+        if yaw:
+            q = quat_mul(np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]), q)
+        self.set_target(p + np.array([dx, dy, dz]), q)
+
+    def hold(self) -> None:
+        """Stop the gripper where it is now (target := current gripper pose)."""
+        p, q = self.session.gripper_pose()
+        self.set_target(p, q)
+
+    def pause(self, paused: bool = True) -> None:
+        self._paused = paused
+        if self.server is not None:
+            self.simulation_panel.pause_btn.label = "Resume" if paused else "Pause"
+
+    def reset(self) -> None:
+        """Restart the current scene (a recording in progress is finished first)."""
+        self.load(self.session.scene.path)
+
+    def load(self, scene: str | Path) -> None:
+        """Switch to another scene (built-in name or path); finishes a recording in progress."""
+        new = Session(load_scene(scene), self.lock)
+        with self.lock:
+            self.recording_panel.finish()
+            self.session = new
+            self._target = None
+            self._target_dirty = False
+            self._view = None
+            self._view_scene = None
+        if self.server is not None:
+            self._build_scene()
+            p, q = new.gripper_pose()
+            self.viewport.gizmo.position, self.viewport.gizmo.wxyz = tuple(p), tuple(q)
+            self.timeline_panel.live_btn.visible = False
+
+    def start_recording(self, path: str | Path | None = None) -> Path:
+        """Start recording to ``path`` (default: a new timestamped file in ``recordings_dir``)."""
+        return self.recording_panel.start(path)
+
+    def stop_recording(self, *, wait: bool = True) -> Path | None:
+        """Finish the recording; compile it (in a thread) and show the program in the panel."""
+        return self.recording_panel.stop(wait=wait)
+
+    def open_recording(self, path: str | Path) -> Timeline:
+        """Show a recording's timeline and cable (the live simulation keeps running unseen)."""
+        return self.timeline_panel.open_recording(path)
+
+    def scrub(self, t: float) -> Snapshot | None:
+        """Show the cable of the viewed timeline (a recording, or the live one) at time ``t``."""
+        return self.timeline_panel.scrub(t)
+
+    def live(self) -> None:
+        """Back to the live simulation view."""
+        self.timeline_panel.live()
+
+    def status(self) -> dict[str, Any]:
+        with self.lock:
+            s = self.session
+            st = s.state
+            return {
+                "scene": s.scene.name,
+                "t": s.record.time,
+                "step": s.record.step,
+                "gripper_pos": s.record.gripper_pos.copy(),
+                "target_pos": s.sim.target_pos.copy(),
+                "points": np.asarray(s.record.points).copy(),
+                "discrete": st.discrete.format(),
+                "topological": st.topological.format(),
+                "last_class": s.last_class(),
+                "force": float(sum(st.forces)),
+                "gripper_force": list(st.gripper_force),
+                "recording": s.recorder.path if s.recorder else None,
+                "paused": self._paused,
+                "rtf": self._rtf,
+                "kept": len(s.tracker.kept),
+            }
+
+    def _publish(self) -> None:
+        srv = self.server
+        if srv is None:
+            return
+        with self.lock:
+            s = self.session
+            rec, st = s.record, s.state
+            text = status_markdown(
+                st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
+            )
+            viewing = self._view is not None
+        if not viewing:
+            pts = np.asarray(rec.points, dtype=float)
+            colors = point_colors(point_classes(st, len(pts)))
+            arrows = contact_arrows(st, pts)
+            view = self.viewport
+            with self._draw_lock, srv.atomic():
+                if self._view is not None:
+                    return
+                view.draw_cable(pts, colors, arrows)
+                view.body.position = tuple(map(float, rec.gripper_pos))
+                view.body.wxyz = tuple(map(float, rec.gripper_quat))
+                self.state_panel.show_live(text)
+            srv.flush()
+            self.publish_count += 1
+        self.timeline_panel.update()
+
+    # -- the GUI ----------------------------------------------------------------------------------
+
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        self.viewport.build_gizmo()
+        self.state_panel.build(gui)
+        self.recording_panel.build(gui)
+        self.timeline_panel.build(gui)
+        self.simulation_panel.build(gui)
+
+    def _build_scene(self) -> None:
+        with self._draw_lock:
+            self.viewport.build()
+            self.timeline_panel.update(force=True)
+
+    # -- clients ------------------------------------------------------------------------------------
+
+    def _on_connect(self, client: Any) -> None:
+        pass
+
+    def _on_disconnect(self, client: Any) -> None:
+        ended = self._dragging.pop(client.client_id, -1.0)
+        if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
+            return
+        if ended is None or (ended >= 0 and time.perf_counter() - ended < 1.0):
+            self.hold()  # it went away mid-drag: the gripper stays where it is now
+
+
+def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
+    """Run the server until Ctrl-C (used by ``dlovr serve``)."""
+    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
+    print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        path = srv.stop()
+        if path is not None:
+            print(f"dlovr serve: finished recording {path}", flush=True)
+        print("dlovr serve: stopped", flush=True)

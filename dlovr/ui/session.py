@@ -1,0 +1,143 @@
+"""The simulation session (no viser): one scene's simulator, contact tracker, optional recorder and
+live timeline, shared by the real-time thread and the GUI callbacks under one lock."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dlovr.model.transitions import classify_step, format_classes
+from dlovr.recording import DemoRecorder
+from dlovr.scene import Scene
+from dlovr.sim import SimulationDiverged, Simulator
+from dlovr.sim.tracker import ContactTracker
+from dlovr.ui.drawing import point_classes, point_colors
+from dlovr.ui.timeline import Band, Snapshot, Timeline
+
+
+class Session:
+    """One scene's simulation with its contact tracker, optional recorder and live timeline.
+
+    All methods take ``lock``; :meth:`advance` is what the real-time thread calls.
+    """
+
+    def __init__(self, scene: Scene, lock: threading.RLock):
+        self.scene = scene
+        self.lock = lock
+        self.sim = Simulator(scene, track=True)
+        self.tracker: ContactTracker = self.sim.tracker
+        self.geometry = self.tracker.geometry
+        self.recorder: DemoRecorder | None = None
+        self.record = self.sim.record()
+        self.state = self.tracker.update(self.record)
+        self.timeline = Timeline()
+        self._kept_seen = 0
+        self._last_snap_t = -1.0
+        self.note = ""
+        self._class_cache: dict[Any, tuple[str, ...]] = {}
+        self._format_cache: dict[Any, str] = {}
+        self._snapshot()
+
+    @property
+    def dt(self) -> float:
+        return float(self.sim.model.opt.timestep)
+
+    def last_class(self) -> str:
+        for b in reversed(self.timeline.bands):
+            if b.classes:
+                return format_classes(b.classes)
+        return ""
+
+    def advance(self, n: int, target: tuple[np.ndarray, np.ndarray] | None) -> bool:
+        """Step ``n`` times toward ``target``; False (and the state restored) if the sim diverged."""
+        with self.lock:
+            sim = self.sim
+            if target is not None:
+                sim.set_target(target[0], target[1])
+            for _ in range(n):
+                good = sim.get_state()
+                try:
+                    rec = sim.step()
+                except SimulationDiverged as e:
+                    sim.set_state(good)
+                    sim.set_target(
+                        sim.data.mocap_pos[sim.built.mocap_id], sim.data.mocap_quat[sim.built.mocap_id]
+                    )
+                    self.record = sim.record()
+                    self.note = f"simulation diverged ({e.reason}); gripper stopped, state restored"
+                    return False
+                st = rec.state  # the simulator tracks the contacts (track=True)
+                if self.recorder is not None:
+                    self.recorder.step(rec)
+                self.record, self.state = rec, st
+            self._timeline_update()
+            return True
+
+    def _timeline_update(self) -> None:
+        kept = self.tracker.kept
+        bands = self.timeline.bands
+        grew = len(kept) > self._kept_seen
+        start = max(0, min(len(bands), len(kept)) - 2)  # only the last one or two may change
+        del bands[start:]
+        for i in range(start, len(kept)):
+            k = kept[i]
+            classes = self._classes(kept[i - 1].situation, k.situation) if i else ()
+            bands.append(Band(k.start, k.end, self._format(k.situation), classes))
+        self._kept_seen = len(kept)
+        if grew or self.record.time - self._last_snap_t >= 0.1:
+            self._snapshot()
+
+    def _classes(self, a: Any, b: Any) -> tuple[str, ...]:
+        key = (a, b)
+        if key not in self._class_cache:
+            self._class_cache[key] = tuple(classify_step(a, b))
+        return self._class_cache[key]
+
+    def _format(self, sit: Any) -> str:
+        if sit not in self._format_cache:
+            self._format_cache[sit] = sit.format()
+        return self._format_cache[sit]
+
+    def _snapshot(self) -> None:
+        r, st = self.record, self.state
+        pts = np.asarray(r.points, dtype=float)
+        self.timeline.snapshots.append(
+            Snapshot(
+                r.time,
+                pts,
+                point_colors(point_classes(st, len(pts))),
+                r.gripper_pos.copy(),
+                r.gripper_quat.copy(),
+                st.discrete.format(),
+            )
+        )
+        self._last_snap_t = r.time
+
+    def restart_timeline(self) -> None:
+        self.timeline = Timeline()
+        self._kept_seen = 0
+        self._last_snap_t = -1.0
+        self._snapshot()
+
+    def start_recording(self, path: Path) -> Path:
+        with self.lock:
+            if self.recorder is not None:
+                return self.recorder.path
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.recorder = DemoRecorder(path, self.scene, self.sim, self.tracker)
+            self.state = self.tracker.current or self.state
+            self.restart_timeline()
+            return self.recorder.path
+
+    def stop_recording(self) -> Path | None:
+        with self.lock:
+            rec, self.recorder = self.recorder, None
+            return rec.close() if rec is not None else None
+
+    def gripper_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        with self.lock:
+            d, mid = self.sim.data, self.sim.built.mocap_id
+            return d.mocap_pos[mid].copy(), d.mocap_quat[mid].copy()

@@ -1,0 +1,140 @@
+"""The timeline (no viser): kept contact situations as coloured bands, and cable snapshots to scrub
+through, either live (filled by :class:`dlovr.ui.session.Session`) or read from a recording file."""
+
+from __future__ import annotations
+
+import html
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dlovr.model.discrete import Stability
+from dlovr.model.transitions import classify_step, format_classes
+from dlovr.recording import Recording, kept_states
+from dlovr.scene import Scene
+from dlovr.ui.drawing import point_colors
+
+BAND_COLORS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#9c755f")
+
+
+@dataclass
+class Snapshot:
+    """The cable at one moment (for the timeline): time, points, point colours, situation text."""
+
+    t: float
+    points: np.ndarray
+    colors: np.ndarray
+    gripper_pos: np.ndarray
+    gripper_quat: np.ndarray
+    text: str
+
+
+@dataclass
+class Band:
+    """One kept contact situation on the timeline."""
+
+    start: float
+    end: float
+    situation: str
+    classes: tuple[str, ...]
+
+
+@dataclass
+class Timeline:
+    """Kept situations as bands plus cable snapshots (one per kept situation and a few per second)."""
+
+    bands: list[Band] = field(default_factory=list)
+    snapshots: deque = field(default_factory=lambda: deque(maxlen=20000))
+    source: str = "live"
+
+    @property
+    def end(self) -> float:
+        t = [b.end for b in self.bands]
+        if self.snapshots:
+            t.append(self.snapshots[-1].t)
+        return max(t, default=0.0)
+
+    @property
+    def start(self) -> float:
+        t = [b.start for b in self.bands]
+        if self.snapshots:
+            t.append(self.snapshots[0].t)
+        return min(t, default=0.0)
+
+    def at(self, t: float) -> Snapshot | None:
+        if not self.snapshots:
+            return None
+        ts = np.fromiter((s.t for s in self.snapshots), dtype=float, count=len(self.snapshots))
+        i = int(np.searchsorted(ts, t, side="right")) - 1
+        return self.snapshots[max(0, i)]
+
+    def band_at(self, t: float) -> Band | None:
+        for b in self.bands:
+            if b.start <= t < b.end:
+                return b
+        return self.bands[-1] if self.bands and t >= self.bands[-1].start else None
+
+    def html(self) -> str:
+        """Coloured bands, one per kept situation, transitions marked with their classes."""
+        t0, t1 = self.start, self.end
+        span = max(t1 - t0, 1e-9)
+        colors: dict[str, str] = {}
+        cells = []
+        for b in self.bands:
+            c = colors.setdefault(b.situation, BAND_COLORS[len(colors) % len(BAND_COLORS)])
+            w = max(0.5, 100.0 * (b.end - b.start) / span)
+            label = format_classes(b.classes) if b.classes else ""
+            tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
+            border = "border-left:2px solid #000;" if b.classes else ""
+            cells.append(f'<div title="{tip}" style="width:{w:.2f}%;background:{c};{border}"></div>')
+        bar = (
+            '<div class="dlovr-timeline" style="display:flex;height:14px;width:100%;'
+            f'background:#ddd;overflow:hidden;border-radius:3px">{"".join(cells)}</div>'
+        )
+        rows = "".join(
+            f"<li>{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
+            f"<code>{html.escape(b.situation)}</code></li>"
+            for b in self.bands[-8:]
+        )
+        src = html.escape(self.source)
+        return (
+            f'<div style="font-size:11px">{bar}<div>{src}: {len(self.bands)} situations, '
+            f"{t0:.2f}-{t1:.2f} s</div><ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
+        )
+
+
+def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
+    """Timeline of a recording file (bands from its debounced contact states, cable from its
+    Foxglove frames), its embedded scene (loaded from a temporary directory) and the Recording."""
+    import tempfile
+
+    from dlovr.recording import load_embedded_scene, situation_from_payload
+
+    rec = Recording(path)
+    tmp = tempfile.mkdtemp(prefix="dlovr-ui-")
+    scene = load_embedded_scene(rec, tmp)
+    kept = kept_states(rec)
+    tl = Timeline(source=Path(path).name)
+    for i, k in enumerate(kept):
+        classes = classify_step(kept[i - 1].situation, k.situation) if i else ()
+        tl.bands.append(Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes)))
+    states = rec.states()
+    st_t = np.array([float(p["t"]) for p in states])
+    for t, pts, gp, gq in rec.frames():
+        j = max(0, int(np.searchsorted(st_t, t + 1e-9, side="right")) - 1)
+        payload = states[j] if states else None
+        classes: list[Stability | None] = [None] * len(pts)
+        text = ""
+        if payload is not None:
+            sit = situation_from_payload(payload)
+            text = payload.get("discrete", "")
+            for c, m_c in zip(sit.contacts, payload.get("contacts", []), strict=False):
+                span, cls = m_c.get("span"), c.state.stability_class
+                if span and cls is not None:
+                    for i in range(max(0, span[0]), min(len(pts) - 1, span[1]) + 1):
+                        classes[i] = cls
+        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text))
+    return tl, scene, rec

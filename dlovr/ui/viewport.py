@@ -1,0 +1,180 @@
+"""The 3D viewport: the obstacles (with optional face labels), the cable as batched cylinders and
+balls coloured by stability class, the contact vectors, the gripper body and the gizmo that commands
+the gripper target."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import trimesh
+
+from dlovr.geometry import SceneGeometry
+from dlovr.scene import Scene
+from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
+
+if TYPE_CHECKING:
+    from dlovr.ui.server import DemoServer
+
+
+class Viewport:
+    """The server's 3D scene elements; drawing happens under the server's ``_draw_lock``."""
+
+    def __init__(self, app: DemoServer) -> None:
+        self.app = app
+        self.obstacle_handles: list[Any] = []
+        self.shown_geometry: Any = None
+        self.cable: Any = None
+        self.joints: Any = None
+        self.cable_n = -1
+        self.arrows: Any = None
+
+    def build_gizmo(self) -> None:
+        """The transform gizmo: a drag sets the gripper target (:meth:`DemoServer.set_target`)."""
+        app = self.app
+        p, q = app.session.gripper_pose()
+        self.gizmo = app.server.scene.add_transform_controls(
+            "/gripper", scale=0.15, position=tuple(p), wxyz=tuple(q)
+        )
+
+        @self.gizmo.on_update
+        async def _(event: Any) -> None:
+            if event.phase == "start" and event.client_id is not None:
+                app._dragging[event.client_id] = None
+            elif event.phase == "end":
+                # viser sends a synthetic "end" just before the disconnect callbacks of a tab that
+                # goes away mid-drag: remember when, so _on_disconnect can tell
+                if event.client_id is not None:
+                    app._dragging[event.client_id] = time.perf_counter()
+                return
+            if event.phase == "update":
+                g = event.target
+                app.set_target(
+                    np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float), move_gizmo=False
+                )
+
+    def draw_cable(self, pts: np.ndarray, colors: np.ndarray, arrows: np.ndarray) -> None:
+        """Move the cable to ``pts`` (world frame, m) with per-point ``colors``; ``arrows`` (k, 2, 3)."""
+        r = (
+            float(self.app.session.scene.dlo.radius)
+            if self.app._view_scene is None
+            else float(self.app._view_scene.dlo.radius)
+        )
+        pos, wxyz, scales = segment_transforms(pts, r)
+        seg_colors = np.where(
+            (colors[:-1] != np.array(COLOR_FREE)).any(axis=1)[:, None], colors[:-1], colors[1:]
+        ).astype(np.uint8)
+        n = len(pos)
+        if self.cable is None or self.cable_n != n:
+            self._make_cable(n, r)
+        cable, joints = self.cable, self.joints
+        cable.batched_positions = pos.astype(np.float32)
+        cable.batched_wxyzs = wxyz.astype(np.float32)
+        cable.batched_scales = scales.astype(np.float32)
+        cable.batched_colors = seg_colors
+        joints.batched_positions = np.asarray(pts, dtype=np.float32)
+        joints.batched_colors = colors
+        if len(arrows):
+            self.arrows = self.app.server.scene.add_arrows(
+                "/contacts/vectors",
+                points=arrows,
+                colors=(30, 60, 220),
+                shaft_radius=0.002,
+                head_radius=0.006,
+                head_length=0.012,
+            )
+        elif self.arrows is not None:
+            self.arrows.remove()
+            self.arrows = None
+
+    def _make_cable(self, n: int, r: float) -> None:
+        srv = self.app.server
+        cyl = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=12)
+        ball = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+        z = np.zeros((n, 3), dtype=np.float32)
+        q = np.tile(np.array([1.0, 0, 0, 0], dtype=np.float32), (n, 1))
+        self.cable = srv.scene.add_batched_meshes_simple(
+            "/cable/tube",
+            cyl.vertices,
+            cyl.faces,
+            batched_wxyzs=q,
+            batched_positions=z,
+            batched_scales=np.ones((n, 3), dtype=np.float32),
+            batched_colors=COLOR_FREE,
+            lod="off",
+        )
+        self.joints = srv.scene.add_batched_meshes_simple(
+            "/cable/points",
+            ball.vertices,
+            ball.faces,
+            batched_wxyzs=np.tile(np.array([1.0, 0, 0, 0], dtype=np.float32), (n + 1, 1)),
+            batched_positions=np.zeros((n + 1, 3), dtype=np.float32),
+            batched_scales=np.full(n + 1, 1.15 * r, dtype=np.float32),
+            batched_colors=COLOR_FREE,
+            lod="off",
+        )
+        self.cable_n = n
+
+    def show_obstacles(self, geometry: SceneGeometry, scene: Scene) -> None:
+        with self.app._draw_lock:
+            self._show_obstacles_locked(geometry, scene)
+
+    def _show_obstacles_locked(self, geometry: SceneGeometry, scene: Scene) -> None:
+        srv = self.app.server
+        for h in self.obstacle_handles:
+            h.remove()
+        self.obstacle_handles = []
+        colors = {o.name: o.color for o in scene.objects}
+        for obj in geometry.objects:
+            c = colors.get(obj.name)
+            rgb = tuple(int(255 * x) for x in c) if c else (150, 155, 170)
+            self.obstacle_handles.append(
+                srv.scene.add_mesh_simple(
+                    f"/obstacles/{obj.name}",
+                    np.asarray(obj.mesh.vertices, dtype=np.float32),
+                    np.asarray(obj.mesh.faces, dtype=np.uint32),
+                    color=rgb,
+                    flat_shading=True,
+                )
+            )
+            if self.app.simulation_panel.face_labels:
+                for name, tris, normal in zip(obj.face_names, obj.face_tris, obj.face_normals, strict=True):
+                    tris = np.asarray(tris, dtype=float)
+                    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+                    c3 = (tris.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-12)
+                    self.obstacle_handles.append(
+                        srv.scene.add_label(
+                            f"/obstacles/{obj.name}_labels/{name}",
+                            name,
+                            position=tuple(c3 + 0.01 * np.asarray(normal)),
+                        )
+                    )
+        self.shown_geometry = geometry
+
+    def build(self) -> None:
+        """(Re)build the scene of the server's session: camera, obstacles, gripper body, cable; called
+        under the server's ``_draw_lock``."""
+        s = self.app.session
+        lo = np.min([o.mesh.bounds[0] for o in s.geometry.objects] + [s.record.points.min(axis=0)], axis=0)
+        hi = np.max([o.mesh.bounds[1] for o in s.geometry.objects] + [s.record.points.max(axis=0)], axis=0)
+        center = (lo + hi) / 2.0
+        size = float(max(np.linalg.norm(hi - lo), 0.3))
+        cam = self.app.server.initial_camera
+        cam.look_at = tuple(center)
+        cam.position = tuple(center + size * np.array([0.55, -0.8, 0.45]))
+        self.cable = None
+        self.cable_n = -1
+        self.arrows = None
+        self.show_obstacles(s.geometry, s.scene)
+        p, q = s.gripper_pose()
+        srv = self.app.server
+        self.body = srv.scene.add_frame("/gripper_body", show_axes=False, position=tuple(p), wxyz=tuple(q))
+        srv.scene.add_box(
+            "/gripper_body/box", dimensions=(0.03, 0.03, 0.04), color=(70, 70, 85), position=(0.0, 0.0, 0.021)
+        )
+        self.draw_cable(
+            np.asarray(s.record.points),
+            point_colors(point_classes(s.state, len(s.record.points))),
+            np.zeros((0, 2, 3)),
+        )
