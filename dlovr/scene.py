@@ -26,7 +26,6 @@ Quat = tuple[float, float, float, float]
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 MAX_MESH_BYTES = 20 * 1024 * 1024
-MAX_MESH_TRIANGLES = 20_000
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".off")
 
 
@@ -326,31 +325,18 @@ def load_scene(name_or_path: str | Path, *, check_geometry: bool = True) -> Scen
 
 def object_local_mesh(obj: SceneObject):
     """The object's mesh in its own frame (trimesh); raises SceneError for an unreadable mesh file."""
-    import trimesh
+    from dlovr.geometry import MeshError
+    from dlovr.geometry import object_local_mesh as local_mesh
 
-    from dlovr.geometry import box_mesh
-
-    if obj.kind == "box":
-        assert obj.size is not None
-        return box_mesh(obj.size)
-    assert obj.mesh_path is not None
     try:
-        m = trimesh.load_mesh(str(obj.mesh_path), process=True, force="mesh")
-    except Exception as e:
-        raise SceneError(f"{obj.mesh_path}: cannot read mesh of object {obj.name!r}: {e}") from None
-    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-        raise SceneError(f"{obj.mesh_path}: mesh of object {obj.name!r} has no triangles")
-    if len(m.faces) > MAX_MESH_TRIANGLES:
-        raise SceneError(
-            f"{obj.mesh_path}: mesh of object {obj.name!r} has more than {MAX_MESH_TRIANGLES} triangles"
-        )
-    if obj.scale != 1.0:
-        m.apply_scale(obj.scale)
-    return m
+        return local_mesh(obj)
+    except MeshError as e:
+        raise SceneError(str(e)) from None
 
 
 def _check_geometry(ctx: _Ctx, scene: Scene) -> None:
-    from dlovr.geometry import check_mesh, pose_matrix, to_manifold
+    from dlovr.geometry import check_mesh, to_manifold
+    from dlovr.transforms import pose_matrix
 
     worlds = []
     for o in scene.objects:

@@ -12,7 +12,8 @@ import manifold3d as M
 import numpy as np
 import pytest
 
-from dlovr.geometry import SceneGeometry, _to_trimesh, box_mesh
+from dlovr.geometry import SceneGeometry, box_mesh
+from dlovr.geometry.mesh import _to_trimesh
 from dlovr.sim.tracker import ContactTracker
 from dlovr.transforms import pose_matrix
 

@@ -11,13 +11,13 @@ import trimesh
 
 from dlovr.geometry import (
     SceneGeometry,
-    _to_trimesh,
     box_mesh,
     build_object,
     decompose,
     object_faces,
     prism_mesh,
 )
+from dlovr.geometry.mesh import _to_trimesh
 from dlovr.transforms import pose_matrix
 
 
@@ -70,7 +70,7 @@ def test_decomposition_cached(tmp_path):
 
 
 def test_non_polyhedral_mesh_falls_back_to_approximate(monkeypatch):
-    import dlovr.geometry as geo
+    import dlovr.geometry.decomposition as geo
 
     monkeypatch.setattr(geo, "MAX_EXACT_FACES", 10)
     sphere = trimesh.creation.icosphere(subdivisions=1, radius=0.1)

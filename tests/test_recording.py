@@ -223,6 +223,7 @@ def test_replay_uses_the_embedded_decomposition(recorded, tmp_path, monkeypatch)
     """A recording keeps the convex pieces it was simulated with: its replay does not depend on
     today's decomposition algorithm or on a (possibly stale) decomposition cache."""
     from dlovr import geometry
+    from dlovr.geometry import objects as geometry_objects
     from dlovr.scene import load_scene
 
     pieces = Recording(recorded).pieces
@@ -232,7 +233,7 @@ def test_replay_uses_the_embedded_decomposition(recorded, tmp_path, monkeypatch)
     def no_decomposition(*a, **kw):
         raise AssertionError("replay decomposed a mesh instead of using the recording's pieces")
 
-    monkeypatch.setattr(geometry, "decompose", no_decomposition)
+    monkeypatch.setattr(geometry_objects, "decompose", no_decomposition)
     assert replay(recorded, verify=True).divergence is None
     bad = tmp_path / "tampered.mcap"
     rewrite_mcap(

@@ -34,7 +34,7 @@ def make_geom() -> SceneGeometry:
     # a wall on the table whose face (normal +y at y = -0.3) bends by 5 deg toward +y at x = -0.2.
     import manifold3d as M
 
-    from dlovr.geometry import _to_trimesh
+    from dlovr.geometry.mesh import _to_trimesh
 
     def cube(lo, hi):
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)

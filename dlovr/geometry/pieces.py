@@ -1,0 +1,146 @@
+"""Convex pieces of an object in the world frame: half-spaces, face polygons labelled external,
+internal or mixed against the object's named faces, and the piece's edges."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from dlovr.geometry.vectors import _clip_polygon, _polygon_area, _unit
+
+FaceLabel = Literal["external", "internal", "mixed"]
+
+
+@dataclass
+class PieceFace:
+    """One planar face of a convex piece (world frame)."""
+
+    normal: np.ndarray
+    offset: float
+    polygon: np.ndarray  # (k,3) ordered loop
+    label: FaceLabel
+    face: str | None  # object face name (None for internal faces)
+    exposed: np.ndarray  # (t,3,3) triangles of the object face in this plane (world), for mixed faces
+    exposed_area: float = 0.0  # area of the part on the object's surface
+
+
+@dataclass
+class Piece:
+    """A convex piece of an object: half-spaces ``normals @ x <= offsets`` (world frame)."""
+
+    obj: str
+    index: int
+    approximate: bool
+    vertices: np.ndarray
+    faces: list[PieceFace]
+    normals: np.ndarray  # (F,3)
+    offsets: np.ndarray  # (F,)
+    edge_a: np.ndarray  # (E,3)
+    edge_b: np.ndarray  # (E,3)
+    edge_faces: np.ndarray  # (E,2) indices into faces
+    lo: np.ndarray
+    hi: np.ndarray
+
+    @property
+    def volume(self) -> float:
+        from scipy.spatial import ConvexHull
+
+        return float(ConvexHull(self.vertices).volume)
+
+    @property
+    def area(self) -> float:
+        return float(sum(_polygon_area(f.polygon) for f in self.faces))
+
+
+def _hull_planes(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray]:
+    """Merged facet planes of the convex hull of ``vertices``: normals, offsets, polygons, hull vertices."""
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(vertices)
+    pts = vertices[hull.vertices]
+    scale = float(np.ptp(pts, axis=0).max()) or 1.0
+    normals: list[np.ndarray] = []
+    offsets: list[float] = []
+    for eq in hull.equations:
+        n, d = eq[:3], -eq[3]
+        nn = float(np.linalg.norm(n))
+        n, d = n / nn, d / nn
+        for k, m in enumerate(normals):
+            if float(n @ m) > 1 - 1e-12 and abs(d - offsets[k]) < 1e-9 * scale:
+                break
+        else:
+            normals.append(n)
+            offsets.append(d)
+    polys = []
+    for n, d in zip(normals, offsets, strict=True):
+        on = pts[np.abs(pts @ n - d) < 1e-9 * scale]
+        c = on.mean(axis=0)
+        u = _unit(on[0] - c) if np.linalg.norm(on[0] - c) > 0 else _unit(np.cross(n, [1.0, 0, 0]))
+        w = np.cross(n, u)
+        ang = np.arctan2((on - c) @ w, (on - c) @ u)
+        polys.append(on[np.argsort(ang)])
+    return np.array(normals), np.array(offsets), polys, pts
+
+
+def _build_piece(
+    obj: str,
+    index: int,
+    vertices: np.ndarray,
+    approximate: bool,
+    obj_faces: list[tuple[str, np.ndarray, float, np.ndarray]],
+) -> Piece:
+    """Convex piece from world-frame vertices; faces labelled against the object's faces.
+
+    ``obj_faces``: (name, world normal, world offset, world triangles (t,3,3)) for each object face.
+    """
+    normals, offsets, polys, pts = _hull_planes(vertices)
+    scale = float(np.ptp(pts, axis=0).max()) or 1.0
+    faces: list[PieceFace] = []
+    for n, d, poly in zip(normals, offsets, polys, strict=True):
+        area = _polygon_area(poly)
+        best_name, best_overlap, best_tris = None, 0.0, np.zeros((0, 3, 3))
+        for name, on, od, tris in obj_faces:
+            if float(n @ on) < 1 - 1e-9 or abs(d - od) > 1e-7 * scale:
+                continue
+            ov = sum(_polygon_area(_clip_polygon(poly, t, n)) for t in tris)
+            if ov > best_overlap:
+                best_name, best_overlap, best_tris = name, ov, tris
+        if best_name is None or best_overlap <= 1e-7 * area:
+            label: FaceLabel = "internal"
+            best_name = None
+        elif best_overlap >= (1 - 1e-7) * area:
+            label = "external"
+        else:
+            label = "mixed"
+        faces.append(
+            PieceFace(n, float(d), poly, label, best_name, best_tris, float(min(best_overlap, area)))
+        )
+    # edges: pairs of faces sharing two hull vertices
+    ea, eb, ef = [], [], []
+    on_face = [np.abs(pts @ n - d) < 1e-9 * scale for n, d in zip(normals, offsets, strict=True)]
+    for i in range(len(faces)):
+        for j in range(i + 1, len(faces)):
+            shared = pts[on_face[i] & on_face[j]]
+            if len(shared) < 2:
+                continue
+            e = _unit(np.cross(normals[i], normals[j]))
+            s = shared @ e
+            ea.append(shared[int(np.argmin(s))])
+            eb.append(shared[int(np.argmax(s))])
+            ef.append((i, j))
+    return Piece(
+        obj,
+        index,
+        approximate,
+        pts,
+        faces,
+        normals,
+        offsets,
+        np.array(ea).reshape(-1, 3),
+        np.array(eb).reshape(-1, 3),
+        np.array(ef, dtype=int).reshape(-1, 2),
+        pts.min(axis=0),
+        pts.max(axis=0),
+    )
