@@ -22,7 +22,7 @@ from dlovr.model.transitions import (
     successional_contacts,
 )
 
-FIG11 = Path(__file__).parent / "data" / "fig11.txt"
+FIG11 = Path(__file__).parents[1] / "data" / "fig11.txt"
 FIG11_CLASSES = ["-", "E", "C", "-", "C", "C", "E", "I", "S,E", "E"]
 
 

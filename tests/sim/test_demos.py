@@ -20,7 +20,7 @@ from dlovr.script import Script, Waypoint, load_script
 from dlovr.sim import Simulator
 from dlovr.sim.tracker import ContactTracker
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 
 @pytest.fixture(autouse=True)

@@ -26,7 +26,7 @@ from dlovr.recording import (
     replay,
 )
 
-SCRIPT = Path(__file__).parent / "data" / "touch_table.script.toml"
+SCRIPT = Path(__file__).parents[1] / "data" / "touch_table.script.toml"
 
 
 def cli(*args):

@@ -20,7 +20,7 @@ from dlovr.model.program import (
 )
 from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
-FIG11 = Path(__file__).parent / "data" / "fig11.txt"
+FIG11 = Path(__file__).parents[1] / "data" / "fig11.txt"
 
 
 def fig11_states():

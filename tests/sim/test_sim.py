@@ -240,7 +240,7 @@ def test_table_demo_script_runs() -> None:
 
     from dlovr.script import load_script
 
-    script = load_script(Path(__file__).resolve().parent.parent / "scenes" / "table.script.toml")
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "table.script.toml")
     tbl = Obstacle("table", [box(0.5, 0.5, 0.025)], pos=(0.0, 0.0, -0.025))
     dlo = DloParams(length=0.5, radius=0.005, segments=20, young=2e7, damping=0.01, mass=0.05)
     sim = Simulator.from_parts([tbl], dlo, GripperPose((0.0, 0.0, 0.55), (1.0, 0.0, 0.0, 0.0)))
@@ -337,7 +337,7 @@ def test_label_reuse_changes_no_state_in_a_live_demo(scene_name, steps):
     from dlovr.sim.tracker import ContactTracker
 
     scene = load_scene(scene_name)
-    script = load_script(Path(__file__).resolve().parent.parent / "scenes" / f"{scene_name}.script.toml")
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / f"{scene_name}.script.toml")
     sim = Simulator(scene, track=True)
     full = ContactTracker(sim.tracker.geometry, scene.params, reuse=False)
     for k, rec in zip(range(steps), sim.run(script), strict=False):

@@ -11,7 +11,7 @@ from dlovr.model.program import program_schema
 from dlovr.model.transitions import classify_step
 from dlovr.recording import Recording, compile_recording, kept_states, replay
 
-ROOT = Path(__file__).resolve().parent.parent / "recordings"
+ROOT = Path(__file__).resolve().parents[2] / "recordings"
 SAMPLES = sorted(ROOT.glob("*.mcap"))
 
 
