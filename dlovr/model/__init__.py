@@ -7,7 +7,10 @@
 - :mod:`dlovr.model.transitions`: principal contacts, matching and transition classes (§V), and the
   debouncing of a simulated sequence.
 - :mod:`dlovr.model.program`: macro programs compiled from a demonstration (§VI).
+- :mod:`dlovr.model.network`: transition networks merged from several demonstrations (§VI, §VII).
+- :mod:`dlovr.model.planning`: network programs: the macro toward the goal at every node, identifying
+  the node reached and planning again (§VI).
 
-Everything here imports only the standard library and numpy (a test checks), so the model is tested
-and reused without a simulator. See ``docs/model.md`` for the rules in words.
+Everything here imports only the standard library, numpy and networkx (a test checks that no simulator,
+mesh, UI or file-format library is), so the model is tested and reused without a simulator. See ``docs/model.md`` for the rules in words.
 """

@@ -1,0 +1,456 @@
+"""Transition networks merged from several demonstrations of one task (paper §VI, §VII).
+
+Pure Python + numpy + networkx. Each demonstration contributes its kept contact situations (see
+:func:`dlovr.recording.kept_states`) and its gripper pose track. The network has
+
+- **nodes**: the distinct discrete situations (with face names), with how often they were visited and
+  how long they held, their principal contacts, the stability of the least stable principal contact
+  (``stable``, ``semi-stable``, ``instable``, or ``free`` when no environment contact exists) and the
+  expected contact vector (the normalised sum of the principal contacts' vectors of eq. 2, world frame;
+  the zero vector in free space, ``None`` when the input carries no vectors);
+- **edges**: the transitions between consecutive kept situations, with their class
+  (:func:`dlovr.model.transitions.classify_step`), how often they were demonstrated (``count``), the
+  probability of leaving the source node along them (``count`` / all departures from the source), the
+  durations (time from entering the source to entering the target, s), the demonstrated gripper motion
+  (mean and spread of the world displacement, m; where it began and ended) and their **risk**: ``none``
+  for ``C``, ``E`` and ``-``, ``caution`` for ``T``, ``risky`` for ``I`` and ``S`` (docs/networks.md);
+- **start** and **goal**: the most common first and last kept situation of the demonstrations (ties go
+  to the one seen first).
+
+Node ids are ``n1, n2, …`` in order of first appearance, so the same demonstrations in the same order
+give the same network, bit for bit. Demonstrations of different scenes are refused
+(:class:`NetworkError`). Frames and units: world frame, metres, seconds.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
+from dlovr.model.program import PoseTrack, TimedSituation, motion_between
+from dlovr.model.transitions import classify_step, principal, successional_contacts
+
+NETWORK_VERSION = 1
+"""Version of the network JSON format (``version`` field); bump on incompatible changes."""
+
+Vec3 = tuple[float, float, float]
+RISKS = ("none", "caution", "risky")
+
+
+class NetworkError(ValueError):
+    """A problem with the demonstrations or a network file; the message is one line."""
+
+
+def edge_risk(classes: Sequence[str]) -> str:
+    """Risk of a transition with these classes: ``risky`` (``I``, ``S``), ``caution`` (``T``) or ``none``."""
+    if {"I", "S"} & set(classes):
+        return "risky"
+    if "T" in classes:
+        return "caution"
+    return "none"
+
+
+def _r(x: float) -> float:
+    return round(float(x), 9) + 0.0
+
+
+def _vec(a: Sequence[float] | np.ndarray) -> Vec3:
+    return (_r(a[0]), _r(a[1]), _r(a[2]))
+
+
+# --------------------------------------------------------------------------------------------------
+# Values
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Demonstration:
+    """One demonstration: its kept situations (in time order) and gripper pose track, and the scene
+    it was made in (name and content hash; demonstrations of one network must share the hash)."""
+
+    name: str
+    states: tuple[TimedSituation, ...]
+    poses: PoseTrack
+    scene_name: str = ""
+    scene_sha256: str = ""
+
+
+@dataclass(frozen=True)
+class MotionStats:
+    """The demonstrated gripper motions along one edge (world frame, m; rotation vector, rad).
+
+    ``world_mean``/``world_std``: mean and per-axis population standard deviation of the displacement;
+    ``relative_mean``: mean displacement in the gripper frame at the start; ``rotation_mean``: mean
+    rotation vector from the start orientation (gripper frame); ``start_mean``/``end_mean``: mean
+    gripper position when the source / the target was entered; ``start_spread``: RMS distance of the
+    start positions from their mean.
+    """
+
+    world_mean: Vec3
+    world_std: Vec3
+    relative_mean: Vec3
+    rotation_mean: Vec3
+    start_mean: Vec3
+    start_spread: float
+    end_mean: Vec3
+
+
+@dataclass(frozen=True)
+class Node:
+    """A discrete situation of the network. Times in s; ``vector`` unit or zero, world frame."""
+
+    id: str
+    situation: str
+    principal: tuple[str, ...]
+    stability: str
+    vector: Vec3 | None
+    visits: int
+    total_time: float
+    mean_time: float
+
+
+@dataclass(frozen=True)
+class Edge:
+    """A demonstrated transition ``source -> target`` (node ids). ``probability`` = ``count`` / all
+    departures from ``source``; ``durations`` (s) one per demonstrated occurrence, in input order;
+    ``demonstrations`` the indices of the demonstrations that took it (with repeats)."""
+
+    source: str
+    target: str
+    classes: tuple[str, ...]
+    risk: str
+    count: int
+    probability: float
+    durations: tuple[float, ...]
+    motion: MotionStats
+    demonstrations: tuple[int, ...]
+
+    @property
+    def id(self) -> str:
+        return f"{self.source}->{self.target}"
+
+    @property
+    def label(self) -> str:
+        return ",".join(self.classes) if self.classes else "-"
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A start or end node: how many demonstrations began (ended) there, and the mean gripper
+    position (m, world) then, with the RMS spread of those positions (m)."""
+
+    node: str
+    count: int
+    position: Vec3
+    spread: float
+
+
+@dataclass(frozen=True)
+class Network:
+    """A transition network (module docstring). Build it with :func:`build_network`."""
+
+    scene_name: str
+    scene_sha256: str
+    demonstrations: tuple[str, ...]
+    nodes: tuple[Node, ...]
+    edges: tuple[Edge, ...]
+    starts: tuple[Endpoint, ...]
+    ends: tuple[Endpoint, ...]
+    start: str
+    goal: str
+    version: int = NETWORK_VERSION
+
+    def node(self, node_id: str) -> Node:
+        for n in self.nodes:
+            if n.id == node_id:
+                return n
+        raise NetworkError(f"node {node_id} is not in the network")
+
+    def locate(self, situation: DiscreteSituation | str) -> str | None:
+        """The id of the node of this situation (notation or value), or None outside the network."""
+        key = situation if isinstance(situation, str) else situation.format()
+        return next((n.id for n in self.nodes if n.situation == key), None)
+
+    def out_edges(self, node_id: str) -> tuple[Edge, ...]:
+        return tuple(e for e in self.edges if e.source == node_id)
+
+    def graph(self) -> nx.DiGraph:
+        """The network as a networkx ``DiGraph``: node and edge attributes are the dataclasses'
+        fields (``data=`` the dataclass itself)."""
+        g = nx.DiGraph()
+        for n in self.nodes:
+            g.add_node(n.id, data=n, stability=n.stability, label=" ".join(n.principal) or "free")
+        for e in self.edges:
+            g.add_edge(e.source, e.target, data=e, probability=e.probability, risk=e.risk, count=e.count)
+        return g
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "version": self.version,
+            "kind": "transition-network",
+            "scene_name": self.scene_name,
+            "scene_sha256": self.scene_sha256,
+            "demonstrations": list(self.demonstrations),
+            "start": self.start,
+            "goal": self.goal,
+            "starts": [_endpoint_json(p) for p in self.starts],
+            "ends": [_endpoint_json(p) for p in self.ends],
+            "nodes": [
+                {
+                    "id": n.id,
+                    "situation": n.situation,
+                    "principal": list(n.principal),
+                    "stability": n.stability,
+                    "vector": None if n.vector is None else list(n.vector),
+                    "visits": n.visits,
+                    "total_time": n.total_time,
+                    "mean_time": n.mean_time,
+                }
+                for n in self.nodes
+            ],
+            "edges": [
+                {
+                    "source": e.source,
+                    "target": e.target,
+                    "classes": list(e.classes),
+                    "label": e.label,
+                    "risk": e.risk,
+                    "count": e.count,
+                    "probability": e.probability,
+                    "durations": list(e.durations),
+                    "demonstrations": list(e.demonstrations),
+                    "motion": {
+                        k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(e.motion).items()
+                    },
+                }
+                for e in self.edges
+            ],
+        }
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), indent=1, ensure_ascii=False) + "\n"
+
+    @staticmethod
+    def from_json(data: Mapping[str, Any]) -> Network:
+        """Read a network written by :meth:`to_json`; raises :class:`NetworkError` on bad input."""
+        if not isinstance(data, Mapping) or data.get("kind") != "transition-network":
+            raise NetworkError("not a transition network (no \"kind\": \"transition-network\")")
+        if data.get("version") != NETWORK_VERSION:
+            raise NetworkError(
+                f"transition network format {data.get('version')}, this dlovr reads {NETWORK_VERSION}"
+            )
+        try:
+            nodes = tuple(
+                Node(str(n["id"]), str(n["situation"]), tuple(map(str, n["principal"])), str(n["stability"]),
+                     None if n["vector"] is None else _vec(n["vector"]), int(n["visits"]),
+                     float(n["total_time"]), float(n["mean_time"]))
+                for n in data["nodes"]
+            )  # fmt: skip
+            edges = tuple(
+                Edge(str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
+                     int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
+                     _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])))
+                for e in data["edges"]
+            )  # fmt: skip
+            net = Network(
+                str(data["scene_name"]), str(data["scene_sha256"]), tuple(map(str, data["demonstrations"])),
+                nodes, edges, tuple(map(_endpoint_from_json, data["starts"])),
+                tuple(map(_endpoint_from_json, data["ends"])), str(data["start"]), str(data["goal"]),
+            )  # fmt: skip
+        except (KeyError, TypeError, ValueError, IndexError) as e:
+            raise NetworkError(f"bad transition network: {type(e).__name__}: {e}") from None
+        _check(net)
+        return net
+
+    @staticmethod
+    def loads(text: str) -> Network:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise NetworkError(f"not valid JSON: {e.msg} at line {e.lineno}") from None
+        return Network.from_json(data)
+
+
+def _endpoint_json(p: Endpoint) -> dict[str, Any]:
+    return {"node": p.node, "count": p.count, "position": list(p.position), "spread": p.spread}
+
+
+def _endpoint_from_json(d: Mapping[str, Any]) -> Endpoint:
+    return Endpoint(str(d["node"]), int(d["count"]), _vec(d["position"]), float(d["spread"]))
+
+
+def _motion_from_json(d: Mapping[str, Any]) -> MotionStats:
+    return MotionStats(
+        _vec(d["world_mean"]), _vec(d["world_std"]), _vec(d["relative_mean"]), _vec(d["rotation_mean"]),
+        _vec(d["start_mean"]), float(d["start_spread"]), _vec(d["end_mean"]),
+    )  # fmt: skip
+
+
+def _check(net: Network) -> None:
+    ids = [n.id for n in net.nodes]
+    if len(set(ids)) != len(ids):
+        raise NetworkError("bad transition network: duplicate node ids")
+    known = set(ids)
+    for e in net.edges:
+        if e.source not in known or e.target not in known:
+            raise NetworkError(f"bad transition network: edge {e.id} names an unknown node")
+        if e.count < 1 or e.risk not in RISKS:
+            raise NetworkError(f"bad transition network: edge {e.id} has a bad count or risk")
+    if net.start not in known or net.goal not in known:
+        raise NetworkError("bad transition network: start or goal is not a node")
+
+
+# --------------------------------------------------------------------------------------------------
+# Construction
+# --------------------------------------------------------------------------------------------------
+
+
+def principal_contacts(situation: DiscreteSituation) -> tuple[DiscreteContact, ...]:
+    """The principal contacts of all successional contacts of a situation, each distinct one once."""
+    out: list[DiscreteContact] = []
+    for run in successional_contacts(situation):
+        for c in principal(run):
+            if c not in out:
+                out.append(c)
+    return tuple(out)
+
+
+def situation_stability(situation: DiscreteSituation) -> str:
+    """``free`` (no principal contact), else the least stable principal contact's stability."""
+    found = {c.state.stability_class for c in principal_contacts(situation)}
+    if not principal_contacts(situation):
+        return "free"
+    if Stability.INSTABLE in found:
+        return "instable"
+    if Stability.SEMI in found:
+        return "semi-stable"
+    return "stable"
+
+
+def situation_vector(situation: DiscreteSituation) -> np.ndarray | None:
+    """Expected contact vector of a situation: the normalised sum of its principal contacts' vectors
+    (world frame); zero when it has none or they cancel; None when one lacks its vector."""
+    pcs = principal_contacts(situation)
+    if any(c.vector is None for c in pcs):
+        return None
+    s = np.zeros(3)
+    for c in pcs:
+        s = s + np.asarray(c.vector, float)
+    n = float(np.sqrt(np.sum(s * s)))
+    return s / n if n > 1e-9 else np.zeros(3)
+
+
+def _spread(points: np.ndarray) -> float:
+    d = points - points.mean(axis=0)
+    return _r(float(np.sqrt(np.mean(np.sum(d * d, axis=1)))))
+
+
+def _check_scenes(demos: Sequence[Demonstration]) -> None:
+    first = demos[0]
+    for d in demos[1:]:
+        if d.scene_sha256 != first.scene_sha256 or d.scene_name != first.scene_name:
+            raise NetworkError(
+                f"{d.name}: scene {d.scene_name or '?'} ({d.scene_sha256[:12] or 'no hash'}) differs from "
+                f"{first.name}'s scene {first.scene_name or '?'} ({first.scene_sha256[:12] or 'no hash'}); "
+                "a network merges demonstrations of one scene"
+            )
+
+
+def _most_common(counter: Counter[str], order: Sequence[str]) -> str:
+    best = max(counter.values())
+    return next(k for k in order if counter.get(k) == best)
+
+
+def build_network(demos: Sequence[Demonstration]) -> Network:
+    """Merge demonstrations of one scene into a transition network (module docstring)."""
+    if not demos:
+        raise NetworkError("no demonstrations to build a network from")
+    _check_scenes(demos)
+    for d in demos:
+        if not d.states:
+            raise NetworkError(f"{d.name}: demonstration has no contact situations")
+    ids: dict[str, str] = {}
+    sits: dict[str, DiscreteSituation] = {}
+    held: dict[str, list[float]] = {}
+    vectors: dict[str, list[np.ndarray]] = {}
+    occ: dict[tuple[str, str], list[tuple[int, float, Any, np.ndarray, np.ndarray]]] = {}
+    firsts: list[tuple[str, np.ndarray]] = []
+    lasts: list[tuple[str, np.ndarray]] = []
+    for di, d in enumerate(demos):
+        keys = []
+        for s in d.states:
+            key = s.situation.format()
+            if key not in ids:
+                ids[key] = f"n{len(ids) + 1}"
+                sits[key] = s.situation
+            keys.append(ids[key])
+            held.setdefault(ids[key], []).append(s.duration)
+            v = situation_vector(s.situation)
+            if v is not None:
+                vectors.setdefault(ids[key], []).append(v)
+        firsts.append((keys[0], d.poses.at(d.states[0].t)[0]))
+        end = d.states[-1]
+        lasts.append((keys[-1], d.poses.at(end.t + end.duration)[0]))
+        for k in range(1, len(d.states)):
+            a, b = d.states[k - 1], d.states[k]
+            mv = motion_between(d.poses, a.t, b.t)
+            occ.setdefault((keys[k - 1], keys[k]), []).append(
+                (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0])
+            )
+    by_id = {v: k for k, v in ids.items()}
+    nodes = []
+    for nid in ids.values():
+        sit = sits[by_id[nid]]
+        vs = vectors.get(nid)
+        vec = None
+        if vs:
+            m = np.mean(vs, axis=0)
+            n = float(np.sqrt(np.sum(m * m)))
+            vec = _vec(m / n if n > 1e-9 else np.zeros(3))
+        h = held[nid]
+        nodes.append(
+            Node(nid, by_id[nid], tuple(c.format() for c in principal_contacts(sit)),
+                 situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)))
+        )  # fmt: skip
+    departures = Counter[str]()
+    for (u, _), xs in occ.items():
+        departures[u] += len(xs)
+    edges = []
+    for (u, v), xs in sorted(occ.items(), key=lambda kv: (int(kv[0][0][1:]), int(kv[0][1][1:]))):
+        classes = classify_step(sits[by_id[u]], sits[by_id[v]])
+        world = np.array([x[2].world for x in xs])
+        starts, ends = np.array([x[3] for x in xs]), np.array([x[4] for x in xs])
+        motion = MotionStats(
+            _vec(world.mean(axis=0)), _vec(world.std(axis=0)),
+            _vec(np.mean([x[2].relative for x in xs], axis=0)),
+            _vec(np.mean([x[2].rotation for x in xs], axis=0)),
+            _vec(starts.mean(axis=0)), _spread(starts), _vec(ends.mean(axis=0)),
+        )  # fmt: skip
+        edges.append(
+            Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
+                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs))
+        )  # fmt: skip
+    order = list(ids.values())
+    net = Network(
+        demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
+        _endpoints(firsts, order), _endpoints(lasts, order),
+        _most_common(Counter(k for k, _ in firsts), order), _most_common(Counter(k for k, _ in lasts), order),
+    )  # fmt: skip
+    _check(net)
+    return net
+
+
+def _endpoints(items: Sequence[tuple[str, np.ndarray]], order: Sequence[str]) -> tuple[Endpoint, ...]:
+    out = []
+    for nid in order:
+        pts = np.array([p for k, p in items if k == nid])
+        if len(pts):
+            out.append(Endpoint(nid, len(pts), _vec(pts.mean(axis=0)), _spread(pts)))
+    return tuple(out)

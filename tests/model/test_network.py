@@ -1,0 +1,315 @@
+"""Transition networks (paper §VI, §VII; docs/networks.md): construction from hand-made situation
+sequences, path choice, identification and re-planning, JSON round trips, refusal of mixed scenes."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
+from dlovr.model.network import (
+    Demonstration,
+    Network,
+    NetworkError,
+    build_network,
+    edge_risk,
+)
+from dlovr.model.planning import NetworkProgram, Successor, identify
+from dlovr.model.program import PoseTrack, TimedSituation
+
+FREE = "V/G & E/N & V/N"
+TIP = "V/G & E/N & V/F[box.F1]"
+LIE = "V/G & E/N & E/F[box.F1] & V/N"
+GROOVE = "V/G & E/N & V/E^LS[box.F1,wall.F2]"
+
+VECTORS = {
+    "V/F[box.F1]": (0.0, 0.0, -1.0),
+    "E/F[box.F1]": (0.0, 0.0, -1.0),
+    "V/F[box.F2]": (-1.0, 0.0, 0.0),
+    "V/F[wall.F1]": (0.0, -1.0, 0.0),
+    "V/E^LI[box.F1,box.F2]": (-0.6, 0.0, -0.8),
+    "V/E^LS[box.F2,floor.F1]": (-0.8, 0.0, -0.6),
+}
+
+
+def S(text: str) -> DiscreteSituation:
+    """A situation with the contact vectors of VECTORS (free and gripper contacts get none)."""
+    s = parse_discrete_situation(text)
+    return DiscreteSituation(tuple(replace(c, vector=VECTORS.get(c.format())) for c in s.contacts))
+
+
+def still(pos=(0.0, 0.0, 0.3)) -> PoseTrack:
+    return PoseTrack(np.array([0.0]), np.array([pos]), np.array([[1.0, 0.0, 0.0, 0.0]]))
+
+
+def demo(name: str, seq, durations=None, poses=None, scene=("box", "abc")) -> Demonstration:
+    durations = durations or [1.0] * len(seq)
+    t = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
+    states = tuple(
+        TimedSituation(float(ti), float(d), S(s)) for ti, d, s in zip(t, durations, seq, strict=True)
+    )
+    return Demonstration(name, states, poses or still(), scene[0], scene[1])
+
+
+def line_track(speed: float, n: int = 10) -> PoseTrack:
+    """Moving along +x at ``speed`` m/s from (0, 0, 0.3); samples every 0.5 s."""
+    t = np.arange(n) * 0.5
+    pos = np.stack([speed * t, np.zeros(n), np.full(n, 0.3)], axis=1)
+    return PoseTrack(t, pos, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+
+
+# --------------------------------------------------------------------------------------------------
+# Construction
+# --------------------------------------------------------------------------------------------------
+
+
+def small_network() -> Network:
+    return build_network(
+        [
+            demo("A", [FREE, TIP, GROOVE], [1.0, 2.0, 0.5], line_track(0.01)),
+            demo("B", [FREE, TIP, LIE, GROOVE], [1.0, 1.0, 1.5, 0.5], line_track(0.02)),
+            demo("C", [FREE, LIE, GROOVE], [2.0, 1.0, 0.5], line_track(0.01)),
+        ]
+    )
+
+
+def test_nodes_count_visits_and_held_times_exactly():
+    net = small_network()
+    assert [(n.id, n.situation) for n in net.nodes] == [
+        ("n1", FREE), ("n2", TIP), ("n3", GROOVE), ("n4", LIE)
+    ]  # fmt: skip
+    by = {n.id: n for n in net.nodes}
+    assert [by[k].visits for k in ("n1", "n2", "n3", "n4")] == [3, 2, 3, 2]
+    assert by["n1"].total_time == 4.0 and by["n1"].mean_time == pytest.approx(4.0 / 3)
+    assert by["n2"].total_time == 3.0 and by["n2"].mean_time == 1.5
+    assert by["n4"].total_time == 2.5
+    assert by["n1"].stability == "free" and by["n1"].principal == () and by["n1"].vector == (0.0, 0.0, 0.0)
+    assert by["n2"].stability == "stable" and by["n2"].principal == ("V/F[box.F1]",)
+    assert by["n2"].vector == (0.0, 0.0, -1.0)
+    assert by["n3"].vector is None  # the hand-made groove has no vector
+    assert net.start == "n1" and net.goal == "n3"
+    assert [(p.node, p.count) for p in net.starts] == [("n1", 3)]
+    assert [(p.node, p.count) for p in net.ends] == [("n3", 3)]
+
+
+def test_edges_count_probability_class_risk_and_durations_exactly():
+    net = small_network()
+    got = {e.id: (e.label, e.risk, e.count, e.probability, e.durations) for e in net.edges}
+    assert got == {
+        "n1->n2": ("E", "none", 2, round(2 / 3, 9), (1.0, 1.0)),
+        "n1->n4": ("E", "none", 1, round(1 / 3, 9), (2.0,)),
+        "n2->n3": ("E", "none", 1, 0.5, (2.0,)),
+        "n2->n4": ("C", "none", 1, 0.5, (1.0,)),
+        "n4->n3": ("E", "none", 2, 1.0, (1.5, 1.0)),
+    }
+    # departures of every node sum to one
+    for n in net.nodes:
+        out = net.out_edges(n.id)
+        if out:
+            assert sum(Fraction(e.count) for e in out) / sum(e.count for e in out) == 1
+            assert sum(e.probability for e in out) == pytest.approx(1.0)
+
+
+def test_edge_motions_are_mean_and_spread_of_the_demonstrated_displacements():
+    net = small_network()
+    e = next(e for e in net.edges if e.id == "n1->n2")  # A: 1 s at 0.01 m/s, B: 1 s at 0.02 m/s
+    np.testing.assert_allclose(e.motion.world_mean, [0.015, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(e.motion.world_std, [0.005, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(e.motion.relative_mean, [0.015, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(e.motion.start_mean, [0.0, 0.0, 0.3], atol=1e-12)
+    np.testing.assert_allclose(e.motion.end_mean, [0.015, 0.0, 0.3], atol=1e-12)
+    assert e.motion.start_spread == 0.0
+    assert e.demonstrations == (0, 1)
+
+
+def test_risk_per_class():
+    assert [edge_risk(c) for c in [(), ("C",), ("E",), ("T",), ("I",), ("S", "E"), ("T", "E")]] == [
+        "none", "none", "none", "caution", "risky", "risky", "caution"
+    ]  # fmt: skip
+
+
+def test_goal_is_the_most_common_last_situation():
+    net = build_network([demo("a", [FREE, TIP]), demo("b", [FREE, LIE]), demo("c", [FREE, TIP, LIE, TIP])])
+    assert net.goal == net.locate(TIP)
+    assert [(p.node, p.count) for p in net.ends] == [("n2", 2), ("n3", 1)]
+
+
+def test_demonstrations_of_different_scenes_are_refused_with_one_line():
+    with pytest.raises(NetworkError) as ei:
+        build_network([demo("a.mcap", [FREE, TIP]), demo("b.mcap", [FREE, TIP], scene=("table", "def"))])
+    msg = str(ei.value)
+    assert "\n" not in msg and "b.mcap" in msg and "a.mcap" in msg and "table" in msg and "box" in msg
+    with pytest.raises(NetworkError, match="no demonstrations"):
+        build_network([])
+
+
+def test_json_round_trip_is_exact_and_versioned():
+    net = small_network()
+    back = Network.loads(net.dumps())
+    assert back == net
+    assert back.dumps() == net.dumps()
+    data = json.loads(net.dumps())
+    assert data["version"] == 1 and data["kind"] == "transition-network"
+    data["version"] = 99
+    with pytest.raises(NetworkError, match="format 99"):
+        Network.from_json(data)
+    with pytest.raises(NetworkError, match="not valid JSON"):
+        Network.loads("{")
+    bad = json.loads(net.dumps())
+    bad["edges"][0]["target"] = "n77"
+    with pytest.raises(NetworkError, match="unknown node"):
+        Network.from_json(bad)
+
+
+def test_network_as_a_networkx_graph():
+    g = small_network().graph()
+    assert sorted(g.nodes) == ["n1", "n2", "n3", "n4"]
+    assert g.edges["n1", "n2"]["count"] == 2 and g.nodes["n2"]["stability"] == "stable"
+
+
+# --------------------------------------------------------------------------------------------------
+# Path choice
+# --------------------------------------------------------------------------------------------------
+
+A = "V/G & E/N & V/F[box.F1]"
+R = "V/G & E/N & V/E^LI[box.F1,box.F2]"
+G = "V/G & E/N & V/F[box.F2]"
+B = "V/G & E/N & E/F[box.F1] & V/N"
+EP = "V/G & E/N & E/E^P[box.F1,box.F2] & V/N"
+
+
+def test_a_stable_path_is_preferred_over_a_shorter_risky_one_of_equal_probability():
+    net = build_network([demo("risky", [A, R, G]), demo("stable", [A, B, EP, G])])
+    labels = {e.id: (e.label, e.risk) for e in net.edges}
+    assert labels[f"{net.locate(A)}->{net.locate(R)}"] == ("I", "risky")
+    assert labels[f"{net.locate(R)}->{net.locate(G)}"] == ("S", "risky")
+    prog = NetworkProgram(net)
+    ch = prog.replan(net.locate(A))
+    assert ch is not None
+    assert ch.path == tuple(net.locate(s) for s in (A, B, EP, G))
+    assert (ch.reach_probability, ch.risky, ch.length) == (0.5, 0, 3)
+    assert ch.macro.classes == ("C",) and ch.macro.risk == "none"
+
+
+def test_probability_comes_first_then_risk_then_length():
+    risky_often = build_network([demo("r1", [A, R, G]), demo("r2", [A, R, G]), demo("s", [A, B, EP, G])])
+    ch = NetworkProgram(risky_often).replan(risky_often.locate(A))
+    assert ch.path[1] == risky_often.locate(R) and ch.reach_probability == round(2 / 3, 9) and ch.risky == 2
+    short = build_network([demo("long", [A, B, EP, G]), demo("short", [A, B, G])])
+    ch = NetworkProgram(short).replan(short.locate(B))
+    assert ch.path == (short.locate(B), short.locate(G)) and ch.reach_probability == 0.5
+
+
+def test_a_step_without_class_joins_the_next_macro_and_a_final_macro_has_no_detection():
+    lie2 = "V/G & E/N & E/F[box.F1] & E/E^P[box.F1,box.F2] & V/N"
+    net = build_network([demo("d", [TIP, LIE, lie2, EP], [1.0, 1.0, 1.0, 1.0], line_track(0.01))])
+    ch = NetworkProgram(net).replan(net.locate(LIE))
+    assert ch.macro.edges == ("n2->n3", "n3->n4") and ch.macro.classes == ("C",) and not ch.macro.final
+    np.testing.assert_allclose(ch.macro.world, [0.02, 0.0, 0.0], atol=1e-12)
+    assert ch.macro.duration == 2.0
+    assert [s.node for s in ch.successors] == ["n4"]  # reached through the undetectable step
+    ends_flat = build_network([demo("d", [TIP, LIE, lie2])])
+    ch = NetworkProgram(ends_flat).replan(ends_flat.locate(LIE))
+    assert ch.macro.final and ch.macro.classes == () and ch.macro.target == ends_flat.goal
+
+
+def test_the_gripper_position_tells_apart_two_visits_of_one_situation():
+    # free at the start, touch, lift and move 0.2 m, free again, then into the groove
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    pos = np.array([[0, 0, 0.3], [0, 0, 0.28], [0.2, 0, 0.3], [0.2, 0, 0.25]], dtype=float)
+    track = PoseTrack(t, pos, np.tile([1.0, 0, 0, 0], (4, 1)))
+    net = build_network([demo("d", [FREE, TIP, FREE, GROOVE], poses=track)])
+    prog = NetworkProgram(net)
+    free = net.locate(FREE)
+    assert prog.replan(free, (0.0, 0.0, 0.3)).edge == f"{free}->{net.locate(TIP)}"
+    assert prog.replan(free, (0.2, 0.0, 0.3)).edge == f"{free}->{net.locate(GROOVE)}"
+    # position unknown: both departures, equal probability 1/2 of reaching the goal: the shorter one
+    anyway = prog.replan(free)
+    assert anyway.edge == f"{free}->{net.locate(GROOVE)}" and anyway.reach_probability == 0.5
+    assert [c.edge for c in prog.plan_from_start()] == ["n1->n2", "n2->n1", "n1->n3"]
+    assert all(c.reach_probability == 1.0 for c in prog.plan_from_start())
+
+
+# --------------------------------------------------------------------------------------------------
+# Identification and re-planning
+# --------------------------------------------------------------------------------------------------
+
+I_ = "V/G & E/N & V/E^LI[box.F1,box.F2]"
+X = "V/G & E/N & V/F[wall.F1]"
+GOAL = "V/G & E/N & V/E^LS[box.F2,floor.F1]"
+
+
+def snapping_network() -> Network:
+    """At the instable edge the DLO snaps onto box.F2 (twice) or, unexpectedly, onto the wall (once)."""
+    return build_network(
+        [demo("1", [A, I_, G, GOAL]), demo("2", [A, I_, X, G, GOAL]), demo("3", [A, I_, G, GOAL])]
+    )
+
+
+def test_replanning_after_an_unexpected_transition():
+    net = snapping_network()
+    prog = NetworkProgram(net)
+    at = {s: net.locate(s) for s in (A, I_, G, X, GOAL)}
+    first = prog.replan(at[A], (0.0, 0.0, 0.3))
+    assert first.macro.target == at[I_] and first.macro.classes == ("I",) and first.macro.risk == "risky"
+    ch = prog.replan(at[I_], (0.0, 0.0, 0.3))
+    assert ch.macro.target == at[G] and ch.macro.classes == ("S",)
+    assert ch.reach_probability == round(2 / 3, 9)
+    expected = [(at[G], round(2 / 3, 9)), (at[X], round(1 / 3, 9))]
+    assert [(s.node, s.probability) for s in ch.successors] == expected
+    # the sensor says: pushed against the wall (-y), not box.F2 (-x)
+    reached = identify(ch.successors, (0.05, -0.9, 0.1))
+    assert reached.node == at[X]
+    again = prog.replan(reached.node, (0.0, 0.0, 0.3))
+    assert again.macro.target == at[G] and again.macro.classes == ("E",)
+    assert prog.replan(at[G]).macro.target == at[GOAL]
+    assert prog.replan(at[GOAL]) is None  # at the goal: done
+    # the expected outcome is identified from its own vector
+    assert identify(ch.successors, (-2.0, 0.0, 0.0)).node == at[G]
+
+
+def test_identify_ties_tolerance_and_no_vectors():
+    a = Successor("n1", "s1", (), (0.0, 0.0, -1.0), 0.3)
+    b = Successor("n2", "s2", (), (0.0, 0.0, -1.0), 0.7)
+    free = Successor("n3", "s3", (), (0.0, 0.0, 0.0), 0.1)
+    assert identify([a, b], (0, 0, -3)).node == "n2"  # a tie goes to the more probable
+    assert identify([a, b, free], None).node == "n3"  # no force: free space
+    assert identify([a, b, free], (0, 0, 1e-12)).node == "n3"
+    assert identify([a, b], (1.0, 0.0, 0.0), tolerance=0.5) is None  # outside the network
+    assert identify([Successor("n4", "s4", (), None, 1.0)], (0, 0, -1)) is None
+
+
+def test_a_situation_outside_the_network_is_reported():
+    prog = NetworkProgram(snapping_network())
+    with pytest.raises(NetworkError, match="n99 is not in the network"):
+        prog.replan("n99")
+    assert prog.network.locate("V/G & E/N & V/F[moon.F1]") is None
+
+
+def test_no_path_to_the_goal_gives_no_choice():
+    net = build_network([demo("a", [A, B, G]), demo("b", [A, R, EP]), demo("c", [A, B, G])])
+    prog = NetworkProgram(net)
+    assert net.goal == net.locate(G)
+    assert prog.replan(net.locate(EP)) is None
+    assert prog.replan(net.locate(R)) is None
+    assert prog.replan(net.locate(A)).path == tuple(net.locate(s) for s in (A, B, G))
+
+
+def test_network_program_json_round_trip():
+    prog = NetworkProgram(snapping_network(), name="snap", source="net.json")
+    data = json.loads(prog.dumps())
+    assert data["kind"] == "network-program" and data["version"] == 1
+    assert data["summary"]["plan_macros"] == 3 and data["summary"]["plan_risky"] == 2
+    node_i = next(n for n in data["nodes"] if n["situation"] == I_)
+    ctx = {c["arrived_by"]: c for c in node_i["contexts"]}
+    assert set(ctx) == {"n1->n2", "any"}
+    assert ctx["any"]["choice"]["successors"][1]["vector"] == [0.0, -1.0, 0.0]
+    back = NetworkProgram.from_json(data)
+    assert back.dumps() == prog.dumps()
+    assert "P(goal)=0.667" in prog.listing()
+    with pytest.raises(NetworkError, match="not a network program"):
+        NetworkProgram.from_json({"kind": "program"})
