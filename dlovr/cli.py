@@ -426,18 +426,40 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
 
 
 @main.command("compile")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.argument("inputs", nargs=-1, type=click.Path())
 @click.option(
-    "-o", "--output-dir", type=click.Path(file_okay=False), help="Where programs go (default: beside each)."
+    "-o",
+    "--output-dir",
+    type=click.Path(),
+    help="Where programs go (default: beside each); with --network, the program file to write.",
 )
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True, help="Worker processes.")
 @click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
-def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool) -> None:
-    """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing)."""
+@click.option(
+    "--network",
+    "network_path",
+    type=click.Path(dir_okay=False),
+    help="Compile this transition network (from `dlovr network`) into a network program (-o FILE).",
+)
+def compile_cmd(
+    inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool, network_path: str | None
+) -> None:
+    """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing),
+    or with --network NET.json a transition network into a network program."""
+    import os
     from concurrent.futures import ProcessPoolExecutor
 
     from dlovr.recording import compile_one, find_recordings, record_compiled
 
+    if network_path is not None:
+        from dlovr.cli_network import compile_network
+
+        compile_network(network_path, inputs, output_dir)
+        return
+    if not inputs:
+        raise UserError("give recordings (files or directories of *.mcap), or --network NET.json")
+    if output_dir is not None and os.path.isfile(output_dir):
+        raise UserError(f"{output_dir}: is a file, not a directory for programs")
     paths = find_recordings(inputs)
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
@@ -522,3 +544,9 @@ def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None
         raise UserError(f"{scene.path}: {e}") from None
     except OSError as e:
         raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
+
+
+# dlovr network (issue 19): its own module, so this one stays small
+from dlovr.cli_network import network_cmd  # noqa: E402
+
+main.add_command(network_cmd)

@@ -12,5 +12,6 @@
   the node reached and planning again (§VI).
 
 Everything here imports only the standard library, numpy and networkx (a test checks that no simulator,
-mesh, UI or file-format library is), so the model is tested and reused without a simulator. See ``docs/model.md`` for the rules in words.
+mesh, UI or file-format library is), so the model is tested and reused without a simulator. See
+``docs/model.md`` for the rules in words.
 """

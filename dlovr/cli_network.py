@@ -1,0 +1,98 @@
+"""Command line for transition networks (paper §VI, §VII): ``dlovr network REC... -o NET.json
+[--html NET.html]`` and ``dlovr compile --network NET.json -o PROGRAM.json`` (registered by
+:mod:`dlovr.cli`). Bad input is one line on stderr with exit code 2, never a traceback."""
+
+from __future__ import annotations
+
+import io
+import sys
+from pathlib import Path
+
+import click
+
+
+class NetworkInputError(click.ClickException):
+    """A problem with the user's input: printed as one line, exit code 2 (as ``dlovr.cli.UserError``)."""
+
+    exit_code = 2
+
+
+def _write_text(path: str, text: str) -> None:
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    except OSError as e:
+        raise NetworkInputError(f"{path}: cannot write: {e.strerror}") from None
+
+
+@click.command("network")
+@click.argument("recordings", nargs=-1, required=True, type=click.Path())
+@click.option(
+    "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Network JSON to write."
+)
+@click.option(
+    "--html", "html_out", type=click.Path(dir_okay=False), help="Also write a self-contained HTML view."
+)
+def network_cmd(recordings: tuple[str, ...], out: str, html_out: str | None) -> None:
+    """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
+    situations, transitions with class, count, probability, durations, gripper motions and risk."""
+    from dlovr.model.network import NetworkError
+    from dlovr.model.planning import NetworkProgram
+    from dlovr.network_html import network_html
+    from dlovr.recording import RecordingError, find_recordings
+    from dlovr.recording.demonstrations import network_from_recordings
+
+    paths = find_recordings(recordings)
+    if not paths:
+        raise NetworkInputError(f"no recordings found in {', '.join(recordings)}")
+    # a progress bar on a terminal only: elsewhere an error stays the one line on stderr
+    stream = sys.stderr if sys.stderr.isatty() else io.StringIO()
+    bar = click.progressbar(length=len(paths), label="reading recordings", file=stream, show_eta=True)
+    with bar:
+        done = [0]
+
+        def progress(k: int) -> None:
+            bar.update(k - done[0])
+            done[0] = k
+
+        try:
+            net = network_from_recordings(paths, progress=progress)
+        except (NetworkError, RecordingError) as e:
+            raise NetworkInputError(str(e)) from None
+    _write_text(out, net.dumps())
+    if html_out:
+        _write_text(html_out, network_html(net, NetworkProgram(net)))
+    risky = sum(e.risk == "risky" for e in net.edges)
+    click.echo(
+        f"wrote {out}: {len(net.nodes)} situations, {len(net.edges)} transitions ({risky} risky) "
+        f"from {len(paths)} recordings of {net.scene_name}; start {net.start}, goal {net.goal}"
+        + (f"; view {html_out}" if html_out else "")
+    )
+
+
+def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None) -> None:
+    """``dlovr compile --network NET.json -o PROGRAM.json``: write the network program."""
+    from dlovr.model.network import Network, NetworkError
+    from dlovr.model.planning import NetworkProgram
+
+    if inputs:
+        raise NetworkInputError("--network compiles a network file; give no recordings with it")
+    if out is None:
+        raise NetworkInputError("--network needs -o PROGRAM.json")
+    try:
+        text = Path(network_path).read_text(encoding="utf-8")
+    except OSError as e:
+        raise NetworkInputError(f"{network_path}: cannot read: {e.strerror}") from None
+    except UnicodeDecodeError:
+        raise NetworkInputError(f"{network_path}: not a text file (a network JSON?)") from None
+    try:
+        prog = NetworkProgram(Network.loads(text), name=Path(out).stem, source=Path(network_path).name)
+    except NetworkError as e:
+        raise NetworkInputError(f"{network_path}: {e}") from None
+    _write_text(out, prog.dumps())
+    plan = prog.plan_from_start()
+    reach = plan[0].reach_probability if plan else 0.0
+    click.echo(
+        f"wrote {out}: network program over {len(prog.network.nodes)} situations; from the start "
+        f"{len(plan)} macros, {sum(c.macro.risk == 'risky' for c in plan)} risky, P(goal)={reach:.3f}"
+    )

@@ -1,0 +1,62 @@
+"""Recordings as demonstrations of a transition network (``dlovr network``): the kept contact
+situations and the gripper pose track of each, read from the contact-state channel only."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dlovr.model.network import Demonstration, Network, NetworkError, build_network
+from dlovr.model.program import PoseTrack
+from dlovr.recording.format import RecordingError
+from dlovr.recording.reader import Recording, kept_states
+
+
+def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
+    """One recording as a :class:`~dlovr.model.network.Demonstration` (scene name and hash from its
+    metadata; gripper poses from its contact-state messages, world frame, m and wxyz)."""
+    rec = Recording(path)
+    states = kept_states(rec, hold)
+    payloads = rec.states()
+    try:
+        t = np.array([float(p["t"]) for p in payloads])
+        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+        quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+        poses = PoseTrack(t, pos, quat)
+    except (KeyError, TypeError, ValueError) as e:
+        raise RecordingError(f"{rec.path}: bad gripper pose in the contact states: {e}") from None
+    return Demonstration(
+        str(rec.path),
+        tuple(states),
+        poses,
+        rec.metadata.get("scene_name", ""),
+        rec.metadata.get("scene_sha256", ""),
+    )
+
+
+def network_from_recordings(
+    paths: Sequence[str | Path],
+    hold: float | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> Network:
+    """Build a transition network from recordings of one scene; ``progress(k)`` after each one read.
+
+    Raises :class:`RecordingError` for an unreadable recording and
+    :class:`~dlovr.model.network.NetworkError` for recordings of different scenes (checked as soon as
+    the second scene is read, before the rest are).
+    """
+    demos: list[Demonstration] = []
+    for k, p in enumerate(paths, 1):
+        d = demonstration(p, hold)
+        if demos and (d.scene_sha256, d.scene_name) != (demos[0].scene_sha256, demos[0].scene_name):
+            f = demos[0]
+            raise NetworkError(
+                f"{d.name}: scene {d.scene_name} ({d.scene_sha256[:12]}) differs from {f.name}'s scene "
+                f"{f.scene_name} ({f.scene_sha256[:12]}); a network merges recordings of one scene"
+            )
+        demos.append(d)
+        if progress is not None:
+            progress(k)
+    return build_network(demos)

@@ -1,0 +1,154 @@
+"""`dlovr network` and `dlovr compile --network` on the sample recordings (issue 19), and the HTML view
+in headless Chromium (Debian's ``chromium``; skipped without it, as in tests/ui/test_ui.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from dlovr.cli import main
+from dlovr.recording import compile_recording
+
+SAMPLES = Path(__file__).parents[1] / "recordings"
+PEG = SAMPLES / "peg_in_hole.mcap"
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def dlovr(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "dlovr", *map(str, args)], capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory) -> Path:
+    """Three copies of the peg-in-hole sample recording in one directory."""
+    d = tmp_path_factory.mktemp("demos")
+    for k in range(3):
+        shutil.copy(PEG, d / f"peg{k}.mcap")
+    return d
+
+
+@pytest.fixture(scope="module")
+def built(three, tmp_path_factory) -> tuple[Path, Path]:
+    out = tmp_path_factory.mktemp("net")
+    r = cli("network", three, "-o", out / "net.json", "--html", out / "net.html")
+    assert r.exit_code == 0, r.output
+    assert "18 situations, 19 transitions (3 risky) from 3 recordings of peg_in_hole" in r.output
+    return out / "net.json", out / "net.html"
+
+
+def test_network_of_three_copies_counts_every_transition_three_times(built):
+    net = json.loads(built[0].read_text())
+    assert net["kind"] == "transition-network" and net["scene_name"] == "peg_in_hole"
+    assert len(net["demonstrations"]) == 3
+    assert {e["count"] for e in net["edges"]} == {3}
+    nodes = {n["id"]: n for n in net["nodes"]}
+    assert nodes[net["start"]]["situation"] == "V/G & E/N & V/N"
+    assert nodes[net["goal"]]["situation"].endswith("V/VS[holeblock.F1,holeblock.F3,holeblock.F5]")
+    assert nodes[net["start"]]["visits"] == 9  # free space, three times in each recording
+    free_out = [e for e in net["edges"] if e["source"] == net["start"]]
+    assert [e["probability"] for e in free_out] == [round(1 / 3, 9)] * 3
+    assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S", "S"]
+
+
+def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_path):
+    r = cli("compile", "--network", built[0], "-o", tmp_path / "prog.json")
+    assert r.exit_code == 0, r.output
+    assert "13 macros, 3 risky, P(goal)=1.000" in r.output
+    prog = json.loads((tmp_path / "prog.json").read_text())
+    assert prog["kind"] == "network-program" and prog["summary"]["plan_reach_probability"] == 1.0
+    single = compile_recording(PEG)
+    plan = prog["plan"]
+    assert [tuple(c["macro"]["classes"]) for c in plan] == [m.classes for m in single.macros]
+    for c, m in zip(plan, single.macros, strict=True):
+        np.testing.assert_allclose(c["macro"]["world"], m.motion.world, atol=1e-8)
+        assert [s["node"] for s in c["successors"]] == [c["macro"]["target"]]
+
+
+def test_recordings_of_different_scenes_are_refused_with_one_line(tmp_path):
+    r = dlovr("network", PEG, SAMPLES / "table.mcap", "-o", tmp_path / "net.json")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "scene" in r.stderr and "peg_in_hole" in r.stderr and "table" in r.stderr
+    assert not (tmp_path / "net.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["network", "missing.mcap", "-o", "n.json"], "cannot read"),
+        (["network", "empty_dir", "-o", "n.json"], "no recordings found"),
+        (["compile", "--network", "missing.json", "-o", "p.json"], "cannot read"),
+        (["compile", "--network", "bad.json", "-o", "p.json"], "not valid JSON"),
+        (["compile", "--network", "other.json", "-o", "p.json"], "not a transition network"),
+        (["compile", "--network", "bad.json"], "needs -o"),
+        (["compile"], "--network NET.json"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tmp_path, args, message):
+    (tmp_path / "empty_dir").mkdir()
+    (tmp_path / "bad.json").write_text("{")
+    (tmp_path / "other.json").write_text('{"version": 1}')
+    r = subprocess.run(
+        [sys.executable, "-m", "dlovr", *args], capture_output=True, text=True, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])},
+    )  # fmt: skip
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and message in r.stderr, r.stderr
+
+
+def test_html_view_is_self_contained(built):
+    html = built[1].read_text()
+    assert html.startswith("<!DOCTYPE html>") and "<svg" in html
+    assert "http://" not in html.replace('xmlns="http://www.w3.org/2000/svg"', "")
+    assert "https://" not in html and "<script" not in html and "<link" not in html
+    assert html.count('class="node ') == 18 and html.count('class="edge risk-risky"') == 3
+    assert "V/VS[holeblock.F1,holeblock.F3,holeblock.F5]" in html and 'id="legend"' in html
+
+
+def _chromium() -> str:
+    path = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
+    if path is None:
+        msg = "chromium not found: `sudo apt-get install -y chromium` to run the browser tests"
+        if os.environ.get("CI"):
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return path
+
+
+def test_html_view_loads_in_headless_chromium_without_errors(built):
+    exe = _chromium()
+    from playwright.sync_api import sync_playwright
+
+    from dlovr.ui.server import HEADLESS_CHROMIUM_ARGS
+
+    errors: list[str] = []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=exe, args=HEADLESS_CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 800})
+            page.on("console", lambda m: errors.append(m.text) if m.type in ("error", "warning") else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("requestfailed", lambda r: errors.append(f"request failed: {r.url}"))
+            page.goto(built[1].as_uri())
+            page.wait_for_load_state("load")
+            assert page.locator("#network g.node").count() == 18
+            assert page.locator("#network g.edge").count() == 19
+            box = page.locator("#network").bounding_box()
+            assert box is not None and box["width"] > 1000 and box["height"] > 200
+            dashed = page.locator("#network g.edge.risk-risky path[stroke-dasharray]")
+            assert dashed.count() == 3
+            assert page.locator("#network g.node title").first.text_content().startswith("n1 (start)")
+        finally:
+            browser.close()
+    assert errors == []
