@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from dlovr import __version__
+from dlovr.batch import cluster_option
 
 
 class UserError(click.ClickException):
@@ -430,29 +431,34 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
 @click.option(
     "-o", "--output-dir", type=click.Path(file_okay=False), help="Where programs go (default: beside each)."
 )
-@click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True, help="Worker processes.")
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 64),
+    help="Worker processes (default 1); with --cluster, tasks in flight (default: every CPU).",
+)
 @click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
-def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool) -> None:
+@cluster_option
+def compile_cmd(
+    inputs: tuple[str, ...], output_dir: str | None, workers: int | None, force: bool, cluster: str | None
+) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing)."""
-    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
 
-    from dlovr.recording import compile_one, find_recordings, record_compiled
+    from dlovr.batch import Task, run_batch, summarize
+    from dlovr.recording import CompileResult, compile_one, find_recordings, record_compiled
 
     paths = find_recordings(inputs)
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
-    results = []
-    with _progress(len(paths), "compiling") as bar:
-        if workers == 1:
-            for p in paths:
-                results.append(compile_one(str(p), output_dir, force))
-                bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(compile_one, str(p), output_dir, force) for p in paths]
-                for f in futures:
-                    results.append(f.result())
-                    bar.update(1)
+    if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
+        paths = [p.resolve() for p in paths]
+        output_dir = str(Path(output_dir).resolve()) if output_dir else None
+    tasks = [Task(str(p), (str(p), output_dir, force)) for p in paths]
+    done = sorted(
+        run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),
+        key=lambda d: d.index,
+    )
+    results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
     record_compiled(results, output_dir)
     failed = [r for r in results if r.error]
     for r in results:
@@ -461,8 +467,8 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
             click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
-    ok = len(results) - len(failed)
-    click.echo(f"{ok} compiled, {len(failed)} failed")
+    retried = summarize(done).retried
+    click.echo(f"{len(results) - len(failed)} compiled, {len(failed)} failed, {retried} retried")
     if failed:
         raise SystemExit(1)
 
