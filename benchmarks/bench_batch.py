@@ -1,6 +1,6 @@
 """Batch throughput on Ray and local processes, measured side by side in one run.
 
-Run: ``.venv/bin/python benchmarks/bench_batch.py [--trials 8] [--sim-time 1.5] [--short 100]``
+Run: ``.venv/bin/python benchmarks/bench_batch.py [--trials 8] [--sim-time 3.0] [--short 100]``
 
 1. Trial-like tasks of about 1 s of CPU each (the table scene simulated for ``--sim-time`` seconds
    with contact tracking, the gripper lowered with a seeded sideways offset so that the cable lands on
@@ -53,7 +53,7 @@ def timed(tasks: list[Task], **kw) -> tuple[float, dict[str, tuple[int, str]]]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=8, help="trial-like tasks per measurement")
-    ap.add_argument("--sim-time", type=float, default=1.5, help="simulated seconds per trial")
+    ap.add_argument("--sim-time", type=float, default=3.0, help="simulated seconds per trial")
     ap.add_argument("--short", type=int, default=100, help="short tasks in the overhead measurement")
     ap.add_argument("--rounds", type=int, default=2, help="alternating rounds; the best of each counts")
     args = ap.parse_args()
@@ -62,7 +62,8 @@ def main() -> None:
 
     from dlovr.batch.on_ray import connect
 
-    print(f"machine: {os.cpu_count()} cores; Ray {ray.__version__}")
+    load = "/".join(f"{x:.1f}" for x in os.getloadavg())
+    print(f"machine: {os.cpu_count()} cores, load average {load} (1/5/15 min); Ray {ray.__version__}")
     t0 = time.perf_counter()
     connect(ray, "local", 2)
     print(f"Ray start-up (local instance, 2 CPUs): {time.perf_counter() - t0:.1f} s")
@@ -77,10 +78,10 @@ def main() -> None:
         }
         for kw in engines.values():  # warm-up: every worker has imported dlovr and built a scene
             timed(trials[:2], **kw)
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), time.process_time()
         trial(0, args.sim_time)
-        one = time.perf_counter() - t1
-        print(f"one trial in this process: {one:.2f} s ({args.sim_time} s simulated)")
+        one, cpu = time.perf_counter() - t1, time.process_time() - c1
+        print(f"one trial in this process: {one:.2f} s wall, {cpu:.2f} s CPU ({args.sim_time} s simulated)")
 
         best: dict[str, float] = {}
         values: dict[str, dict] = {}
@@ -111,6 +112,8 @@ def main() -> None:
             "includes forking its 2 worker processes, Ray's workers are already running)"
         )
         print(f"  Ray / local {over['Ray'] / over['local']:.2f}x: Ray's overhead {per:+.1f} ms per task")
+        load = "/".join(f"{x:.1f}" for x in os.getloadavg())
+        print(f"\nload average at the end: {load}")
     finally:
         ray.shutdown()
 
