@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from dlovr import __version__
+from dlovr.batch import cluster_option
 
 
 class UserError(click.ClickException):
@@ -433,7 +434,11 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     type=click.Path(),
     help="Where programs go (default: beside each); with --network, the program file to write.",
 )
-@click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True, help="Worker processes.")
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 64),
+    help="Worker processes (default 1); with --cluster, tasks in flight (default: every CPU).",
+)
 @click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
 @click.option(
     "--network",
@@ -441,15 +446,22 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     type=click.Path(dir_okay=False),
     help="Compile this transition network (from `dlovr network`) into a network program (-o FILE).",
 )
+@cluster_option
 def compile_cmd(
-    inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool, network_path: str | None
+    inputs: tuple[str, ...],
+    output_dir: str | None,
+    workers: int | None,
+    force: bool,
+    network_path: str | None,
+    cluster: str | None,
 ) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing),
     or with --network NET.json a transition network into a network program."""
     import os
-    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
 
-    from dlovr.recording import compile_one, find_recordings, record_compiled
+    from dlovr.batch import Task, run_batch, summarize
+    from dlovr.recording import CompileResult, compile_one, find_recordings, record_compiled
 
     if network_path is not None:
         from dlovr.cli_network import compile_network
@@ -463,18 +475,15 @@ def compile_cmd(
     paths = find_recordings(inputs)
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
-    results = []
-    with _progress(len(paths), "compiling") as bar:
-        if workers == 1:
-            for p in paths:
-                results.append(compile_one(str(p), output_dir, force))
-                bar.update(1)
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = [pool.submit(compile_one, str(p), output_dir, force) for p in paths]
-                for f in futures:
-                    results.append(f.result())
-                    bar.update(1)
+    if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
+        paths = [p.resolve() for p in paths]
+        output_dir = str(Path(output_dir).resolve()) if output_dir else None
+    tasks = [Task(str(p), (str(p), output_dir, force)) for p in paths]
+    done = sorted(
+        run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),
+        key=lambda d: d.index,
+    )
+    results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
     record_compiled(results, output_dir)
     failed = [r for r in results if r.error]
     for r in results:
@@ -483,8 +492,8 @@ def compile_cmd(
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
             click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
-    ok = len(results) - len(failed)
-    click.echo(f"{ok} compiled, {len(failed)} failed")
+    retried = summarize(done).retried
+    click.echo(f"{len(results) - len(failed)} compiled, {len(failed)} failed, {retried} retried")
     if failed:
         raise SystemExit(1)
 

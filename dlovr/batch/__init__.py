@@ -1,0 +1,124 @@
+"""Batch work: one function over many tasks, on local processes (the default) or a Ray cluster.
+
+:func:`run_batch` runs ``fn(*task.args, **task.kwargs)`` for every :class:`Task` and yields a
+:class:`TaskResult` for each as it completes (order of completion; ``index`` is the task's place):
+
+- ``cluster=None``: this machine. ``workers=1`` (or ``None``) runs the tasks one after the other in
+  this process; ``workers=N`` in N worker processes (:mod:`dlovr.batch.local`);
+- ``cluster="local"``: a private Ray instance on this machine (``num_cpus`` = ``workers``, or every
+  core), bound to 127.0.0.1, stopped at the end (:mod:`dlovr.batch.on_ray`);
+- ``cluster="HOST:PORT"`` (or ``"auto"``, ``"ray://HOST:PORT"``): joins a running Ray cluster
+  (``ray start --head`` elsewhere); ``workers`` then caps the tasks in flight.
+
+If this process is already connected to Ray (``ray.is_initialized()``), any ``cluster`` uses that
+connection and leaves it open. Ray is imported only when a cluster is asked for.
+
+Same seeds, same results: the engine adds no randomness and passes each task its own arguments, so a
+task's value depends on its arguments only, not on where it ran. A task whose worker died is run again
+(at most ``retries`` more times) and reported; a task that raises is not run again (its error is its
+result). Every task yields exactly one result. Files a task writes land where the task writes them:
+with a remote cluster, inputs and outputs must be on storage every node sees under the same paths
+(README, "Scaling out").
+
+Modules: :mod:`dlovr.batch.core` (tasks, results, bookkeeping), :mod:`dlovr.batch.local` (this
+process, worker processes), :mod:`dlovr.batch.on_ray` (Ray).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+import click
+
+from dlovr.batch.core import (
+    INSTALL_HINT,
+    BatchError,
+    BatchSummary,
+    Task,
+    TaskResult,
+    check_cluster,
+    ray_installed,
+    summarize,
+)
+from dlovr.batch.local import run_here, run_on_processes
+
+__all__ = [
+    "INSTALL_HINT",
+    "BatchError",
+    "BatchSummary",
+    "Task",
+    "TaskResult",
+    "check_cluster",
+    "cluster_option",
+    "ray_installed",
+    "run_batch",
+    "summarize",
+]
+
+log = logging.getLogger(__name__)
+
+
+def run_batch(
+    fn: Callable[..., Any],
+    tasks: Sequence[Task],
+    *,
+    workers: int | None = None,
+    cluster: str | None = None,
+    retries: int = 2,
+    progress: bool = True,
+    label: str = "tasks",
+) -> Iterator[TaskResult]:
+    """Run ``fn`` over ``tasks``; yield each :class:`TaskResult` as it completes (see the module).
+
+    ``fn`` must be importable by name (a module-level function) when it runs in other processes.
+    ``progress`` draws a progress bar (``label``) on stderr and reports lost workers there (else they
+    go to the ``dlovr.batch`` logger). Raises :class:`BatchError` when the cluster cannot be used.
+    """
+    tasks = list(tasks)
+    keys = [t.key for t in tasks]
+    if len(set(keys)) != len(keys):
+        raise ValueError("task keys must be unique")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    if retries < 0:
+        raise ValueError(f"retries must be at least 0, got {retries}")
+    check_cluster(cluster)
+    note: Callable[[str], None] = (lambda msg: click.echo(f"\n{msg}", err=True)) if progress else log.warning
+    if cluster is not None:
+        from dlovr.batch.on_ray import run_on_ray
+
+        inner = run_on_ray(fn, tasks, workers, cluster, retries, note)
+        next(inner)  # connected: a cluster that cannot be used fails here, before the progress bar
+    elif (workers or 1) == 1 or len(tasks) <= 1:
+        inner = run_here(fn, tasks)
+    else:
+        inner = run_on_processes(fn, tasks, min(workers or 1, len(tasks)), retries, note)
+    try:
+        if not progress:
+            yield from inner  # type: ignore[misc]
+            return
+        with click.progressbar(length=len(tasks), label=label, file=sys.stderr, show_eta=True) as bar:
+            for r in inner:
+                bar.update(1)
+                yield r  # type: ignore[misc]
+    finally:
+        inner.close()
+
+
+def _cluster_callback(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    return check_cluster(value)
+
+
+def cluster_option(f: Callable[..., Any]) -> Callable[..., Any]:
+    """The ``--cluster local|ADDRESS`` option of a batch command (passes ``cluster``: None when not
+    given); a bad value or a missing Ray is one line, exit code 2."""
+    return click.option(
+        "--cluster",
+        metavar="local|ADDRESS",
+        callback=_cluster_callback,
+        help="Run on Ray: 'local' starts a Ray instance here, HOST:PORT joins a running cluster "
+        "(needs dlovr[ray]; outputs must be on storage every node sees). Default: local processes.",
+    )(f)

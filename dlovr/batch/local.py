@@ -1,0 +1,144 @@
+"""Batch work on this machine: in this process, or in a pool of worker processes of our own.
+
+The pool knows which task each worker runs, so a worker that dies mid-task (a crash in native code,
+the OOM killer, ``os._exit``) costs that task one attempt and nothing else: the task is sent again to a
+fresh worker, the other workers go on. (``concurrent.futures.ProcessPoolExecutor`` would break the
+whole pool and fail every task in flight, without telling which one killed it.)
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import multiprocessing.connection
+import signal
+import socket
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+from dlovr.batch.core import Attempts, Task, TaskResult, call_task, one_line
+
+
+def run_here(fn: Callable[..., Any], tasks: Sequence[Task]) -> Iterator[TaskResult]:
+    """Run the tasks one after the other in this process."""
+    book = Attempts(tasks, 0, lambda _msg: None)
+    for i, t in enumerate(tasks):
+        book.count[i] = 1
+        yield book.result(i, *call_task(fn, t.args, t.kwargs))
+
+
+def _worker_loop(conn: multiprocessing.connection.Connection) -> None:
+    """A worker process: run the tasks sent over ``conn`` until it closes or sends None."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg is None:
+            return
+        out = call_task(*msg)
+        try:
+            conn.send(out)
+        except Exception as e:  # a value that cannot be pickled
+            conn.send((False, f"its result cannot be sent back: {one_line(e)}", out[2]))
+
+
+class _Worker:
+    """A worker process, its end of the pipe, and the index of the task it runs (None when idle)."""
+
+    def __init__(self, ctx: Any):
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_loop, args=(child,), name="dlovr-batch-worker")
+        self.proc.start()
+        child.close()
+        self.task: int | None = None
+
+    def death(self) -> str:
+        """Why the (dead or dying) process ended, for the report."""
+        self.proc.join(5.0)
+        code = self.proc.exitcode
+        if code is not None and code < 0:
+            try:
+                how = f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exit code {code}" if code is not None else "stopped answering"
+        return f"worker {socket.gethostname()}:{self.proc.pid} died ({how})"
+
+    def stop(self, wait: bool) -> None:
+        """Ask it to finish (``wait``) or kill it; close the pipe."""
+        if wait and self.proc.is_alive():
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+            self.proc.join(2.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join(2.0)
+        self.conn.close()
+
+
+def run_on_processes(
+    fn: Callable[..., Any],
+    tasks: Sequence[Task],
+    workers: int,
+    retries: int,
+    note: Callable[[str], None],
+) -> Iterator[TaskResult]:
+    """Run the tasks on ``workers`` worker processes; yield results in order of completion.
+
+    ``fn`` and the tasks' arguments are pickled (``fn`` by name). A task whose worker dies runs again on
+    a fresh worker, at most ``retries`` more times; ``note`` gets a line for each loss.
+    """
+    ctx = multiprocessing.get_context()
+    book = Attempts(tasks, retries, note)
+    queue = deque(range(len(tasks)))
+    idle: list[_Worker] = []
+    running: dict[Any, _Worker] = {}  # pipe and sentinel of each busy worker -> worker
+    clean = False
+    try:
+        while queue or running:
+            while queue and len(running) < 2 * workers:
+                w = idle.pop() if idle else _Worker(ctx)
+                i = queue.popleft()
+                try:
+                    w.conn.send((fn, tasks[i].args, tasks[i].kwargs))
+                except (BrokenPipeError, ConnectionResetError):  # it died while idle: not the task's fault
+                    queue.appendleft(i)
+                    w.stop(wait=False)
+                    continue
+                book.count[i] += 1
+                w.task = i
+                running[w.conn] = running[w.proc.sentinel] = w
+            for obj in multiprocessing.connection.wait(list(running)):
+                w = running.get(obj)
+                if w is None or w.task is None:
+                    continue  # its pipe and its sentinel were both ready: handled already
+                out = None
+                try:
+                    if w.conn.poll():
+                        out = w.conn.recv()
+                except (EOFError, OSError):
+                    pass
+                if out is None and obj is w.conn and w.proc.is_alive():
+                    continue  # the pipe closed but the process has not ended yet: wait for it
+                i, w.task = w.task, None
+                del running[w.conn], running[w.proc.sentinel]
+                if out is not None:
+                    idle.append(w)
+                    yield book.result(i, *out)
+                    continue
+                reason = w.death()
+                w.stop(wait=False)
+                failed = book.worker_lost(i, reason)
+                if failed is None:
+                    queue.appendleft(i)
+                else:
+                    yield failed
+        clean = True
+    finally:
+        for w in [*idle, *{id(w): w for w in running.values()}.values()]:
+            w.stop(wait=clean)

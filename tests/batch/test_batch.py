@@ -1,0 +1,187 @@
+"""Batch work (dlovr.batch): local processes and Ray give the same results, a killed worker's task runs
+again and is reported, nothing is lost; ``dlovr compile --cluster``."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+from batch_tasks import always_die, die_once, fail_on, seeded, wait_for
+from click.testing import CliRunner
+
+import dlovr
+from dlovr.batch import BatchError, Task, run_batch, summarize
+from dlovr.cli import main
+
+RECORDINGS = Path(__file__).parents[2] / "recordings"
+SEEDS = range(6)
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def run(fn, tasks, **kw):
+    return list(run_batch(fn, tasks, progress=False, **kw))
+
+
+def by_key(results):
+    return {r.key: r.value for r in results}
+
+
+def seed_tasks(*extra, **kwargs):
+    return [Task(f"seed{s}", (s, *extra), kwargs) for s in SEEDS]
+
+
+@pytest.fixture(scope="module")
+def ray_instance():
+    """One Ray instance for the module: 2 CPUs, no dashboard, bound to 127.0.0.1 (dlovr's own local
+    start); its workers import this dlovr and the task module."""
+    import ray
+
+    from dlovr.batch.on_ray import connect
+
+    path = os.pathsep.join(
+        [str(Path(dlovr.__file__).parents[1]), str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]
+    )
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PYTHONPATH", path)  # inherited by the raylet, so by the workers
+        assert connect(ray, "local", 2)
+    try:
+        assert ray.cluster_resources()["CPU"] == 2
+        assert {n["NodeManagerAddress"] for n in ray.nodes()} == {"127.0.0.1"}
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+# --------------------------------------------------------------------------------------------------
+# Local processes
+# --------------------------------------------------------------------------------------------------
+
+
+def test_in_process_and_worker_processes_give_the_same_values():
+    one = run(seeded, seed_tasks(), workers=1)
+    two = run(seeded, seed_tasks(), workers=2)
+    assert by_key(one) == by_key(two) == {f"seed{s}": seeded(s) for s in SEEDS}
+    assert {r.where for r in one} == {f"{os.uname().nodename}:{os.getpid()}"}
+    assert str(os.getpid()) not in {r.where.rpartition(":")[2] for r in two}
+    assert sorted(r.index for r in two) == list(range(len(SEEDS)))
+
+
+@pytest.mark.parametrize("how", ["exit", "kill"])
+def test_a_worker_that_dies_mid_task_gets_its_task_run_again(tmp_path, how):
+    res = run(die_once, seed_tasks(3, str(tmp_path / "m"), how), workers=2)
+    assert by_key(res) == {f"seed{s}": seeded(s) for s in SEEDS}  # nothing lost, values as usual
+    victim = next(r for r in res if r.key == "seed3")
+    assert victim.attempts == 2 and len(victim.lost) == 1
+    assert ("exit code 13" if how == "exit" else "killed by SIGKILL") in victim.lost[0]
+    assert all(r.attempts == 1 for r in res if r.key != "seed3")
+    assert str(summarize(res)) == "6 tasks: 6 done, 0 failed, 1 retried"
+
+
+def test_a_task_whose_worker_always_dies_is_reported_failed(capsys):
+    res = list(run_batch(always_die, seed_tasks(2), workers=2, retries=1))
+    bad = next(r for r in res if r.key == "seed2")
+    assert not bad.ok and bad.attempts == 2 and "worker lost on each of 2 attempts" in bad.error
+    assert sum(r.ok for r in res) == 5 and summarize(res).failed == 1
+    err = capsys.readouterr().err
+    assert "running it again" in err and "giving up" in err  # reported as it happens
+
+
+def test_an_error_in_the_task_is_its_result_not_retried():
+    for workers in (1, 2):
+        res = run(fail_on, seed_tasks(4), workers=workers)
+        bad = next(r for r in res if r.key == "seed4")
+        assert bad.error == "ValueError: seed 4 is bad second line" and bad.attempts == 1
+        assert summarize(res).ok == 5
+
+
+def test_results_come_in_order_of_completion(tmp_path):
+    tasks = [Task(str(s), (s, str(tmp_path / "m"))) for s in range(3)]
+    order = [r.index for r in run(wait_for, tasks, workers=2)]
+    assert sorted(order) == [0, 1, 2] and order.index(1) < order.index(0)
+
+
+def test_bad_batches_are_refused():
+    with pytest.raises(ValueError, match="unique"):
+        run(seeded, [Task("a", (1,)), Task("a", (2,))])
+    with pytest.raises(BatchError, match="expected local, auto or HOST:PORT"):
+        run(seeded, seed_tasks(), cluster="nowhere")
+
+
+# --------------------------------------------------------------------------------------------------
+# The command line, without Ray running
+# --------------------------------------------------------------------------------------------------
+
+
+def test_cluster_without_ray_installed_is_one_line_exit_2(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    r = cli("compile", RECORDINGS, "--cluster", "local")
+    assert r.exit_code == 2 and r.output.strip().splitlines() == [
+        "Error: --cluster needs Ray, which is not installed: pip install 'dlovr[ray]'"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("address", "message"),
+    [("nowhere", "expected local, auto or HOST:PORT"), ("127.0.0.1:1", "cannot reach the Ray cluster")],
+)
+def test_bad_or_unreachable_cluster_is_one_line_exit_2(address, message, tmp_path):
+    r = cli("compile", RECORDINGS / "table.mcap", "-o", tmp_path, "--cluster", address)
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and message in r.output
+
+
+# --------------------------------------------------------------------------------------------------
+# Ray (one instance for the module)
+# --------------------------------------------------------------------------------------------------
+
+
+def test_ray_gives_the_same_values_as_local_processes(ray_instance):
+    on_ray = run(seeded, seed_tasks(), cluster="local")
+    assert by_key(on_ray) == by_key(run(seeded, seed_tasks(), workers=2))
+    assert all(r.attempts == 1 for r in on_ray)
+    assert str(os.getpid()) not in {r.where.rpartition(":")[2] for r in on_ray}  # ran in Ray's workers
+
+
+def test_ray_runs_a_killed_workers_task_again(ray_instance, tmp_path):
+    res = run(die_once, seed_tasks(1, str(tmp_path / "m"), "kill"), cluster="local")
+    assert by_key(res) == {f"seed{s}": seeded(s) for s in SEEDS}
+    victim = next(r for r in res if r.key == "seed1")
+    assert victim.attempts == 2 and "WorkerCrashedError" in victim.lost[0]
+    assert str(summarize(res)) == "6 tasks: 6 done, 0 failed, 1 retried"
+
+
+def test_ray_reports_a_task_whose_worker_always_dies(ray_instance):
+    res = run(always_die, seed_tasks(0), cluster="local", retries=1)
+    bad = next(r for r in res if r.key == "seed0")
+    assert not bad.ok and bad.attempts == 2 and "WorkerCrashedError" in bad.error
+    assert summarize(res).ok == 5
+
+
+def test_ray_streams_results_in_order_of_completion(ray_instance, tmp_path):
+    tasks = [Task(str(s), (s, str(tmp_path / "m"))) for s in range(3)]
+    order = [r.index for r in run(wait_for, tasks, cluster="local", workers=2)]
+    assert sorted(order) == [0, 1, 2] and order.index(1) < order.index(0)
+
+
+def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    names = sorted(p.name for p in RECORDINGS.glob("*.mcap"))
+    assert len(names) >= 4
+    for n in names:
+        shutil.copy(RECORDINGS / n, src / n)
+    (src / "broken.mcap").write_bytes(b"not an mcap file")
+    local = cli("compile", src, "-o", tmp_path / "local", "--workers", "2")
+    on_ray = cli("compile", src, "-o", tmp_path / "ray", "--cluster", "local")
+    for r in (local, on_ray):
+        assert r.exit_code == 1, r.output
+        assert f"{len(names)} compiled, 1 failed, 0 retried" in r.output and "broken.mcap" in r.output
+    for n in names:
+        for ext in (".program.json", ".program.txt"):
+            out = Path(n).stem + ext
+            assert (tmp_path / "ray" / out).read_bytes() == (tmp_path / "local" / out).read_bytes()
