@@ -183,7 +183,7 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
     """Run a scripted demonstration headless (optionally recording it); return (scene, tracker)."""
     from contextlib import nullcontext
 
-    from dlovr.recording import DemoRecorder, finish_on_sigterm
+    from dlovr.recording import DemoRecorder, StopSignals, finish_on_sigterm
     from dlovr.sim import SimulationDiverged, Simulator
 
     if script_path is None:
@@ -198,7 +198,8 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
         raise UserError(f"{scene.path}: {e}") from None
     tracker = sim.tracker
     nsteps = round(script.total_duration / sim.model.opt.timestep)
-    with finish_on_sigterm():
+    stop = StopSignals() if out else None  # while recording, a signal ends it between two steps
+    with finish_on_sigterm(), stop or nullcontext():
         recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
         with recorder as rec, _progress(nsteps, label) as bar:
             try:
@@ -207,9 +208,15 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
                         rec.step(record)
                     if k % 100 == 0:
                         bar.update(100)
+                    if stop is not None and stop.signum is not None:
+                        break
             except SimulationDiverged as e:
                 saved = f" (recording kept up to there: {out})" if out else ""
                 raise click.ClickException(f"simulation diverged: {e}{saved}") from None
+    if stop is not None and stop.signum is not None:
+        kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
+        click.echo(f"interrupted ({stop.name}): {kept}", err=True)
+        raise SystemExit(stop.exit_code)
     return scene, tracker
 
 
@@ -271,10 +278,27 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
 )
-def record_cmd(scene_ref: str | None, script_path: str, out: str) -> None:
-    """Record a scripted demonstration headless to an MCAP file."""
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
+    """Record a scripted demonstration headless to an MCAP file.
+
+    An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
+    two steps: the file is kept, finished, and replays and verifies (`dlovr replay --verify`).
+
+    Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there);
+    130 (Ctrl-C, SIGINT) or 143 (SIGTERM) interrupted, the recording so far kept.
+    """
+    _refuse_existing(out, force)
     _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
     click.echo(f"wrote {out}: {len(tracker.kept)} contact situations")
+
+
+def _refuse_existing(out: str, force: bool) -> None:
+    """One line, exit 2, if ``out`` exists and may not be overwritten."""
+    import os
+
+    if os.path.lexists(out) and not force:
+        raise UserError(f"{out}: exists; give --force to overwrite it")
 
 
 def _recording_error(fn):
@@ -297,7 +321,11 @@ def _recording_error(fn):
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
 @_recording_error
 def replay_cmd(recording: str, verify: bool) -> None:
-    """Re-simulate a recording from its embedded scene and command stream."""
+    """Re-simulate a recording from its embedded scene and command stream.
+
+    Exit status: 0 replayed (with --verify: bit-identical); 1 with --verify: the replay diverged from
+    the recording; 2 the recording cannot be read (damaged, not a recording, ...).
+    """
     from dlovr.recording import replay
 
     with _progress(1, "replay") as bar:
@@ -377,15 +405,24 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 @main.command("recover")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
 @_recording_error
-def recover_cmd(broken: str, out: str) -> None:
-    """Rescue every complete chunk of a recording whose writer was killed."""
+def recover_cmd(broken: str, out: str, force: bool) -> None:
+    """Rescue every intact part of a damaged recording or of one whose writer was killed.
+
+    Damaged chunks are skipped (and listed with their time ranges), every intact one is kept; an
+    unfinished file is cut at its last checkpoint (at most the last second or two are lost), so that
+    the result replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
+    """
     from dlovr.recording import recover
 
+    _refuse_existing(out, force)
     rep = recover(broken, out)
     click.echo(
         f"wrote {out}: {rep.messages} messages, {rep.attachments} attachments, {rep.last_time_s:.2f} s"
     )
+    for line in rep.skipped:
+        click.echo(f"skipped {line}", err=True)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -433,12 +470,27 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True, help="Worker processes.")
 @click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
 def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool) -> None:
-    """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing)."""
+    """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing).
+
+    A recording NAME.mcap gives NAME.program.json and NAME.program.txt, beside it or in -o DIR. Two
+    recordings with the same name into one -o folder are refused (the message names both). Recordings
+    unchanged since they were last compiled there are skipped. A recording that cannot be read is
+    named and the others are compiled. Exit status: 0 all compiled or skipped; 2 any failed.
+    """
     from concurrent.futures import ProcessPoolExecutor
 
-    from dlovr.recording import compile_one, find_recordings, record_compiled
+    from dlovr.recording import (
+        RecordingError,
+        check_unique_outputs,
+        compile_one,
+        find_recordings,
+        record_compiled,
+    )
 
-    paths = find_recordings(inputs)
+    try:
+        paths = check_unique_outputs(find_recordings(inputs), output_dir)
+    except RecordingError as e:
+        raise UserError(str(e)) from None
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
     results = []
@@ -461,10 +513,12 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
             click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
-    ok = len(results) - len(failed)
-    click.echo(f"{ok} compiled, {len(failed)} failed")
+    skipped = sum(1 for r in results if r.skipped and not r.error)
+    compiled = len(results) - len(failed) - skipped
+    counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
+    click.echo(", ".join([*counts, f"{len(failed)} failed"]))
     if failed:
-        raise SystemExit(1)
+        raise SystemExit(2)
 
 
 @scene_group.command("export")

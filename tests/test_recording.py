@@ -109,12 +109,13 @@ def test_compile_one_and_two_workers_identical_and_failures_reported(recorded, t
     r1 = cli("compile", src, "-o", tmp_path / "o1", "--workers", "1")
     r2 = cli("compile", src, "-o", tmp_path / "o2", "--workers", "2")
     for r in (r1, r2):
-        assert r.exit_code == 1 and "2 compiled, 1 failed" in r.output and "broken.mcap" in r.output
+        assert r.exit_code == 2 and "2 compiled, 1 failed" in r.output and "broken.mcap" in r.output
     for name in ("a.program.json", "a.program.txt", "b.program.json"):
         assert (tmp_path / "o1" / name).read_bytes() == (tmp_path / "o2" / name).read_bytes()
     (src / "broken.mcap").unlink()
     again = cli("compile", src, "-o", tmp_path / "o1")
     assert again.exit_code == 0 and again.output.count("unchanged, skipped") == 2
+    assert "0 compiled, 2 skipped (unchanged), 0 failed" in again.output
 
 
 @pytest.mark.parametrize(
