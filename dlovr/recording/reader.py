@@ -176,6 +176,8 @@ class Recording:
                 steps.append(int(m["step"]) + np.arange(len(p)))
                 pos.append(p)
                 quat.append(q)
+        except RecordingError:  # already names the file and the problem
+            raise
         except _FIELD_ERRORS as e:
             raise RecordingError(f"{self.path}: bad gripper command message: {one_line(e)}") from None
         if not steps:
@@ -207,6 +209,8 @@ class Recording:
                     ns = stamp_ns(ent["timestamp"])
                     pts = [[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]]
                     frames.append((ns, np.array(pts, dtype=float).reshape(-1, 3)))
+        except RecordingError:  # already names the file and the problem
+            raise
         except _FIELD_ERRORS as e:
             raise RecordingError(f"{self.path}: bad visual frame message: {one_line(e)}") from None
         for ns, pts in frames:
@@ -222,6 +226,8 @@ class Recording:
                            np.asarray(m["target_quat"], float).reshape(4))
                 for m in self._iter(TOPIC_CHECKPOINT)
             ]  # fmt: skip
+        except RecordingError:  # already names the file and the problem
+            raise
         except _FIELD_ERRORS as e:
             raise RecordingError(f"{self.path}: bad checkpoint message: {one_line(e)}") from None
         if not out:
@@ -280,6 +286,8 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
             force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
             top = p.get("topological")
             out.append(TimedSituation(k.start, round(stop - k.start, 9), k.situation, top, force))
+    except RecordingError:  # already names the file and the problem
+        raise
     except _FIELD_ERRORS as e:  # NotationError is a ValueError
         raise RecordingError(f"{recording.path}: bad contact-state message: {one_line(e)}") from None
     return out
