@@ -269,6 +269,21 @@ def test_recover_with_a_damaged_first_chunk_uses_the_summary(touch, tmp_path):
     assert macros(tmp_path / "fixed.mcap") == macros(touch)
 
 
+def test_recover_of_a_killed_file_without_channel_definitions_uses_the_format_layout(touch, tmp_path):
+    raw = touch.read_bytes()
+    chunks = chunk_offsets(raw)
+    pos, _ = chunks[0]
+    cut = chunks[-3][0]  # killed: no summary, the last chunks missing
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(raw[: pos + 60] + bytes([raw[pos + 60] ^ 0xFF]) + raw[pos + 61 : cut + 100])
+    rep = recover(bad, tmp_path / "fixed.mcap")
+    assert any("fixed channel layout" in line for line in rep.skipped)
+    fixed = Recording(tmp_path / "fixed.mcap")
+    steps = fixed.commands()[0]
+    assert steps[0] == 1 and steps[-1] == fixed.checkpoints()[-1].step > 500
+    assert fixed.states()[-1]["end"] and fixed.states()[-1]["step"] == steps[-1]
+
+
 def test_recover_of_an_intact_file_is_an_identical_recording(touch, tmp_path):
     rep = recover(touch, tmp_path / "same.mcap")
     assert rep.skipped == ()

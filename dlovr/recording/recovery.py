@@ -72,7 +72,7 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
         skipped.append(f"{orphans} messages whose channel definition was lost")
     topic = {cid: c.topic for cid, c in channels.items()}
     if not res.data_end:
-        chunks = _cut_at_last_checkpoint(chunks, topic, meta, clock, skipped)
+        chunks = _cut_at_last_checkpoint(chunks, topic, clock, skipped)
     messages = [m for c in chunks for m in c]
     if not messages:
         raise RecordingError(f"{src}: nothing recoverable (no intact chunk with messages)")
@@ -82,7 +82,10 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
             + (" (the writer was stopped within its first second?)" if not res.data_end else "")
         )
     skipped += _command_gaps(messages, topic, clock)
-    _write(dst, res, meta, schemas, channels, chunks)
+    try:
+        _write(dst, res, schemas, channels, chunks)
+    except OSError as e:
+        raise RecordingError(f"{dst}: cannot write: {e.strerror or e}") from None
     first, last = min(m.log_time for m in messages), max(m.log_time for m in messages)
     return RecoveryReport(
         len(messages), len(res.attachments), (last - first) / 1e9 if messages else math.nan, tuple(skipped)
@@ -143,7 +146,7 @@ def _dlovr_layout() -> tuple[dict[int, Any], dict[int, Any]]:
 
 
 def _cut_at_last_checkpoint(
-    chunks: list[list[Any]], topic: dict[int, str], meta: dict[str, str], clock: _Clock, skipped: list[str]
+    chunks: list[list[Any]], topic: dict[int, str], clock: _Clock, skipped: list[str]
 ) -> list[list[Any]]:
     """Keep what precedes the last checkpoint (an unfinished file's consistent part) and end the
     contact states there as the writer does when it closes."""
@@ -241,7 +244,6 @@ def _command_gaps(messages: list[Any], topic: dict[int, str], clock: _Clock) -> 
 def _write(
     dst: Path,
     res: ScanResult,
-    meta: dict[str, str],
     schemas: dict[int, Any],
     channels: dict[int, Any],
     chunks: list[list[Any]],
