@@ -410,9 +410,9 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 def recover_cmd(broken: str, out: str, force: bool) -> None:
     """Rescue every intact part of a damaged recording or of one whose writer was killed.
 
-    Damaged chunks are skipped (and listed with their time ranges), every intact one is kept; an
-    unfinished file is cut at its last checkpoint (at most the last second or two are lost), so that
-    the result replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
+    Damaged chunks are skipped (and listed with their time ranges), every intact one is kept. A file
+    whose writer was killed is cut at its last checkpoint (at most the last 2 s of simulated time are
+    lost), so that it replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
     """
     from dlovr.recording import recover
 
