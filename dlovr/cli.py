@@ -184,7 +184,7 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
     """Run a scripted demonstration headless (optionally recording it); return (scene, tracker)."""
     from contextlib import nullcontext
 
-    from dlovr.recording import DemoRecorder, finish_on_sigterm
+    from dlovr.recording import DemoRecorder, StopSignals, finish_on_sigterm
     from dlovr.sim import SimulationDiverged, Simulator
 
     if script_path is None:
@@ -199,7 +199,8 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
         raise UserError(f"{scene.path}: {e}") from None
     tracker = sim.tracker
     nsteps = round(script.total_duration / sim.model.opt.timestep)
-    with finish_on_sigterm():
+    stop = StopSignals() if out else None  # while recording, a signal ends it between two steps
+    with finish_on_sigterm(), stop or nullcontext():
         recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
         with recorder as rec, _progress(nsteps, label) as bar:
             try:
@@ -208,9 +209,15 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
                         rec.step(record)
                     if k % 100 == 0:
                         bar.update(100)
+                    if stop is not None and stop.signum is not None:
+                        break
             except SimulationDiverged as e:
                 saved = f" (recording kept up to there: {out})" if out else ""
                 raise click.ClickException(f"simulation diverged: {e}{saved}") from None
+    if stop is not None and stop.signum is not None:
+        kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
+        click.echo(f"interrupted ({stop.name}): {kept}", err=True)
+        raise SystemExit(stop.exit_code)
     return scene, tracker
 
 
@@ -272,10 +279,27 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
 )
-def record_cmd(scene_ref: str | None, script_path: str, out: str) -> None:
-    """Record a scripted demonstration headless to an MCAP file."""
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
+    """Record a scripted demonstration headless to an MCAP file.
+
+    An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
+    two steps: the file is kept, finished, and replays and verifies (`dlovr replay --verify`).
+
+    Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there);
+    130 (Ctrl-C, SIGINT) or 143 (SIGTERM) interrupted, the recording so far kept.
+    """
+    _refuse_existing(out, force)
     _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
     click.echo(f"wrote {out}: {len(tracker.kept)} contact situations")
+
+
+def _refuse_existing(out: str, force: bool) -> None:
+    """One line, exit 2, if ``out`` exists and may not be overwritten."""
+    import os
+
+    if os.path.lexists(out) and not force:
+        raise UserError(f"{out}: exists; give --force to overwrite it")
 
 
 def _recording_error(fn):
@@ -298,7 +322,11 @@ def _recording_error(fn):
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
 @_recording_error
 def replay_cmd(recording: str, verify: bool) -> None:
-    """Re-simulate a recording from its embedded scene and command stream."""
+    """Re-simulate a recording from its embedded scene and command stream.
+
+    Exit status: 0 replayed (with --verify: bit-identical); 1 with --verify: the replay diverged from
+    the recording; 2 the recording cannot be read (damaged, not a recording, ...).
+    """
     from dlovr.recording import replay
 
     with _progress(1, "replay") as bar:
@@ -378,15 +406,24 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 @main.command("recover")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
 @_recording_error
-def recover_cmd(broken: str, out: str) -> None:
-    """Rescue every complete chunk of a recording whose writer was killed."""
+def recover_cmd(broken: str, out: str, force: bool) -> None:
+    """Rescue every intact part of a damaged recording or of one whose writer was killed.
+
+    Damaged chunks are skipped (and listed with their time ranges), every intact one is kept. A file
+    whose writer was killed is cut at its last checkpoint (at most the last 2 s of simulated time are
+    lost), so that it replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
+    """
     from dlovr.recording import recover
 
+    _refuse_existing(out, force)
     rep = recover(broken, out)
     click.echo(
         f"wrote {out}: {rep.messages} messages, {rep.attachments} attachments, {rep.last_time_s:.2f} s"
     )
+    for line in rep.skipped:
+        click.echo(f"skipped {line}", err=True)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -456,12 +493,25 @@ def compile_cmd(
     cluster: str | None,
 ) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing),
-    or with --network NET.json a transition network into a network program."""
+    or with --network NET.json a transition network into a network program.
+
+    A recording NAME.mcap gives NAME.program.json and NAME.program.txt, beside it or in -o DIR. Two
+    recordings with the same name into one -o folder are refused (the message names both). Recordings
+    unchanged since they were last compiled there are skipped. A recording that cannot be read is
+    named and the others are compiled. Exit status: 0 all compiled or skipped; 2 any failed.
+    """
     import os
     from pathlib import Path
 
     from dlovr.batch import Task, run_batch, summarize
-    from dlovr.recording import CompileResult, compile_one, find_recordings, record_compiled
+    from dlovr.recording import (
+        CompileResult,
+        RecordingError,
+        check_unique_outputs,
+        compile_one,
+        find_recordings,
+        record_compiled,
+    )
 
     if network_path is not None:
         from dlovr.cli_network import compile_network
@@ -472,7 +522,10 @@ def compile_cmd(
         raise UserError("give recordings (files or directories of *.mcap), or --network NET.json")
     if output_dir is not None and os.path.isfile(output_dir):
         raise UserError(f"{output_dir}: is a file, not a directory for programs")
-    paths = find_recordings(inputs)
+    try:
+        paths = check_unique_outputs(find_recordings(inputs), output_dir)
+    except RecordingError as e:
+        raise UserError(str(e)) from None
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
@@ -492,10 +545,13 @@ def compile_cmd(
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
             click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
+    skipped = sum(1 for r in results if r.skipped and not r.error)
+    compiled = len(results) - len(failed) - skipped
+    counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
     retried = summarize(done).retried
-    click.echo(f"{len(results) - len(failed)} compiled, {len(failed)} failed, {retried} retried")
+    click.echo(", ".join([*counts, f"{len(failed)} failed", f"{retried} retried"]))
     if failed:
-        raise SystemExit(1)
+        raise SystemExit(2)
 
 
 @scene_group.command("export")

@@ -6,17 +6,21 @@
   obstacles' convex pieces as JSON;
 - :mod:`dlovr.recording.foxglove`: the ``SceneUpdate`` and ``FrameTransforms`` messages Foxglove shows;
 - :mod:`dlovr.recording.writer`: :class:`Recorder` (the file) and :class:`DemoRecorder` (a running
-  demonstration), :func:`finish_on_sigterm`;
+  demonstration), :func:`finish_on_sigterm`, :class:`StopSignals` (stopping between two steps on a
+  signal);
 - :mod:`dlovr.recording.reader`: :class:`Recording`, a validated file opened for reading, and
   :func:`kept_states`, its debounced contact situations;
 - :mod:`dlovr.recording.replaying`: :func:`replay`, re-simulating a recording bit for bit;
-- :mod:`dlovr.recording.recovery`: :func:`recover`, rescuing a file whose writer was killed;
+- :mod:`dlovr.recording.integrity`: whole-file checksums and a tolerant scan of damaged files;
+- :mod:`dlovr.recording.recovery`: :func:`recover`, rescuing a damaged file or one whose writer was
+  killed;
 - :mod:`dlovr.recording.compile`: :func:`compile_recording` and batch compilation with a cache.
 """
 
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, pieces_to_json
 from dlovr.recording.compile import (
     CompileResult,
+    check_unique_outputs,
     compile_one,
     compile_recording,
     find_recordings,
@@ -35,7 +39,7 @@ from dlovr.recording.format import (
 from dlovr.recording.reader import Checkpoint, Recording, kept_states, situation_from_payload
 from dlovr.recording.recovery import RecoveryReport, recover
 from dlovr.recording.replaying import ReplayResult, load_embedded_scene, replay
-from dlovr.recording.writer import DemoRecorder, Recorder, finish_on_sigterm
+from dlovr.recording.writer import DemoRecorder, Recorder, StopSignals, finish_on_sigterm
 
 __all__ = [
     "FORMAT_VERSION",
@@ -54,6 +58,8 @@ __all__ = [
     "RecoveryReport",
     "ReplayResult",
     "SceneBundle",
+    "StopSignals",
+    "check_unique_outputs",
     "compile_one",
     "compile_recording",
     "find_recordings",

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.recording.format import RecordingError
+from dlovr.recording.format import RecordingError, one_line
 from dlovr.recording.reader import Recording, kept_states
 
 
@@ -23,10 +23,14 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
-    t = np.array([float(p["t"]) for p in payloads])
-    pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
-    quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
-    return compile_program(states, PoseTrack(t, pos, quat), name=Path(path).stem, source=Path(path).name)
+    try:
+        t = np.array([float(p["t"]) for p in payloads])
+        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float).reshape(-1, 3)
+        quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+        track = PoseTrack(t, pos, quat.reshape(-1, 4))
+    except (KeyError, TypeError, ValueError) as e:
+        raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
+    return compile_program(states, track, name=Path(path).stem, source=Path(path).name)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -68,24 +72,54 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def program_paths(path: str | Path, out_dir: str | Path | None) -> tuple[Path, Path]:
+    """Where a recording's program goes: ``<stem>.program.json`` and ``.program.txt`` in ``out_dir``
+    (default: beside the recording)."""
+    p = Path(path)
+    out = Path(out_dir) if out_dir else p.parent
+    return out / f"{p.stem}.program.json", out / f"{p.stem}.program.txt"
+
+
+def check_unique_outputs(paths: Sequence[Path], out_dir: str | Path | None) -> list[Path]:
+    """The recordings without duplicates (the same file named twice counts once); raises
+    :class:`RecordingError` naming both inputs when two different recordings would write the same
+    program (same file name, one output folder)."""
+    seen: dict[Path, Path] = {}
+    files: set[Path] = set()
+    out = []
+    for p in paths:
+        real = p.resolve()
+        if real in files:
+            continue
+        files.add(real)
+        dst = program_paths(p, out_dir)[0].resolve()
+        if dst in seen:
+            raise RecordingError(
+                f"{seen[dst]} and {p} would both be compiled to {program_paths(p, out_dir)[0]}: "
+                "compile them into different -o folders (or without -o, beside each)"
+            )
+        seen[dst] = p
+        out.append(p)
+    return out
+
+
 def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileResult:
     """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job)."""
     p = Path(path)
-    out = Path(out_dir) if out_dir else p.parent
     try:
         digest = _sha256(p)
     except OSError as e:
         return CompileResult(str(p), None, error=f"{p}: cannot read: {e.strerror}")
-    jpath, tpath = out / f"{p.stem}.program.json", out / f"{p.stem}.program.txt"
+    jpath, tpath = program_paths(p, out_dir)
+    out = jpath.parent
     cache_file = out / CACHE_NAME
     try:
         cache = json.loads(cache_file.read_text()) if cache_file.is_file() else {}
-    except (OSError, ValueError):
-        cache = {}
-    if not force and cache.get(p.name) == digest and jpath.is_file() and tpath.is_file():
-        data = json.loads(jpath.read_text())
-        s = data.get("summary", {})
-        return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
+        if not force and cache.get(p.name) == digest and jpath.is_file() and tpath.is_file():
+            s = json.loads(jpath.read_text()).get("summary", {})
+            return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
+    except (OSError, ValueError, AttributeError):
+        pass  # no usable cache or program: compile again
     try:
         prog = compile_recording(p)
     except RecordingError as e:

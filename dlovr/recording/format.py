@@ -18,6 +18,7 @@ Python's shortest round-trip repr (:func:`dumps`), so states and commands come b
 from __future__ import annotations
 
 import json
+import struct
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,15 @@ TOPIC_STATES = "/dlovr/contact_states"
 TOPIC_SCENE = "/foxglove/scene"
 TOPIC_TF = "/tf"
 REQUIRED_TOPICS = (TOPIC_COMMAND, TOPIC_CHECKPOINT, TOPIC_STATES)
+CHANNELS = (
+    (TOPIC_COMMAND, "dlovr.Commands"),
+    (TOPIC_CHECKPOINT, "dlovr.Checkpoint"),
+    (TOPIC_STATES, "dlovr.ContactState"),
+    (TOPIC_SCENE, "foxglove.SceneUpdate"),
+    (TOPIC_TF, "foxglove.FrameTransforms"),
+)
+"""Topics and schema names in the order the writer registers them: channel and schema ids 1, 2, ...
+(``dlovr recover`` relies on it when a file's channel definitions were lost)."""
 SCENE_PREFIX = "scene/"
 SCENE_TOML = "scene/scene.toml"
 PIECES_JSON = "model/pieces.json"
@@ -39,6 +49,37 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 class RecordingError(ValueError):
     """A recording cannot be used; the message names the file and the problem in one line."""
+
+
+def _decode_errors() -> tuple[type[BaseException], ...]:
+    import zstandard
+    from mcap.exceptions import McapError
+
+    return (
+        McapError,  # bad magic, record too long, unsupported compression, end of file
+        ValueError,  # CRC mismatches, bad JSON, bad UTF-8, malformed numbers
+        zstandard.ZstdError,
+        RuntimeError,  # lz4.frame
+        struct.error,  # truncated or malformed records
+        EOFError,
+        KeyError,
+        IndexError,
+        TypeError,  # a JSON value of the wrong type
+        OverflowError,
+        MemoryError,  # a damaged length field
+        OSError,
+    )
+
+
+DECODE_ERRORS: tuple[type[BaseException], ...] = _decode_errors()
+"""Every exception that decoding damaged bytes can raise (MCAP records, zstd/lz4, CRC, JSON, fields):
+readers turn them into one :class:`RecordingError` line naming the file."""
+
+
+def one_line(e: BaseException) -> str:
+    """An exception as one short line (its first line, or its type's name)."""
+    s = str(e).strip().splitlines()
+    return (s[0] if s else type(e).__name__)[:200]
 
 
 COMMAND_SCHEMA = {

@@ -12,13 +12,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from dlovr import __version__
 from dlovr.model.transitions import DEFAULT_HOLD_S
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
 from dlovr.recording.format import (
+    DECODE_ERRORS,
     FORMAT_VERSION,
     MAX_ATTACHMENT_BYTES,
     MCAP_MAGIC,
@@ -33,8 +33,10 @@ from dlovr.recording.format import (
     TOPIC_STATES,
     TOPIC_TF,
     RecordingError,
+    one_line,
 )
 from dlovr.recording.foxglove import stamp_ns
+from dlovr.recording.integrity import check_checksums
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,12 @@ class Checkpoint:
 
 
 class Recording:
-    """A validated recording opened for reading. Raises :class:`RecordingError` on any problem."""
+    """A validated recording opened for reading. Raises :class:`RecordingError` on any problem.
+
+    Opening checks the file's checksums (summary, data section when written) and its metadata; reading
+    a channel checks its chunks' CRCs and the messages' JSON. ``dt``: time step (s); ``t0_ns``: log
+    time of step 0; ``hold``: the debouncing hold time (s) it was recorded with.
+    """
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -70,6 +77,7 @@ class Recording:
                 f"{p}: truncated recording (no MCAP footer: the writer was killed?); "
                 f"try `dlovr recover {p} -o FIXED.mcap`"
             )
+        check_checksums(p, size)
         try:
             with open(p, "rb") as fh:
                 reader = make_reader(fh, validate_crcs=True)
@@ -77,8 +85,8 @@ class Recording:
                 summary = reader.get_summary()
                 meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
                 attachments = {a.name: a.data for a in reader.iter_attachments()}
-        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
-            raise RecordingError(f"{p}: corrupt MCAP data: {_one_line(e)}") from None
+        except DECODE_ERRORS as e:
+            raise RecordingError(f"{p}: corrupt MCAP data: {one_line(e)}") from None
         if header.profile != PROFILE or "dlovr" not in meta:
             raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
         self.metadata: dict[str, str] = meta["dlovr"]
@@ -130,18 +138,28 @@ class Recording:
             raise RecordingError(f"{p}: metadata lacks a valid timestep / t0_ns") from None
         if not (0 < self.dt < 1):
             raise RecordingError(f"{p}: implausible timestep {self.dt}")
+        try:
+            self.hold = float(self.metadata.get("hold", DEFAULT_HOLD_S))
+        except ValueError:
+            raise RecordingError(f"{p}: metadata has an invalid hold time") from None
+        if not (0 <= self.hold < 1e3):
+            raise RecordingError(f"{p}: implausible hold time {self.hold}")
 
     def count(self, topic: str) -> int:
         return self._counts.get(topic, 0)
 
     def _iter(self, topic: str) -> Iterator[dict[str, Any]]:
+        """The messages of ``topic`` as JSON objects; any decoding problem is a RecordingError."""
         try:
             with open(self.path, "rb") as fh:
                 reader = make_reader(fh, validate_crcs=True)
                 for _, _, msg in reader.iter_messages(topics=[topic]):
-                    yield json.loads(msg.data)
-        except (McapError, ValueError, EOFError, KeyError, OSError) as e:
-            raise RecordingError(f"{self.path}: corrupt data in {topic}: {_one_line(e)}") from None
+                    obj = json.loads(msg.data)
+                    if not isinstance(obj, dict):
+                        raise ValueError(f"a message is {type(obj).__name__}, not an object")
+                    yield obj
+        except DECODE_ERRORS as e:
+            raise RecordingError(f"{self.path}: corrupt data in {topic}: {one_line(e)}") from None
 
     def states(self) -> list[dict[str, Any]]:
         """The contact-state messages (reads only their chunks)."""
@@ -158,8 +176,10 @@ class Recording:
                 steps.append(int(m["step"]) + np.arange(len(p)))
                 pos.append(p)
                 quat.append(q)
-        except (KeyError, TypeError, ValueError) as e:
-            raise RecordingError(f"{self.path}: bad gripper command message: {e}") from None
+        except RecordingError:  # already names the file and the problem
+            raise
+        except _FIELD_ERRORS as e:
+            raise RecordingError(f"{self.path}: bad gripper command message: {one_line(e)}") from None
         if not steps:
             raise RecordingError(f"{self.path}: recording has no gripper commands")
         s = np.concatenate(steps)
@@ -173,36 +193,50 @@ class Recording:
         Read from the Foxglove channels (this decompresses the bulk chunks: slower than states()).
         """
         poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        for m in self._iter(TOPIC_TF):
-            for tf in m.get("transforms", []):
-                tr, ro = tf["translation"], tf["rotation"]
-                poses[stamp_ns(tf["timestamp"])] = (
-                    np.array([tr["x"], tr["y"], tr["z"]], dtype=float),
-                    np.array([ro["w"], ro["x"], ro["y"], ro["z"]], dtype=float),
-                )
-        for m in self._iter(TOPIC_SCENE):
-            for ent in m.get("entities", []):
-                if ent.get("id") != "cable" or not ent.get("lines"):
-                    continue
-                ns = stamp_ns(ent["timestamp"])
-                pts = np.array([[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]], dtype=float)
-                gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
-                yield (ns - self.t0_ns) / 1e9, pts, gp, gq
+        try:
+            for m in self._iter(TOPIC_TF):
+                for tf in m.get("transforms", []):
+                    tr, ro = tf["translation"], tf["rotation"]
+                    poses[stamp_ns(tf["timestamp"])] = (
+                        np.array([tr["x"], tr["y"], tr["z"]], dtype=float),
+                        np.array([ro["w"], ro["x"], ro["y"], ro["z"]], dtype=float),
+                    )
+            frames = []
+            for m in self._iter(TOPIC_SCENE):
+                for ent in m.get("entities", []):
+                    if ent.get("id") != "cable" or not ent.get("lines"):
+                        continue
+                    ns = stamp_ns(ent["timestamp"])
+                    pts = [[p["x"], p["y"], p["z"]] for p in ent["lines"][0]["points"]]
+                    frames.append((ns, np.array(pts, dtype=float).reshape(-1, 3)))
+        except RecordingError:  # already names the file and the problem
+            raise
+        except _FIELD_ERRORS as e:
+            raise RecordingError(f"{self.path}: bad visual frame message: {one_line(e)}") from None
+        for ns, pts in frames:
+            gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
+            yield (ns - self.t0_ns) / 1e9, pts, gp, gq
 
     def checkpoints(self) -> list[Checkpoint]:
-        out = [
-            Checkpoint(int(m["step"]), np.asarray(m["state"], float), np.asarray(m["target_pos"], float),
-                       np.asarray(m["target_quat"], float))
-            for m in self._iter(TOPIC_CHECKPOINT)
-        ]  # fmt: skip
+        """The full simulator states, in order."""
+        try:
+            out = [
+                Checkpoint(int(m["step"]), np.asarray(m["state"], float).ravel(),
+                           np.asarray(m["target_pos"], float).reshape(3),
+                           np.asarray(m["target_quat"], float).reshape(4))
+                for m in self._iter(TOPIC_CHECKPOINT)
+            ]  # fmt: skip
+        except RecordingError:  # already names the file and the problem
+            raise
+        except _FIELD_ERRORS as e:
+            raise RecordingError(f"{self.path}: bad checkpoint message: {one_line(e)}") from None
         if not out:
             raise RecordingError(f"{self.path}: recording has no checkpoints")
         return out
 
 
-def _one_line(e: BaseException) -> str:
-    s = str(e).strip().splitlines()
-    return (s[0] if s else type(e).__name__)[:200]
+_FIELD_ERRORS = (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError)
+"""What a JSON message with missing or wrongly typed fields raises when its fields are used."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -236,23 +270,24 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
     payloads = recording.states()
     if not payloads:
         raise RecordingError(f"{recording.path}: recording has no contact states")
-    hold = float(recording.metadata.get("hold", DEFAULT_HOLD_S)) if hold is None else hold
+    hold = recording.hold if hold is None else hold
     deb: Debouncer[Any] = Debouncer(hold, is_transient)
     first: dict[Any, Mapping[str, Any]] = {}
+    out = []
     try:
         for p in payloads:
             sit = situation_from_payload(p)
             deb.push(float(p["t"]), sit)
             first.setdefault((float(p["t"]), sit), p)
-    except (KeyError, ValueError, TypeError) as e:
-        raise RecordingError(f"{recording.path}: bad contact-state message: {e}") from None
-    end = payloads[-1]["t"]  # the last message is written when the recording ends
-    out = []
-    for i, k in enumerate(deb.kept):
-        p = first.get((k.start, k.situation), {})
-        stop = k.end if i + 1 < len(deb.kept) else end
-        force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
-        out.append(
-            TimedSituation(k.start, round(stop - k.start, 9), k.situation, p.get("topological"), force)
-        )
+        end = float(payloads[-1]["t"])  # the last message is written when the recording ends
+        for i, k in enumerate(deb.kept):
+            p = first.get((k.start, k.situation), {})
+            stop = k.end if i + 1 < len(deb.kept) else end
+            force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
+            top = p.get("topological")
+            out.append(TimedSituation(k.start, round(stop - k.start, 9), k.situation, top, force))
+    except RecordingError:  # already names the file and the problem
+        raise
+    except _FIELD_ERRORS as e:  # NotationError is a ValueError
+        raise RecordingError(f"{recording.path}: bad contact-state message: {one_line(e)}") from None
     return out

@@ -1,29 +1,53 @@
-"""Recovery: rescue the complete chunks of a recording whose writer was killed into a new, finished
-file (``dlovr recover``)."""
+"""Recovery: rescue every intact chunk of a damaged recording, or of one whose writer was killed, into a
+new, finished file (``dlovr recover``).
+
+What is kept: every chunk that decompresses and passes its CRC, wherever it lies (damaged chunks are
+skipped, not the rest of the file); schema and channel definitions from wherever they survive (the
+chunks, the summary section at the end, or else the dlovr format's fixed channel layout); metadata and
+attachments that pass their checks. A file whose writer was killed (no end of data section) is cut at
+its last checkpoint: the writer puts every command and contact state up to a checkpoint in the file
+before the checkpoint, so the recovered file is consistent and replays (``dlovr replay --verify``).
+What was skipped is reported as byte and time ranges.
+"""
 
 from __future__ import annotations
 
-import io
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
-from dlovr.recording.format import MCAP_MAGIC, PROFILE, RecordingError
+from dlovr.recording.format import (
+    CHANNELS,
+    DECODE_ERRORS,
+    MCAP_MAGIC,
+    PROFILE,
+    TOPIC_CHECKPOINT,
+    TOPIC_COMMAND,
+    TOPIC_STATES,
+    RecordingError,
+    dumps,
+)
+from dlovr.recording.integrity import ScanResult, scan
 
 
 @dataclass(frozen=True)
 class RecoveryReport:
+    """``messages`` and ``attachments`` written; ``last_time_s``: seconds from the first to the last
+    message kept; ``skipped``: one line per skipped part (what, where, time range, why)."""
+
     messages: int
     attachments: int
     last_time_s: float
+    skipped: tuple[str, ...] = ()
 
 
 def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
-    """Copy every complete chunk of a recording whose writer was killed into a new, finished file."""
+    """Copy every intact part of a damaged or unfinished recording into a new, finished file."""
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise RecordingError(f"{dst}: recover writes a new file; choose another output path")
@@ -31,54 +55,217 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
         raw = src.read_bytes()
     except OSError as e:
         raise RecordingError(f"{src}: cannot read: {e.strerror}") from None
-    if not raw.startswith(MCAP_MAGIC):
+    res = scan(raw)
+    if not raw.startswith(MCAP_MAGIC) and not res.chunks:
         raise RecordingError(f"{src}: not an MCAP file (bad magic bytes)")
-    from mcap.records import Attachment, Channel, Message, Metadata, Schema
-
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    attachments: list[Attachment] = []
-    metadata: list[Metadata] = []
-    header_profile = PROFILE
-    reader = StreamReader(io.BytesIO(raw), validate_crcs=True)
+    meta = next((dict(m.metadata) for m in res.metadata if m.name == "dlovr"), {})
+    clock = _Clock.of(meta, res)
+    skipped = [_describe(d, clock) for d in res.damage]
+    schemas = {**res.summary_schemas, **res.schemas}
+    channels = {**res.summary_channels, **res.channels}
+    if not channels and (res.profile == PROFILE or meta.get("format_version")):
+        channels, schemas = _dlovr_layout()
+        skipped.append("channel definitions: lost; used the dlovr format's fixed channel layout")
+    chunks = [[m for m in c if m.channel_id in channels] for c in res.chunks]
+    orphans = sum(len(c) for c in res.chunks) - sum(len(c) for c in chunks)
+    if orphans:
+        skipped.append(f"{orphans} messages whose channel definition was lost")
+    topic = {cid: c.topic for cid, c in channels.items()}
+    if not res.data_end:
+        chunks = _cut_at_last_checkpoint(chunks, topic, clock, skipped)
+    messages = [m for c in chunks for m in c]
+    if not messages:
+        raise RecordingError(f"{src}: nothing recoverable (no intact chunk with messages)")
+    if not any(topic[m.channel_id] == TOPIC_COMMAND for m in messages):
+        raise RecordingError(
+            f"{src}: nothing recoverable: no intact chunk holds gripper commands"
+            + (" (the writer was stopped within its first second?)" if not res.data_end else "")
+        )
+    skipped += _command_gaps(messages, topic, clock)
     try:
-        for rec in reader.records:
-            name = type(rec).__name__
-            if name == "Header":
-                header_profile = rec.profile
-            elif isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-            elif isinstance(rec, Message):
-                messages.append(rec)
-            elif isinstance(rec, Attachment):
-                attachments.append(rec)
-            elif isinstance(rec, Metadata):
-                metadata.append(rec)
-    except Exception:  # the broken tail: keep everything complete before it
-        pass
-    if not channels:
-        raise RecordingError(f"{src}: nothing recoverable (no complete chunk with channel definitions)")
+        _write(dst, res, schemas, channels, chunks)
+    except OSError as e:
+        raise RecordingError(f"{dst}: cannot write: {e.strerror or e}") from None
+    first, last = min(m.log_time for m in messages), max(m.log_time for m in messages)
+    return RecoveryReport(
+        len(messages), len(res.attachments), (last - first) / 1e9 if messages else math.nan, tuple(skipped)
+    )
+
+
+@dataclass(frozen=True)
+class _Clock:
+    """Log time (ns) to recording time (s): ``(ns - t0_ns) / 1e9``; the time step when known."""
+
+    t0_ns: int
+    dt: float | None
+
+    @staticmethod
+    def of(meta: dict[str, str], res: ScanResult) -> _Clock:
+        try:
+            t0 = int(meta["t0_ns"])
+        except (KeyError, ValueError):
+            t0 = min((m.log_time for c in res.chunks for m in c), default=0)
+        try:
+            dt: float | None = float(meta["timestep"])
+            if not (0 < dt < 1):  # type: ignore[operator]
+                dt = None
+        except (KeyError, ValueError):
+            dt = None
+        return _Clock(t0, dt)
+
+    def t(self, ns: int) -> float:
+        return (ns - self.t0_ns) / 1e9
+
+    def span(self, a_ns: int, b_ns: int) -> str:
+        a, b = self.t(a_ns), self.t(b_ns)
+        if not (-1.0 <= a <= b <= 1e7):
+            return "time unknown"
+        return f"t={a:.3f}-{b:.3f} s"
+
+
+def _describe(d: Any, clock: _Clock) -> str:
+    when = f", {clock.span(*d.time_ns)}" if d.time_ns else ""
+    return f"{d.what} at bytes {d.start}-{d.end}{when}: {d.reason}"
+
+
+def _dlovr_layout() -> tuple[dict[int, Any], dict[int, Any]]:
+    from mcap.records import Channel, Schema
+
+    from dlovr.recording.writer import schemas
+
+    data = schemas()
+    sch = {
+        i: Schema(id=i, data=data[name], encoding="jsonschema", name=name)
+        for i, (_, name) in enumerate(CHANNELS, 1)
+    }
+    chs = {
+        i: Channel(id=i, topic=topic, message_encoding="json", metadata={}, schema_id=i)
+        for i, (topic, _) in enumerate(CHANNELS, 1)
+    }
+    return chs, sch
+
+
+def _cut_at_last_checkpoint(
+    chunks: list[list[Any]], topic: dict[int, str], clock: _Clock, skipped: list[str]
+) -> list[list[Any]]:
+    """Keep what precedes the last checkpoint (an unfinished file's consistent part) and end the
+    contact states there as the writer does when it closes."""
+    cps = [m for c in chunks for m in c if topic[m.channel_id] == TOPIC_CHECKPOINT]
+    if not cps:
+        return chunks
+    last = max(cps, key=lambda m: m.log_time)
+    try:
+        step = int(json.loads(last.data)["step"])
+    except (*DECODE_ERRORS, AttributeError):
+        return chunks
+    cut = last.log_time
+    dropped = [m.log_time for c in chunks for m in c if m.log_time > cut]
+    out = []
+    for c in chunks:
+        kept = []
+        for m in c:
+            if m.log_time > cut:
+                continue
+            if topic[m.channel_id] == TOPIC_COMMAND:
+                m = _trim_commands(m, step)
+            kept.append(m)
+        out.append(kept)
+    if dropped:
+        skipped.append(
+            f"the unfinished end after the last checkpoint ({clock.span(cut, max(dropped))}): "
+            "the writer was stopped before it was complete"
+        )
+    states = [m for c in out for m in c if topic[m.channel_id] == TOPIC_STATES]
+    end = _end_marker(states, step, clock)
+    if end is not None:
+        cid = next(cid for cid, t in topic.items() if t == TOPIC_STATES)
+        from mcap.records import Message
+
+        out.append([Message(channel_id=cid, log_time=cut, data=end, publish_time=cut, sequence=0)])
+    return out
+
+
+def _trim_commands(m: Any, last_step: int) -> Any:
+    """A command batch cut to the steps up to ``last_step`` (unchanged if it ends before)."""
+    from mcap.records import Message
+
+    try:
+        d = json.loads(m.data)
+        keep = last_step - int(d["step"]) + 1
+        if keep >= len(d["pos"]):
+            return m
+        d["pos"], d["quat"] = d["pos"][:keep], d["quat"][:keep]
+    except (*DECODE_ERRORS, AttributeError):
+        return m
+    return Message(
+        channel_id=m.channel_id,
+        log_time=m.log_time,
+        data=dumps(d),
+        publish_time=m.publish_time,
+        sequence=m.sequence,
+    )
+
+
+def _end_marker(states: list[Any], step: int, clock: _Clock) -> bytes | None:
+    """The end-of-recording contact state at ``step`` (the last situation, unchanged), or None."""
+    if not states or clock.dt is None:
+        return None
+    try:
+        last = json.loads(max(states, key=lambda m: m.log_time).data)
+        if last.get("end"):
+            return None
+        t = float(last["t"]) + (step - int(last["step"])) * clock.dt
+    except (*DECODE_ERRORS, AttributeError):
+        return None
+    return dumps({**last, "classes": [], "step": step, "t": round(t, 9), "end": True})
+
+
+def _command_gaps(messages: list[Any], topic: dict[int, str], clock: _Clock) -> list[str]:
+    """Time ranges without gripper commands between the first and the last recovered command."""
+    if clock.dt is None:
+        return []
+    spans = []
+    for m in messages:
+        if topic[m.channel_id] == TOPIC_COMMAND:
+            try:
+                d = json.loads(m.data)
+                spans.append((int(d["step"]), int(d["step"]) + len(d["pos"])))
+            except (*DECODE_ERRORS, AttributeError):
+                continue
+    spans.sort()
+    out, reach = [], spans[0][1] if spans else 0
+    for a, b in spans[1:]:
+        if a > reach:
+            out.append(f"gripper commands missing for t={reach * clock.dt:.3f}-{a * clock.dt:.3f} s")
+        reach = max(reach, b)
+    return out
+
+
+def _write(
+    dst: Path,
+    res: ScanResult,
+    schemas: dict[int, Any],
+    channels: dict[int, Any],
+    chunks: list[list[Any]],
+) -> None:
+    """Write the recovered file (one output chunk per input chunk, so contact states stay apart)."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
     with open(dst, "wb") as fh:
-        w = Writer(fh, compression=CompressionType.ZSTD)
-        w.start(profile=header_profile, library=f"dlovr {__version__} recover")
-        for m in metadata:
+        w = Writer(fh, compression=CompressionType.ZSTD, enable_data_crcs=True)
+        w.start(profile=res.profile or PROFILE, library=f"dlovr {__version__} recover")
+        for m in res.metadata:
             w.add_metadata(m.name, dict(m.metadata))
-        for a in attachments:
+        for a in res.attachments:
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
-        sid_map = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()}
+        sid_map = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in sorted(schemas.items())}
         cid_map = {
             cid: w.register_channel(
                 c.topic, c.message_encoding, sid_map.get(c.schema_id, 0), dict(c.metadata)
             )
-            for cid, c in channels.items()
+            for cid, c in sorted(channels.items())
         }
-        for m in messages:
-            if m.channel_id in cid_map:
+        for c in chunks:
+            for m in c:
                 w.add_message(cid_map[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+            w.flush()
         w.finish()
-    last = max((m.log_time for m in messages), default=0)
-    first = min((m.log_time for m in messages), default=0)
-    return RecoveryReport(len(messages), len(attachments), (last - first) / 1e9 if messages else math.nan)

@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 
 from dlovr import __version__
-from dlovr.model.transitions import DEFAULT_HOLD_S
 from dlovr.recording.format import RecordingError
 from dlovr.recording.reader import Recording
 
@@ -74,7 +73,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
                 f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
             )
     tracker = sim.tracker
-    tracker.hold = float(rec.metadata.get("hold", DEFAULT_HOLD_S))  # taken by restart() below
+    tracker.hold = rec.hold  # taken by restart() below
     first = cps[0]
     if len(first.state) != len(sim.get_state().mj):
         raise RecordingError(f"{rec.path}: checkpoint size does not match the embedded scene's model")

@@ -20,6 +20,7 @@ from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
 from dlovr.recording import foxglove
 from dlovr.recording.bundle import SceneBundle, pieces_to_json
 from dlovr.recording.format import (
+    CHANNELS,
     CHECKPOINT_SCHEMA,
     COMMAND_BATCH,
     COMMAND_SCHEMA,
@@ -39,6 +40,16 @@ from dlovr.recording.format import (
 )
 
 
+def schemas() -> dict[str, bytes]:
+    """The JSON schemas of the channels' message types, by name (see :data:`CHANNELS`)."""
+    own = {
+        "dlovr.Commands": COMMAND_SCHEMA,
+        "dlovr.Checkpoint": CHECKPOINT_SCHEMA,
+        "dlovr.ContactState": STATES_SCHEMA,
+    }
+    return {name: dumps(own[name]) if name in own else foxglove.schema(name) for _, name in CHANNELS}
+
+
 @contextmanager
 def finish_on_sigterm() -> Iterator[None]:
     """Turn SIGTERM into ``SystemExit`` while inside, so ``with Recorder(...)`` finishes the file."""
@@ -54,12 +65,55 @@ def finish_on_sigterm() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+class StopSignals:
+    """SIGINT (Ctrl-C) and SIGTERM while inside ``with StopSignals() as stop:`` do not interrupt: they
+    set ``stop.signum``, so that a recording loop ends between two steps (check ``stop.signum`` after
+    each) and finishes its file with the last step's command, contact states and checkpoint all
+    written (such a file replays and verifies). ``stop.exit_code`` is the conventional exit status
+    (128 + signal number: 130 for SIGINT, 143 for SIGTERM). Outside the main thread nothing is
+    installed.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + int(self.signum or 0)
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name if self.signum else ""
+
+    def _handle(self, signum: int, _frame: object) -> None:
+        if self.signum is None:
+            self.signum = signum
+
+    def __enter__(self) -> StopSignals:
+        try:
+            for sig in self.SIGNALS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        except ValueError:  # not the main thread
+            pass
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+        self._previous.clear()
+
+
 class Recorder:
     """Writes one demonstration to an MCAP file (see :mod:`dlovr.recording.format` for its contents).
 
     Use as a context manager: the file is finished on normal exit and on exceptions (and on SIGTERM
-    inside :func:`finish_on_sigterm`). It is flushed every ``flush_interval`` seconds of wall time so
-    that a killed writer loses at most that much (``dlovr recover``).
+    inside :func:`finish_on_sigterm`). Each :meth:`checkpoint` ends the chunks in progress, so that a
+    killed writer's file is recovered up to its last checkpoint (``dlovr recover``); the file is also
+    flushed and synced to disk every ``flush_interval`` seconds of wall time. The data section carries
+    a CRC, so readers detect any changed byte.
     """
 
     def __init__(
@@ -84,7 +138,9 @@ class Recorder:
         self.flush_interval = float(flush_interval)
         self.frame_every = max(1, round(1.0 / (frame_rate * self.dt)))
         self._fh: BinaryIO = open(self.path, "wb")
-        self._w = Writer(self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD)
+        self._w = Writer(
+            self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD, enable_data_crcs=True
+        )
         self._w.start(profile=PROFILE, library=f"dlovr {__version__}")
         pieces_json = pieces_to_json(pieces) if pieces is not None else b""
         meta = {
@@ -106,19 +162,8 @@ class Recorder:
             self._w.add_attachment(now, now, PIECES_JSON, "application/json", pieces_json)
         for name, data in scene.files:
             self._w.add_attachment(now, now, SCENE_PREFIX + name, "application/octet-stream", data)
-        js = "jsonschema"
-        ids = {
-            TOPIC_COMMAND: self._w.register_schema("dlovr.Commands", js, dumps(COMMAND_SCHEMA)),
-            TOPIC_CHECKPOINT: self._w.register_schema("dlovr.Checkpoint", js, dumps(CHECKPOINT_SCHEMA)),
-            TOPIC_STATES: self._w.register_schema("dlovr.ContactState", js, dumps(STATES_SCHEMA)),
-            TOPIC_SCENE: self._w.register_schema(
-                "foxglove.SceneUpdate", js, foxglove.schema("foxglove.SceneUpdate")
-            ),
-            TOPIC_TF: self._w.register_schema(
-                "foxglove.FrameTransforms", js, foxglove.schema("foxglove.FrameTransforms")
-            ),
-        }
-        self._ch = {topic: self._w.register_channel(topic, "json", sid) for topic, sid in ids.items()}
+        sids = {name: self._w.register_schema(name, "jsonschema", data) for name, data in schemas().items()}
+        self._ch = {topic: self._w.register_channel(topic, "json", sids[name]) for topic, name in CHANNELS}
         self._pending_states: list[tuple[int, bytes]] = []
         self._commands: list[tuple[int, list[float], list[float]]] = []
         self._seq = 0
@@ -157,14 +202,25 @@ class Recorder:
     def checkpoint(
         self, step: int, state: np.ndarray, target_pos: Sequence[float], target_quat: Sequence[float]
     ) -> None:
-        """A full simulator state after ``step`` steps."""
+        """A full simulator state after ``step`` steps; give the command of ``step`` and the contact
+        states up to it first.
+
+        A checkpoint ends the chunks in progress: when it returns, the commands, contact states and
+        frames up to ``step`` and then the checkpoint (in a chunk of its own) are in the file. So a
+        file whose writer was killed is consistent up to its last checkpoint (``dlovr recover``).
+        """
         payload = {
             "step": int(step),
             "state": floats(state),
             "target_pos": floats(target_pos),
             "target_quat": floats(target_quat),
         }
+        self._write_commands()
+        self._write_states()
+        self._w.flush()
         self._add(TOPIC_CHECKPOINT, step, dumps(payload))
+        self._w.flush()  # also hands the bytes to the OS: a killed process loses none of them
+        self._maybe_flush()
 
     def contact_state(self, step: int, payload: Mapping[str, Any]) -> None:
         """A contact situation that began at ``step`` (buffered; written in chunks of its own)."""
@@ -265,6 +321,11 @@ class DemoRecorder:
         self._prev = start.discrete
         self._n_changes = len(tracker.changes)
         self.rec.contact_state(self.start_step, start.payload())
+
+    @property
+    def duration(self) -> float:
+        """Simulated time recorded so far (s)."""
+        return (int(self.sim.step_index) - self.start_step) * self.rec.dt
 
     def _checkpoint(self) -> None:
         st = self.sim.get_state()

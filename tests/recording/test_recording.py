@@ -5,10 +5,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +16,9 @@ from mcap_edit import rewrite_mcap
 
 from dlovr.cli import main
 from dlovr.recording import (
-    TOPIC_STATES,
     Recording,
     RecordingError,
     compile_recording,
-    recover,
     replay,
 )
 
@@ -109,12 +105,13 @@ def test_compile_one_and_two_workers_identical_and_failures_reported(recorded, t
     r1 = cli("compile", src, "-o", tmp_path / "o1", "--workers", "1")
     r2 = cli("compile", src, "-o", tmp_path / "o2", "--workers", "2")
     for r in (r1, r2):
-        assert r.exit_code == 1 and "2 compiled, 1 failed" in r.output and "broken.mcap" in r.output
+        assert r.exit_code == 2 and "2 compiled, 1 failed" in r.output and "broken.mcap" in r.output
     for name in ("a.program.json", "a.program.txt", "b.program.json"):
         assert (tmp_path / "o1" / name).read_bytes() == (tmp_path / "o2" / name).read_bytes()
     (src / "broken.mcap").unlink()
     again = cli("compile", src, "-o", tmp_path / "o1")
     assert again.exit_code == 0 and again.output.count("unchanged, skipped") == 2
+    assert "0 compiled, 2 skipped (unchanged), 0 failed" in again.output
 
 
 @pytest.mark.parametrize(
@@ -138,45 +135,6 @@ def test_truncated_recording_points_to_recover(recorded, tmp_path):
     assert r.exit_code == 2 and "dlovr recover" in r.output
     with pytest.raises(RecordingError, match="truncated"):
         Recording(f)
-
-
-def test_sigterm_finishes_the_file_and_sigkill_is_recoverable(tmp_path):
-    long_script = tmp_path / "long.script.toml"
-    long_script.write_text(
-        SCRIPT.read_text() + "\n[[waypoints]]\npos = [-0.45, 0.3, 0.03]\nduration = 30.0\n"
-    )
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        out = tmp_path / f"rec-{sig.name}.mcap"
-        err = tmp_path / f"stderr-{sig.name}.txt"
-        with open(err, "w") as fh:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "dlovr", "record", "--script", str(long_script), "-o", str(out)],
-                stdout=subprocess.DEVNULL,
-                stderr=fh,
-            )
-        deadline = time.time() + 60
-        while time.time() < deadline and (not out.exists() or out.stat().st_size < 200_000):
-            assert proc.poll() is None, f"recording process ended early: {err.read_text()[-2000:]}"
-            time.sleep(0.2)
-        time.sleep(2.5)  # past at least one flush interval
-        assert proc.poll() is None, f"recording process ended early: {err.read_text()[-2000:]}"
-        proc.send_signal(sig)
-        proc.wait(timeout=30)
-        if sig == signal.SIGTERM:
-            rec = Recording(out)  # finished: footer and summary present
-            assert len(rec.commands()[0]) > 0
-            continue
-        with pytest.raises(RecordingError, match="truncated"):
-            Recording(out)
-        fixed = tmp_path / "fixed.mcap"
-        rep = recover(out, fixed)
-        rec = Recording(fixed)
-        steps, _, _ = rec.commands()
-        assert rep.messages > 0 and steps[0] == 1
-        assert np.all(np.diff(steps) == 1)
-        assert rec.count(TOPIC_STATES) >= 1
-        r = cli("recover", out, "-o", tmp_path / "fixed2.mcap")
-        assert r.exit_code == 0
 
 
 def test_scene_export_loads_in_plain_mujoco(tmp_path):
