@@ -93,3 +93,20 @@ def test_bad_facts_file(tmp_path):
     facts.write_text(json.dumps({"faces": {"box.F1": {"normal": [0, 0, 1]}}}))
     r = invoke("transitions", str(seq), "--facts", str(facts))
     assert r.exit_code == 2 and "box.F2" in r.output and f"{seq}:1:" in r.output
+
+
+def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
+    """One face for an edge, five for a vertex, no E contact between the ends: one line each, exit 2."""
+    for line, message in (
+        ("V/G & E/N & V/E^LS[a.F1]", "names 2 to 4 faces, got 1"),
+        ("V/G & E/N & V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]", "names 3 to 4 faces, got 5"),
+        ("V/G & V/N", "at least one E contact"),
+    ):
+        f = tmp_path / "seq.txt"
+        f.write_text(f"V/G & E/N & V/N\n{line}\n")
+        r = subprocess.run(
+            [sys.executable, "-m", "dlovr", "transitions", str(f)], capture_output=True, text=True
+        )
+        assert r.returncode == 2, (line, r.stdout)
+        assert f"{f}:2:" in r.stderr and message in r.stderr and "Traceback" not in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
