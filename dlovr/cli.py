@@ -28,34 +28,13 @@ def main() -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-def _load_facts(path: str) -> tuple[object, dict[int, tuple[float, float, float]]]:
-    """Read a facts JSON file: face normals, face-pair relations and DLO vectors by point index."""
-    import json
-
-    from dlovr.model.discrete import FaceFact, FactBook, PairFact
+def _load_facts(path: str):
+    from dlovr.facts import FactsError, load_facts
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            raw = json.load(fh)
-    except OSError as e:
-        raise UserError(f"{path}: cannot read facts file: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise UserError(f"{path}: not valid JSON: {e.msg} at line {e.lineno}") from None
-    try:
-        faces = {
-            name: FaceFact(
-                name, name.rpartition(".")[0], tuple(map(float, f["normal"])), bool(f.get("internal"))
-            )
-            for name, f in raw.get("faces", {}).items()
-        }
-        pairs = [
-            PairFact(p["a"], p["b"], bool(p["concave"]), float(p["opening_deg"]), None)
-            for p in raw.get("pairs", [])
-        ]
-        vectors = {int(k): tuple(map(float, v)) for k, v in raw.get("dlo_vectors", {}).items()}
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        raise UserError(f"{path}: bad facts file: {e!r}") from None
-    return FactBook(faces, pairs), vectors  # type: ignore[return-value]
+        return load_facts(path)
+    except FactsError as e:
+        raise UserError(str(e)) from None
 
 
 @main.command("transitions")
