@@ -17,6 +17,17 @@ class UserError(click.ClickException):
     exit_code = 2
 
 
+def _plural(n: int, word: str) -> str:
+    """``1 macro``, ``2 macros``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _t(seconds: float) -> float:
+    """A time (s) as printed and exported: rounded to the microsecond (a plain float, no numpy type);
+    recordings keep the exact values."""
+    return round(float(seconds), 6)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dlovr")
 def main() -> None:
@@ -123,13 +134,14 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
 # --------------------------------------------------------------------------------------------------
 
 
-def _scene(ref: str):
+def _scene(ref: str, script=None):
+    """Load a scene; one that a script names is reported with the script's file."""
     from dlovr.scene import SceneError, load_scene
 
     try:
         return load_scene(ref)
     except SceneError as e:
-        raise UserError(str(e)) from None
+        raise UserError(f"{script.source}: scene: {e}" if script is not None else str(e)) from None
 
 
 def _script(path: str):
@@ -158,37 +170,93 @@ def _progress(total: int, label: str):
     return click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True, show_percent=True)
 
 
+def _one_line(fn):
+    """Report a bad recording or an output path that cannot be written as one line (exit 2)."""
+    import functools
+
+    from dlovr.outputs import OutputError
+    from dlovr.recording import RecordingError
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        try:
+            return fn(*a, **kw)
+        except (RecordingError, OutputError) as e:
+            raise UserError(str(e)) from None
+
+    return wrapper
+
+
+def _os_errors(fn):
+    """Report an ``OSError`` while writing outputs as one line naming the file (exit 2)."""
+    import functools
+
+    from dlovr.outputs import describe_os_error
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        try:
+            return fn(*a, **kw)
+        except OSError as e:
+            raise UserError(f"{e.filename or 'output'}: cannot write: {describe_os_error(e)}") from None
+
+    return wrapper
+
+
 def run_demonstration(scene_ref: str | None, script_path: str | None, out: str | None, label: str):
-    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker)."""
+    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker).
+
+    Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
+    relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
+    it cannot be written, the partial file is removed and the run stops with one line.
+    """
+    import os
     from contextlib import nullcontext
 
+    from dlovr.outputs import output_error, prepare_output, remove_partial
     from dlovr.recording import DemoRecorder, finish_on_sigterm
     from dlovr.sim import SimulationDiverged, Simulator
 
     if script_path is None:
         if scene_ref is None:
             raise UserError("give --scene NAME|PATH or --script FILE")
-        script_path = _builtin_script(scene_ref)
-    script = _script(script_path)
-    scene = _scene(scene_ref or script.scene or "table")
+        scene = _scene(scene_ref)
+        script = _script(_builtin_script(scene_ref))
+    else:
+        script = _script(script_path)
+        if scene_ref is not None:
+            scene = _scene(scene_ref)
+        else:
+            scene = _scene(script.scene, script) if script.scene else _scene("table")
     try:
         sim = Simulator(scene, track=True)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
     tracker = sim.tracker
     nsteps = round(script.total_duration / sim.model.opt.timestep)
-    with finish_on_sigterm():
-        recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
-        with recorder as rec, _progress(nsteps, label) as bar:
-            try:
-                for k, record in enumerate(sim.run(script), 1):
-                    if rec is not None:
-                        rec.step(record)
-                    if k % 100 == 0:
-                        bar.update(100)
-            except SimulationDiverged as e:
-                saved = f" (recording kept up to there: {out})" if out else ""
-                raise click.ClickException(f"simulation diverged: {e}{saved}") from None
+    existed = out is not None and os.path.lexists(out)
+    if out is not None:
+        prepare_output(out)
+    try:
+        with finish_on_sigterm():
+            recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
+            with recorder as rec, _progress(nsteps, label) as bar:
+                try:
+                    for k, record in enumerate(sim.run(script), 1):
+                        if rec is not None:
+                            rec.step(record)
+                        if k % 100 == 0:
+                            bar.update(100)
+                except SimulationDiverged as e:
+                    if rec is not None:  # the end marker says so; compile warns
+                        rec.end_reason = str(e)
+                    saved = f"; the recording up to there is kept: {out}" if out else ""
+                    raise click.ClickException(f"{e}{saved}") from None
+    except OSError as e:
+        if out is None:
+            raise
+        removed = not existed and remove_partial(out)
+        raise UserError(str(output_error(out, e)) + (" (partial file removed)" if removed else "")) from None
     return scene, tracker
 
 
@@ -210,8 +278,8 @@ def _kept_rows(tracker) -> list[dict]:
         st = by_start.get((kept.start, kept.situation))
         rows.append(
             {
-                "t": kept.start,
-                "duration": kept.duration,
+                "t": _t(kept.start),
+                "duration": _t(kept.duration),
                 "topological": st.topological.format() if st else "",
                 "discrete": kept.situation.format(),
                 "classes": list(classes),
@@ -231,6 +299,7 @@ def _kept_rows(tracker) -> list[dict]:
     "-o", "--record", "out", type=click.Path(dir_okay=False), help="Also record it to this MCAP file."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the situations as JSON.")
+@_one_line
 def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool) -> None:
     """Run a built-in demonstration headless and print its contact situations (Fig. 11 style)."""
     import json
@@ -250,31 +319,17 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
 )
+@_one_line
 def record_cmd(scene_ref: str | None, script_path: str, out: str) -> None:
     """Record a scripted demonstration headless to an MCAP file."""
     _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
-    click.echo(f"wrote {out}: {len(tracker.kept)} contact situations")
-
-
-def _recording_error(fn):
-    import functools
-
-    from dlovr.recording import RecordingError
-
-    @functools.wraps(fn)
-    def wrapper(*a, **kw):
-        try:
-            return fn(*a, **kw)
-        except RecordingError as e:
-            raise UserError(str(e)) from None
-
-    return wrapper
+    click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
 
 
 @main.command("replay")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
-@_recording_error
+@_one_line
 def replay_cmd(recording: str, verify: bool) -> None:
     """Re-simulate a recording from its embedded scene and command stream."""
     from dlovr.recording import replay
@@ -306,7 +361,7 @@ def replay_cmd(recording: str, verify: bool) -> None:
     "--format", "fmt", type=click.Choice(["table", "json", "csv"]), default="table", show_default=True
 )
 @click.option("--raw", is_flag=True, help="Every recorded change, not debounced.")
-@_recording_error
+@_one_line
 def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     """Print a recording's contact situations and transitions (reads only the contact-state channel)."""
     import csv
@@ -320,7 +375,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     if raw:
         rows = [
             {
-                "t": p["t"],
+                "t": _t(p["t"]),
                 "topological": p["topological"],
                 "discrete": p["discrete"],
                 "classes": p.get("classes", []),
@@ -332,8 +387,8 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
         kept = kept_states(rec)
         rows = [
             {
-                "t": k.t,
-                "duration": k.duration,
+                "t": _t(k.t),
+                "duration": _t(k.duration),
                 "topological": k.topological or "",
                 "discrete": k.situation.format(),
                 "classes": list(classify_step(kept[i - 1].situation, k.situation)) if i else [],
@@ -356,14 +411,21 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 @main.command("recover")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
-@_recording_error
+@_one_line
 def recover_cmd(broken: str, out: str) -> None:
     """Rescue every complete chunk of a recording whose writer was killed."""
-    from dlovr.recording import recover
+    from pathlib import Path
 
-    rep = recover(broken, out)
+    from dlovr.outputs import atomic_output
+    from dlovr.recording import RecordingError, recover
+
+    if Path(broken).resolve() == Path(out).resolve():
+        raise RecordingError(f"{out}: recover writes a new file; choose another output path")
+    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+        rep = recover(broken, tmp)
     click.echo(
-        f"wrote {out}: {rep.messages} messages, {rep.attachments} attachments, {rep.last_time_s:.2f} s"
+        f"wrote {out}: {_plural(rep.messages, 'message')}, {_plural(rep.attachments, 'attachment')}, "
+        f"{rep.last_time_s:.2f} s"
     )
 
 
@@ -411,15 +473,20 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
 )
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True, help="Worker processes.")
 @click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
+@_one_line
+@_os_errors
 def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, force: bool) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing)."""
     from concurrent.futures import ProcessPoolExecutor
 
+    from dlovr.outputs import prepare_output_dir
     from dlovr.recording import compile_one, find_recordings, record_compiled
 
     paths = find_recordings(inputs)
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
+    if output_dir is not None:
+        prepare_output_dir(output_dir)
     results = []
     with _progress(len(paths), "compiling") as bar:
         if workers == 1:
@@ -439,7 +506,9 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
             click.echo(f"FAILED {r.error}", err=True)
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
-            click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
+            click.echo(f"{r.path} -> {r.json_path}: {_plural(r.macros, 'macro')}, {r.risky} risky{note}")
+            if r.warning:
+                click.echo(f"warning: {r.warning}", err=True)
     ok = len(results) - len(failed)
     click.echo(f"{ok} compiled, {len(failed)} failed")
     if failed:
@@ -451,8 +520,10 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write."
 )
+@_one_line
 def scene_export_cmd(ref: str, out: str) -> None:
     """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo."""
+    from dlovr.outputs import atomic_output
     from dlovr.sim import Simulator, export_xml
 
     scene = _scene(ref)
@@ -460,11 +531,9 @@ def scene_export_cmd(ref: str, out: str) -> None:
         sim = Simulator(scene)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
-    try:
-        path = export_xml(sim.built, out)
-    except OSError as e:
-        raise UserError(f"{out}: cannot write: {e.strerror}") from None
-    click.echo(f"wrote {path}")
+    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+        export_xml(sim.built, tmp)
+    click.echo(f"wrote {out}")
 
 
 # --------------------------------------------------------------------------------------------------
