@@ -175,8 +175,37 @@ def test_touching_objects_do_not_overlap(tmp_path):
 
 
 def test_error_cable_longer_than_scene(tmp_path):
-    msg = error(tmp_path, HEADER.replace("length = 0.5", "length = 12.0"))
+    msg = error(tmp_path, HEADER.replace("length = 0.5", "length = 5.0"))
     assert "dlo.length" in msg and "longer than the scene" in msg
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expected"),
+    [
+        ("segments = 20", "segments = 100000", "dlo.segments: must be an integer from 2 to 200, got 100000"),
+        ("segments = 20", "segments = 201", "dlo.segments: must be an integer from 2 to 200, got 201"),
+        ("segments = 20", "segments = 1", "dlo.segments: must be an integer from 2 to 200, got 1"),
+        ("length = 0.5", "length = 1e6", "dlo.length: must be at most 10 m"),
+        ("radius = 0.005", "radius = 0.25", "dlo.radius: must be less than half the length"),
+    ],
+)
+def test_error_cable_beyond_the_documented_limits(tmp_path, old, new, expected):
+    msg = error(tmp_path, HEADER.replace(old, new))
+    assert expected in msg and "\n" not in msg
+
+
+def test_the_segment_limit_itself_is_accepted(tmp_path):
+    p = write(tmp_path, HEADER.replace("segments = 20", "segments = 200"))
+    assert load_scene(p, check_geometry=False).dlo.segments == 200
+
+
+def test_error_too_many_objects(tmp_path):
+    boxes = "".join(
+        f'[[objects]]\nname = "b{i}"\nbox = {{ size = [0.01, 0.01, 0.01] }}\n'
+        for i in range(64)
+    )
+    msg = error(tmp_path, HEADER + boxes)
+    assert "objects: 65 objects, at most 64 allowed" in msg
 
 
 def test_error_unknown_scene_name():
