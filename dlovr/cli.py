@@ -48,7 +48,7 @@ def _load_facts(path: str):
         raise UserError(str(e)) from None
 
 
-@main.command("transitions")
+@main.command("transitions", short_help="Classify a hand-written sequence of situations.")
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--unicode/--ascii", default=False, help="Notation in the table (default ASCII).")
@@ -171,16 +171,18 @@ def _progress(total: int, label: str):
 
 
 def _one_line(fn):
-    """Report a bad recording or an output path that cannot be written as one line (exit 2)."""
+    """Report a bad recording or an output path that cannot be written as one line (exit 2). SIGTERM
+    ends the command as an exception (exit 143), so that its temporary files and folders are removed."""
     import functools
 
     from dlovr.outputs import OutputError
-    from dlovr.recording import RecordingError
+    from dlovr.recording import RecordingError, finish_on_sigterm
 
     @functools.wraps(fn)
     def wrapper(*a, **kw):
         try:
-            return fn(*a, **kw)
+            with finish_on_sigterm():
+                return fn(*a, **kw)
         except (RecordingError, OutputError) as e:
             raise UserError(str(e)) from None
 
@@ -288,7 +290,7 @@ def _kept_rows(tracker) -> list[dict]:
     return rows
 
 
-@main.command("demo")
+@main.command("demo", short_help="Run a built-in demonstration headless, print its states.")
 @click.option(
     "--scene",
     "scene_ref",
@@ -311,7 +313,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
 
-@main.command("record")
+@main.command("record", short_help="Record a scripted demonstration to an MCAP file.")
 @click.option("--scene", "scene_ref", help="Built-in scene name or path (default: the script's scene).")
 @click.option(
     "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
@@ -326,7 +328,7 @@ def record_cmd(scene_ref: str | None, script_path: str, out: str) -> None:
     click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
 
 
-@main.command("replay")
+@main.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
 @_one_line
@@ -355,7 +357,7 @@ def replay_cmd(recording: str, verify: bool) -> None:
         click.echo("verified: every checkpoint bit-identical, contact states identical")
 
 
-@main.command("states")
+@main.command("states", short_help="Print a recording's contact situations and transitions.")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option(
     "--format", "fmt", type=click.Choice(["table", "json", "csv"]), default="table", show_default=True
@@ -408,7 +410,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
         click.echo(_states_table(rows))
 
 
-@main.command("recover")
+@main.command("recover", short_help="Rescue a recording whose writer was killed.")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
 @_one_line
@@ -434,7 +436,7 @@ def recover_cmd(broken: str, out: str) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@main.command("scenes")
+@main.command("scenes", short_help="List the built-in scenes.")
 def scenes_cmd() -> None:
     """List the built-in scenes (use them by name, e.g. ``dlovr scene show peg_in_hole``)."""
     from dlovr.scene import builtin_scenes
@@ -445,12 +447,12 @@ def scenes_cmd() -> None:
         click.echo(f"{name:<{width}}  {desc}")
 
 
-@main.group("scene")
+@main.group("scene", short_help="Inspect scenes: show one, export its MuJoCo model.")
 def scene_group() -> None:
     """Inspect scenes: built-in ones by name, others by the path of their TOML file."""
 
 
-@scene_group.command("show")
+@scene_group.command("show", short_help="Print a scene's objects, pieces, faces and edges.")
 @click.argument("ref", metavar="NAME|PATH")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def scene_show_cmd(ref: str, as_json: bool) -> None:
@@ -466,7 +468,7 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     click.echo(json.dumps(desc, indent=2, ensure_ascii=False) if as_json else format_scene(desc))
 
 
-@main.command("compile")
+@main.command("compile", short_help="Compile recordings into macro programs.")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @click.option(
     "-o", "--output-dir", type=click.Path(file_okay=False), help="Where programs go (default: beside each)."
@@ -515,7 +517,7 @@ def compile_cmd(inputs: tuple[str, ...], output_dir: str | None, workers: int, f
         raise SystemExit(1)
 
 
-@scene_group.command("export")
+@scene_group.command("export", short_help="Write a scene's compiled MuJoCo model (MJCF).")
 @click.argument("ref", metavar="NAME|PATH")
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write."
@@ -541,7 +543,7 @@ def scene_export_cmd(ref: str, out: str) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@main.command("serve")
+@main.command("serve", short_help="Serve the browser teleoperation UI.")
 @click.option("--scene", "scene_ref", default="table", show_default=True, help="Built-in scene name or path.")
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
 @click.option(

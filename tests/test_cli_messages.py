@@ -206,3 +206,22 @@ def test_replay_removes_its_temporary_folder_when_interrupted(tmp_path, sig):
     assert list(tmp.iterdir()) == [], "the temporary folder was left behind"
     assert "Traceback" not in err
     assert proc.returncode == (143 if sig == signal.SIGTERM else 1)
+
+
+def test_a_replay_divergence_names_plain_numbers(touch, tmp_path):
+    """The message shows the differing values as numbers (shortest round-trip), not numpy reprs."""
+
+    def nudge(topic, data):
+        d = json.loads(data)
+        if topic == "/dlovr/command" and d["step"] <= 300 < d["step"] + len(d["pos"]):
+            d["pos"][300 - d["step"]][0] += 1e-4
+            return json.dumps(d).encode()
+        return data
+
+    bad = tmp_path / "nudged.mcap"
+    rewrite_mcap(touch[1], bad, message=nudge)
+    r = cli("replay", bad, "--verify")
+    assert r.exit_code == 1 and "replay diverged: state differs at checkpoint step 500" in r.output
+    assert "np.float64" not in r.output and "recorded " in r.output
+    recorded = r.output.split("recorded ")[1].split(",")[0]
+    float(recorded)  # a plain number
