@@ -249,3 +249,14 @@ def test_cli_bad_scene_exit_code_2_no_traceback(tmp_path):
     assert r.exit_code == 2
     assert "Traceback" not in r.output and "TOML syntax error" in r.output
     assert r.output.count("\n") == 1
+
+
+def test_the_limits_are_documented_as_the_code_has_them():
+    from dlovr import scene, script
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
+    assert f"| `dlo.segments` | 2 to {scene.MAX_SEGMENTS} |" in doc
+    assert f"| `dlo.length` | at most {scene.MAX_LENGTH_M:g} m" in doc
+    assert f"| objects | at most {scene.MAX_OBJECTS} |" in doc
+    assert f"{scene.MAX_MESH_TRIANGLES:,} triangles" in doc
+    assert f"at most {script.MAX_WAYPOINTS:,}" in doc and f"at most {script.MAX_DURATION_S:g} s in all" in doc
