@@ -1,7 +1,8 @@
 """Scene files (TOML): the cable, the gripper, the model parameters and the environment objects.
 
 The schema is documented in ``docs/scenes.md``. Built-in scenes live in the repository's ``scenes/``
-directory and are found by name (``peg_in_hole``); any other argument is a path to a TOML file. Meshes
+directory (shipped in the package as ``dlovr/_scenes``, see :func:`scenes_dir`) and are found by
+name (``peg_in_hole``); any other argument is a path to a TOML file. Meshes
 are resolved relative to the scene file and must lie inside its directory.
 
 Every problem is a :class:`SceneError` with a one-line message naming the file, the key or object,
@@ -100,12 +101,18 @@ class Scene:
 
 
 def scenes_dir() -> Path:
-    """Directory of the built-in scenes: ``scenes/`` at the repository top (or beside the package)."""
-    here = Path(__file__).resolve().parent
-    for cand in (here.parent / "scenes", here / "scenes"):
-        if cand.is_dir():
-            return cand
-    return here.parent / "scenes"
+    """Directory of the built-in scenes, scripts and meshes.
+
+    An installed package carries them as its resource folder ``dlovr/_scenes`` (``setup.py`` maps the
+    repository's ``scenes/`` there); a checkout or an editable install uses ``scenes/`` at the
+    repository top.
+    """
+    from importlib.resources import files
+
+    shipped = files("dlovr") / "_scenes"
+    if shipped.is_dir():
+        return Path(str(shipped))
+    return Path(__file__).resolve().parent.parent / "scenes"
 
 
 def builtin_scenes() -> list[tuple[str, str]]:
