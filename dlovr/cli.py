@@ -18,6 +18,17 @@ class UserError(click.ClickException):
     exit_code = 2
 
 
+def _plural(n: int, word: str) -> str:
+    """``1 macro``, ``2 macros``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _t(seconds: float) -> float:
+    """A time (s) as printed and exported: rounded to the microsecond (a plain float, no numpy type);
+    recordings keep the exact values."""
+    return round(float(seconds), 6)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="dlovr")
 def main() -> None:
@@ -29,37 +40,16 @@ def main() -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-def _load_facts(path: str) -> tuple[object, dict[int, tuple[float, float, float]]]:
-    """Read a facts JSON file: face normals, face-pair relations and DLO vectors by point index."""
-    import json
-
-    from dlovr.model.discrete import FaceFact, FactBook, PairFact
+def _load_facts(path: str):
+    from dlovr.facts import FactsError, load_facts
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            raw = json.load(fh)
-    except OSError as e:
-        raise UserError(f"{path}: cannot read facts file: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise UserError(f"{path}: not valid JSON: {e.msg} at line {e.lineno}") from None
-    try:
-        faces = {
-            name: FaceFact(
-                name, name.rpartition(".")[0], tuple(map(float, f["normal"])), bool(f.get("internal"))
-            )
-            for name, f in raw.get("faces", {}).items()
-        }
-        pairs = [
-            PairFact(p["a"], p["b"], bool(p["concave"]), float(p["opening_deg"]), None)
-            for p in raw.get("pairs", [])
-        ]
-        vectors = {int(k): tuple(map(float, v)) for k, v in raw.get("dlo_vectors", {}).items()}
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        raise UserError(f"{path}: bad facts file: {e!r}") from None
-    return FactBook(faces, pairs), vectors  # type: ignore[return-value]
+        return load_facts(path)
+    except FactsError as e:
+        raise UserError(str(e)) from None
 
 
-@main.command("transitions")
+@main.command("transitions", short_help="Classify a hand-written sequence of situations.")
 @click.argument("file", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @click.option("--unicode/--ascii", default=False, help="Notation in the table (default ASCII).")
@@ -145,13 +135,14 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
 # --------------------------------------------------------------------------------------------------
 
 
-def _scene(ref: str):
+def _scene(ref: str, script=None):
+    """Load a scene; one that a script names is reported with the script's file."""
     from dlovr.scene import SceneError, load_scene
 
     try:
         return load_scene(ref)
     except SceneError as e:
-        raise UserError(str(e)) from None
+        raise UserError(f"{script.source}: scene: {e}" if script is not None else str(e)) from None
 
 
 def _script(path: str):
@@ -180,40 +171,98 @@ def _progress(total: int, label: str):
     return click.progressbar(length=total, label=label, file=sys.stderr, show_eta=True, show_percent=True)
 
 
+def _one_line(fn):
+    """Report a bad recording or an output path that cannot be written as one line (exit 2). SIGTERM
+    ends the command as an exception (exit 143), so that its temporary files and folders are removed."""
+    import functools
+
+    from dlovr.outputs import OutputError
+    from dlovr.recording import RecordingError, finish_on_sigterm
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        try:
+            with finish_on_sigterm():
+                return fn(*a, **kw)
+        except (RecordingError, OutputError) as e:
+            raise UserError(str(e)) from None
+
+    return wrapper
+
+
+def _os_errors(fn):
+    """Report an ``OSError`` while writing outputs as one line naming the file (exit 2)."""
+    import functools
+
+    from dlovr.outputs import describe_os_error
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        try:
+            return fn(*a, **kw)
+        except OSError as e:
+            raise UserError(f"{e.filename or 'output'}: cannot write: {describe_os_error(e)}") from None
+
+    return wrapper
+
+
 def run_demonstration(scene_ref: str | None, script_path: str | None, out: str | None, label: str):
-    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker)."""
+    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker).
+
+    Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
+    relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
+    it cannot be written, the partial file is removed and the run stops with one line.
+    """
+    import os
     from contextlib import nullcontext
 
+    from dlovr.outputs import output_error, prepare_output, remove_partial
     from dlovr.recording import DemoRecorder, StopSignals, finish_on_sigterm
     from dlovr.sim import SimulationDiverged, Simulator
 
     if script_path is None:
         if scene_ref is None:
             raise UserError("give --scene NAME|PATH or --script FILE")
-        script_path = _builtin_script(scene_ref)
-    script = _script(script_path)
-    scene = _scene(scene_ref or script.scene or "table")
+        scene = _scene(scene_ref)
+        script = _script(_builtin_script(scene_ref))
+    else:
+        script = _script(script_path)
+        if scene_ref is not None:
+            scene = _scene(scene_ref)
+        else:
+            scene = _scene(script.scene, script) if script.scene else _scene("table")
     try:
         sim = Simulator(scene, track=True)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
     tracker = sim.tracker
     nsteps = round(script.total_duration / sim.model.opt.timestep)
+    existed = out is not None and os.path.lexists(out)
+    if out is not None:
+        prepare_output(out)
     stop = StopSignals() if out else None  # while recording, a signal ends it between two steps
-    with finish_on_sigterm(), stop or nullcontext():
-        recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
-        with recorder as rec, _progress(nsteps, label) as bar:
-            try:
-                for k, record in enumerate(sim.run(script), 1):
-                    if rec is not None:
-                        rec.step(record)
-                    if k % 100 == 0:
-                        bar.update(100)
-                    if stop is not None and stop.signum is not None:
-                        break
-            except SimulationDiverged as e:
-                saved = f" (recording kept up to there: {out})" if out else ""
-                raise click.ClickException(f"simulation diverged: {e}{saved}") from None
+    try:
+        with finish_on_sigterm(), stop or nullcontext():
+            recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
+            with recorder as rec, _progress(nsteps, label) as bar:
+                try:
+                    for k, record in enumerate(sim.run(script), 1):
+                        if rec is not None:
+                            rec.step(record)
+                        if k % 100 == 0:
+                            bar.update(100)
+                        if stop is not None and stop.signum is not None:
+                            break
+                except SimulationDiverged as e:
+                    if rec is not None:  # the end marker says so; compile warns
+                        rec.end_reason = str(e)
+                    saved = f"; the recording up to there is kept: {out}" if out else ""
+                    raise click.ClickException(f"{e}{saved}") from None
+    except OSError as e:
+        if out is None:
+            raise
+        removed = not existed and remove_partial(out)
+        raise UserError(str(output_error(out, e)) + (" (partial file removed)" if removed else "")) from None
     if stop is not None and stop.signum is not None:
         kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
         click.echo(f"interrupted ({stop.name}): {kept}", err=True)
@@ -239,8 +288,8 @@ def _kept_rows(tracker) -> list[dict]:
         st = by_start.get((kept.start, kept.situation))
         rows.append(
             {
-                "t": kept.start,
-                "duration": kept.duration,
+                "t": _t(kept.start),
+                "duration": _t(kept.duration),
                 "topological": st.topological.format() if st else "",
                 "discrete": kept.situation.format(),
                 "classes": list(classes),
@@ -249,7 +298,7 @@ def _kept_rows(tracker) -> list[dict]:
     return rows
 
 
-@main.command("demo")
+@main.command("demo", short_help="Run a built-in demonstration headless, print its states.")
 @click.option(
     "--scene",
     "scene_ref",
@@ -260,6 +309,7 @@ def _kept_rows(tracker) -> list[dict]:
     "-o", "--record", "out", type=click.Path(dir_okay=False), help="Also record it to this MCAP file."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the situations as JSON.")
+@_one_line
 def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool) -> None:
     """Run a built-in demonstration headless and print its contact situations (Fig. 11 style)."""
     import json
@@ -271,7 +321,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
 
-@main.command("record")
+@main.command("record", short_help="Record a scripted demonstration to an MCAP file.")
 @click.option("--scene", "scene_ref", help="Built-in scene name or path (default: the script's scene).")
 @click.option(
     "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
@@ -280,6 +330,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
 )
 @click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+@_one_line
 def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
     """Record a scripted demonstration headless to an MCAP file.
 
@@ -291,7 +342,7 @@ def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -
     """
     _refuse_existing(out, force)
     _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
-    click.echo(f"wrote {out}: {len(tracker.kept)} contact situations")
+    click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
 
 
 def _refuse_existing(out: str, force: bool) -> None:
@@ -302,25 +353,10 @@ def _refuse_existing(out: str, force: bool) -> None:
         raise UserError(f"{out}: exists; give --force to overwrite it")
 
 
-def _recording_error(fn):
-    import functools
-
-    from dlovr.recording import RecordingError
-
-    @functools.wraps(fn)
-    def wrapper(*a, **kw):
-        try:
-            return fn(*a, **kw)
-        except RecordingError as e:
-            raise UserError(str(e)) from None
-
-    return wrapper
-
-
-@main.command("replay")
+@main.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
-@_recording_error
+@_one_line
 def replay_cmd(recording: str, verify: bool) -> None:
     """Re-simulate a recording from its embedded scene and command stream.
 
@@ -350,13 +386,13 @@ def replay_cmd(recording: str, verify: bool) -> None:
         click.echo("verified: every checkpoint bit-identical, contact states identical")
 
 
-@main.command("states")
+@main.command("states", short_help="Print a recording's contact situations and transitions.")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option(
     "--format", "fmt", type=click.Choice(["table", "json", "csv"]), default="table", show_default=True
 )
 @click.option("--raw", is_flag=True, help="Every recorded change, not debounced.")
-@_recording_error
+@_one_line
 def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     """Print a recording's contact situations and transitions (reads only the contact-state channel)."""
     import csv
@@ -370,7 +406,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     if raw:
         rows = [
             {
-                "t": p["t"],
+                "t": _t(p["t"]),
                 "topological": p["topological"],
                 "discrete": p["discrete"],
                 "classes": p.get("classes", []),
@@ -382,8 +418,8 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
         kept = kept_states(rec)
         rows = [
             {
-                "t": k.t,
-                "duration": k.duration,
+                "t": _t(k.t),
+                "duration": _t(k.duration),
                 "topological": k.topological or "",
                 "discrete": k.situation.format(),
                 "classes": list(classify_step(kept[i - 1].situation, k.situation)) if i else [],
@@ -403,11 +439,11 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
         click.echo(_states_table(rows))
 
 
-@main.command("recover")
+@main.command("recover", short_help="Rescue a recording whose writer was killed.")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
 @click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
-@_recording_error
+@_one_line
 def recover_cmd(broken: str, out: str, force: bool) -> None:
     """Rescue every intact part of a damaged recording or of one whose writer was killed.
 
@@ -415,12 +451,19 @@ def recover_cmd(broken: str, out: str, force: bool) -> None:
     whose writer was killed is cut at its last checkpoint (at most the last 2 s of simulated time are
     lost), so that it replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
     """
-    from dlovr.recording import recover
+    from pathlib import Path
 
+    from dlovr.outputs import atomic_output
+    from dlovr.recording import RecordingError, recover
+
+    if Path(broken).resolve() == Path(out).resolve():
+        raise RecordingError(f"{out}: recover writes a new file; choose another output path")
     _refuse_existing(out, force)
-    rep = recover(broken, out)
+    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+        rep = recover(broken, tmp)
     click.echo(
-        f"wrote {out}: {rep.messages} messages, {rep.attachments} attachments, {rep.last_time_s:.2f} s"
+        f"wrote {out}: {_plural(rep.messages, 'message')}, {_plural(rep.attachments, 'attachment')}, "
+        f"{rep.last_time_s:.2f} s"
     )
     for line in rep.skipped:
         click.echo(f"skipped {line}", err=True)
@@ -431,7 +474,7 @@ def recover_cmd(broken: str, out: str, force: bool) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@main.command("scenes")
+@main.command("scenes", short_help="List the built-in scenes.")
 def scenes_cmd() -> None:
     """List the built-in scenes (use them by name, e.g. ``dlovr scene show peg_in_hole``)."""
     from dlovr.scene import builtin_scenes
@@ -442,12 +485,12 @@ def scenes_cmd() -> None:
         click.echo(f"{name:<{width}}  {desc}")
 
 
-@main.group("scene")
+@main.group("scene", short_help="Inspect scenes: show one, export its MuJoCo model.")
 def scene_group() -> None:
     """Inspect scenes: built-in ones by name, others by the path of their TOML file."""
 
 
-@scene_group.command("show")
+@scene_group.command("show", short_help="Print a scene's objects, pieces, faces and edges.")
 @click.argument("ref", metavar="NAME|PATH")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def scene_show_cmd(ref: str, as_json: bool) -> None:
@@ -463,7 +506,7 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     click.echo(json.dumps(desc, indent=2, ensure_ascii=False) if as_json else format_scene(desc))
 
 
-@main.command("compile")
+@main.command("compile", short_help="Compile recordings (or a network) into macro programs.")
 @click.argument("inputs", nargs=-1, type=click.Path())
 @click.option(
     "-o",
@@ -484,6 +527,8 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     help="Compile this transition network (from `dlovr network`) into a network program (-o FILE).",
 )
 @cluster_option
+@_one_line
+@_os_errors
 def compile_cmd(
     inputs: tuple[str, ...],
     output_dir: str | None,
@@ -504,6 +549,7 @@ def compile_cmd(
     from pathlib import Path
 
     from dlovr.batch import Task, run_batch, summarize
+    from dlovr.outputs import prepare_output_dir
     from dlovr.recording import (
         CompileResult,
         RecordingError,
@@ -528,6 +574,8 @@ def compile_cmd(
         raise UserError(str(e)) from None
     if not paths:
         raise UserError(f"no recordings found in {', '.join(inputs)}")
+    if output_dir is not None:
+        prepare_output_dir(output_dir)
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
         paths = [p.resolve() for p in paths]
         output_dir = str(Path(output_dir).resolve()) if output_dir else None
@@ -544,7 +592,9 @@ def compile_cmd(
             click.echo(f"FAILED {r.error}", err=True)
         else:
             note = " (unchanged, skipped)" if r.skipped else ""
-            click.echo(f"{r.path} -> {r.json_path}: {r.macros} macros, {r.risky} risky{note}")
+            click.echo(f"{r.path} -> {r.json_path}: {_plural(r.macros, 'macro')}, {r.risky} risky{note}")
+            if r.warning:
+                click.echo(f"warning: {r.warning}", err=True)
     skipped = sum(1 for r in results if r.skipped and not r.error)
     compiled = len(results) - len(failed) - skipped
     counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
@@ -554,13 +604,15 @@ def compile_cmd(
         raise SystemExit(2)
 
 
-@scene_group.command("export")
+@scene_group.command("export", short_help="Write a scene's compiled MuJoCo model (MJCF).")
 @click.argument("ref", metavar="NAME|PATH")
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write."
 )
+@_one_line
 def scene_export_cmd(ref: str, out: str) -> None:
     """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo."""
+    from dlovr.outputs import atomic_output
     from dlovr.sim import Simulator, export_xml
 
     scene = _scene(ref)
@@ -568,11 +620,9 @@ def scene_export_cmd(ref: str, out: str) -> None:
         sim = Simulator(scene)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
-    try:
-        path = export_xml(sim.built, out)
-    except OSError as e:
-        raise UserError(f"{out}: cannot write: {e.strerror}") from None
-    click.echo(f"wrote {path}")
+    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+        export_xml(sim.built, tmp)
+    click.echo(f"wrote {out}")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -580,7 +630,7 @@ def scene_export_cmd(ref: str, out: str) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@main.command("serve")
+@main.command("serve", short_help="Serve the browser teleoperation UI.")
 @click.option("--scene", "scene_ref", default="table", show_default=True, help="Built-in scene name or path.")
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to listen on.")
 @click.option(

@@ -1,7 +1,8 @@
 """Scene files (TOML): the cable, the gripper, the model parameters and the environment objects.
 
 The schema is documented in ``docs/scenes.md``. Built-in scenes live in the repository's ``scenes/``
-directory and are found by name (``peg_in_hole``); any other argument is a path to a TOML file. Meshes
+directory (shipped in the package as ``dlovr/_scenes``, see :func:`scenes_dir`) and are found by
+name (``peg_in_hole``); any other argument is a path to a TOML file. Meshes
 are resolved relative to the scene file and must lie inside its directory.
 
 Every problem is a :class:`SceneError` with a one-line message naming the file, the key or object,
@@ -26,6 +27,13 @@ Quat = tuple[float, float, float, float]
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*$")
 MAX_MESH_BYTES = 20 * 1024 * 1024
+#: Most cable segments: at 200 one simulation step with contact extraction takes about the 2 ms it
+#: simulates on the development machine (real time for the browser UI); more only runs slower.
+MAX_SEGMENTS = 200
+#: Longest cable in metres.
+MAX_LENGTH_M = 10.0
+#: Most environment objects (their pairwise overlap check grows with the square).
+MAX_OBJECTS = 64
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".off")
 
 
@@ -92,12 +100,18 @@ class Scene:
 
 
 def scenes_dir() -> Path:
-    """Directory of the built-in scenes: ``scenes/`` at the repository top (or beside the package)."""
-    here = Path(__file__).resolve().parent
-    for cand in (here.parent / "scenes", here / "scenes"):
-        if cand.is_dir():
-            return cand
-    return here.parent / "scenes"
+    """Directory of the built-in scenes, scripts and meshes.
+
+    An installed package carries them as its resource folder ``dlovr/_scenes`` (``setup.py`` maps the
+    repository's ``scenes/`` there); a checkout or an editable install uses ``scenes/`` at the
+    repository top.
+    """
+    from importlib.resources import files
+
+    shipped = files("dlovr") / "_scenes"
+    if shipped.is_dir():
+        return Path(str(shipped))
+    return Path(__file__).resolve().parent.parent / "scenes"
 
 
 def builtin_scenes() -> list[tuple[str, str]]:
@@ -223,8 +237,8 @@ def load_scene(name_or_path: str | Path, *, check_geometry: bool = True) -> Scen
     for k, default in _DLO_DEFAULTS.items():
         v = raw_dlo.get(k, default)
         if k == "segments":
-            if isinstance(v, bool) or not isinstance(v, int) or v < 2:
-                raise ctx.err("dlo.segments", f"must be an integer >= 2, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, int) or not 2 <= v <= MAX_SEGMENTS:
+                raise ctx.err("dlo.segments", f"must be an integer from 2 to {MAX_SEGMENTS}, got {v!r}")
             vals[k] = v
         elif k in ("damping", "friction"):
             vals[k] = ctx.number(v, f"dlo.{k}", nonneg=True)
@@ -234,6 +248,10 @@ def load_scene(name_or_path: str | Path, *, check_geometry: bool = True) -> Scen
                 raise ctx.err("dlo.poisson", f"must be in (-1, 0.5), got {v!r}")
         else:
             vals[k] = ctx.number(v, f"dlo.{k}", positive=True)
+    if vals["length"] > MAX_LENGTH_M:
+        raise ctx.err("dlo.length", f"must be at most {MAX_LENGTH_M:g} m, got {vals['length']:g}")
+    if vals["radius"] >= vals["length"] / 2:
+        raise ctx.err("dlo.radius", f"must be less than half the length, got {vals['radius']:g} m")
     dlo = DloSpec(**vals)
     if dlo.length / dlo.segments <= 0.0:
         raise ctx.err("dlo.segments", "segments too short")
@@ -254,6 +272,8 @@ def load_scene(name_or_path: str | Path, *, check_geometry: bool = True) -> Scen
     raw_objs = data.get("objects", [])
     if not isinstance(raw_objs, list):
         raise ctx.err("objects", "must be an array of tables ([[objects]])")
+    if len(raw_objs) > MAX_OBJECTS:
+        raise ctx.err("objects", f"{len(raw_objs)} objects, at most {MAX_OBJECTS} allowed")
     objects: list[SceneObject] = []
     seen: set[str] = set()
     for i, ro in enumerate(raw_objs):

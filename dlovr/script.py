@@ -2,7 +2,7 @@
 
 Format::
 
-    scene = "peg_in_hole"         # default scene for this script
+    scene = "peg_in_hole"         # default scene: a built-in name, or a path relative to this file
     [[waypoints]]
     pos = [0.1, 0.0, 0.75]        # m, world
     quat = [1, 0, 0, 0]           # optional, wxyz (default: keep the previous orientation)
@@ -13,15 +13,19 @@ The first waypoint is reached from the gripper's start pose (the scene's gripper
 pose the simulator is in) over its ``duration``. Between waypoints the position is interpolated
 linearly and the orientation by slerp. Bad files raise :class:`ScriptError` with a one-line message
 naming the file, the waypoint and the key.
+
+Limits: at most :data:`MAX_WAYPOINTS` waypoints and :data:`MAX_DURATION_S` seconds in all (moves and
+holds), so that no script runs for hours.
 """
 
 from __future__ import annotations
 
 import bisect
 import math
+import re
 import tomllib
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +34,10 @@ import numpy as np
 from dlovr.transforms import quat_normalize, slerp
 
 _TOP_KEYS = {"scene", "waypoints", "description"}
+#: Most waypoints a script may have.
+MAX_WAYPOINTS = 10_000
+#: Longest a script may run, in seconds of simulated time (durations and holds together).
+MAX_DURATION_S = 600.0
 _WP_KEYS = {"pos", "quat", "duration", "hold", "note"}
 
 
@@ -165,6 +173,8 @@ def parse_script(data: dict[str, Any], source: str = "<script>") -> Script:
         raise ScriptError(f"{source}: missing [[waypoints]]")
     if not isinstance(wps, list) or not wps:
         raise ScriptError(f"{source}: waypoints: expected at least one [[waypoints]] table")
+    if len(wps) > MAX_WAYPOINTS:
+        raise ScriptError(f"{source}: waypoints: {len(wps)} waypoints, at most {MAX_WAYPOINTS} allowed")
     out = []
     for i, w in enumerate(wps):
         at = f"{source}: waypoints[{i}]"
@@ -186,11 +196,25 @@ def parse_script(data: dict[str, Any], source: str = "<script>") -> Script:
         duration = _num(w["duration"], f"{at}.duration", positive=True)
         hold = _num(w.get("hold", 0.0), f"{at}.hold", nonneg=True)
         out.append(Waypoint(pos=pos, quat=quat, duration=duration, hold=hold))  # type: ignore[arg-type]
+    total = sum(w.duration + w.hold for w in out)
+    if total > MAX_DURATION_S:
+        raise ScriptError(
+            f"{source}: waypoints: the script lasts {total:.6g} s (durations and holds), "
+            f"at most {MAX_DURATION_S:g} s allowed"
+        )
     return Script(waypoints=tuple(out), scene=scene, source=source)
 
 
+def _is_scene_name(ref: str) -> bool:
+    """A built-in scene's name (``peg_in_hole``), not a path (``my_scene.toml``, ``../x.toml``)."""
+    return re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", ref) is not None
+
+
 def load_script(path: str | Path) -> Script:
-    """Read and validate a script file. Raises :class:`ScriptError` (one line) on any problem."""
+    """Read and validate a script file. Raises :class:`ScriptError` (one line) on any problem.
+
+    A ``scene`` that is a path (not a built-in scene's name) is taken relative to the script's folder.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -200,4 +224,7 @@ def load_script(path: str | Path) -> Script:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScriptError(f"{p}: invalid TOML: {e}".replace("\n", " ")) from None
-    return parse_script(data, str(p))
+    script = parse_script(data, str(p))
+    if script.scene is not None and not _is_scene_name(script.scene):
+        script = replace(script, scene=str(p.parent / Path(script.scene).expanduser()))
+    return script

@@ -93,3 +93,47 @@ def test_bad_facts_file(tmp_path):
     facts.write_text(json.dumps({"faces": {"box.F1": {"normal": [0, 0, 1]}}}))
     r = invoke("transitions", str(seq), "--facts", str(facts))
     assert r.exit_code == 2 and "box.F2" in r.output and f"{seq}:1:" in r.output
+
+
+def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
+    """One face for an edge, five for a vertex, no E contact between the ends: one line each, exit 2."""
+    for line, message in (
+        ("V/G & E/N & V/E^LS[a.F1]", "names 2 to 4 faces, got 1"),
+        ("V/G & E/N & V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]", "names 3 to 4 faces, got 5"),
+        ("V/G & V/N", "at least one E contact"),
+    ):
+        f = tmp_path / "seq.txt"
+        f.write_text(f"V/G & E/N & V/N\n{line}\n")
+        r = subprocess.run(
+            [sys.executable, "-m", "dlovr", "transitions", str(f)], capture_output=True, text=True
+        )
+        assert r.returncode == 2, (line, r.stdout)
+        assert f"{f}:2:" in r.stderr and message in r.stderr and "Traceback" not in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
+    seq = tmp_path / "topo.txt"
+    seq.write_text("VS/G & E5/N & E15/(box.F1,box.F2) & VE/N\n")
+    facts = tmp_path / "facts.json"
+    good_faces = {"box.F1": {"normal": [0, 0, 1]}, "box.F2": {"normal": [1, 0, 0]}}
+    pair = {"a": "box.F1", "b": "box.F2", "concave": "no", "opening_deg": 270}
+    for raw, where in (
+        ([1, 2], "must be a JSON object"),
+        ({"faces": ["box.F1"]}, "faces:"),
+        ({"faces": {"box.F1": {"normal": "up"}}}, "faces.box.F1.normal"),
+        ({"faces": {"box.F1": {"normal": [0, 0]}}}, "faces.box.F1.normal"),
+        ({"faces": good_faces, "pairs": {"a": "box.F1"}}, "pairs:"),
+        ({"faces": good_faces, "pairs": [pair]}, "pairs[0].concave"),
+        ({"faces": good_faces, "dlo_vectors": {"x": [1, 0, 0]}}, "dlo_vectors"),
+    ):  # fmt: skip
+        facts.write_text(json.dumps(raw))
+        r = subprocess.run(
+            [sys.executable, "-m", "dlovr", "transitions", str(seq), "--facts", str(facts)],
+            capture_output=True,
+            text=True,
+        )
+        assert r.returncode == 2, (raw, r.stdout)
+        assert f"{facts}: {where}" in r.stderr, (raw, r.stderr)
+        assert "Error(" not in r.stderr and "Traceback" not in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1

@@ -175,8 +175,37 @@ def test_touching_objects_do_not_overlap(tmp_path):
 
 
 def test_error_cable_longer_than_scene(tmp_path):
-    msg = error(tmp_path, HEADER.replace("length = 0.5", "length = 12.0"))
+    msg = error(tmp_path, HEADER.replace("length = 0.5", "length = 5.0"))
     assert "dlo.length" in msg and "longer than the scene" in msg
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "expected"),
+    [
+        ("segments = 20", "segments = 100000", "dlo.segments: must be an integer from 2 to 200, got 100000"),
+        ("segments = 20", "segments = 201", "dlo.segments: must be an integer from 2 to 200, got 201"),
+        ("segments = 20", "segments = 1", "dlo.segments: must be an integer from 2 to 200, got 1"),
+        ("length = 0.5", "length = 1e6", "dlo.length: must be at most 10 m"),
+        ("radius = 0.005", "radius = 0.25", "dlo.radius: must be less than half the length"),
+    ],
+)
+def test_error_cable_beyond_the_documented_limits(tmp_path, old, new, expected):
+    msg = error(tmp_path, HEADER.replace(old, new))
+    assert expected in msg and "\n" not in msg
+
+
+def test_the_segment_limit_itself_is_accepted(tmp_path):
+    p = write(tmp_path, HEADER.replace("segments = 20", "segments = 200"))
+    assert load_scene(p, check_geometry=False).dlo.segments == 200
+
+
+def test_error_too_many_objects(tmp_path):
+    boxes = "".join(
+        f'[[objects]]\nname = "b{i}"\nbox = {{ size = [0.01, 0.01, 0.01] }}\n'
+        for i in range(64)
+    )
+    msg = error(tmp_path, HEADER + boxes)
+    assert "objects: 65 objects, at most 64 allowed" in msg
 
 
 def test_error_unknown_scene_name():
@@ -220,3 +249,15 @@ def test_cli_bad_scene_exit_code_2_no_traceback(tmp_path):
     assert r.exit_code == 2
     assert "Traceback" not in r.output and "TOML syntax error" in r.output
     assert r.output.count("\n") == 1
+
+
+def test_the_limits_are_documented_as_the_code_has_them():
+    from dlovr import scene, script
+    from dlovr.geometry import mesh
+
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
+    assert f"| `dlo.segments` | 2 to {scene.MAX_SEGMENTS} |" in doc
+    assert f"| `dlo.length` | at most {scene.MAX_LENGTH_M:g} m" in doc
+    assert f"| objects | at most {scene.MAX_OBJECTS} |" in doc
+    assert f"{mesh.MAX_MESH_TRIANGLES:,} triangles" in doc
+    assert f"at most {script.MAX_WAYPOINTS:,}" in doc and f"at most {script.MAX_DURATION_S:g} s in all" in doc

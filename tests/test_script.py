@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,12 @@ def test_slerp_and_rotate() -> None:
         ("scene = 'x'\n", "missing [[waypoints]]"),
         ("waypoints = [\n", "invalid TOML"),
         ("foo = 1\n[[waypoints]]\npos=[0,0,1]\nduration=1\n", "unknown key 'foo'"),
+        ("[[waypoints]]\npos=[0,0,1]\nduration=1e9\n", "the script lasts 1e+09 s"),
+        (
+            "[[waypoints]]\npos=[0,0,1]\nduration=300\nhold=300.5\n",
+            "the script lasts 600.5 s (durations and holds), at most 600 s",
+        ),
+        ("[[waypoints]]\npos=[0,0,1]\nduration=0.01\n" * 10_001, "10001 waypoints, at most 10000 allowed"),
     ],
 )
 def test_errors_are_one_line_and_name_file_waypoint_key(tmp_path: Path, text: str, expected: str) -> None:
@@ -150,3 +157,22 @@ def test_plan_phases_at_their_boundaries_and_returns_fresh_arrays() -> None:
     # at the end of a move the waypoint is held exactly (interpolating would give 0.09999999999999998)
     held = parse_script({"waypoints": [{"pos": [0.1, 0.0, 0.0], "duration": 1.0, "hold": 0.5}]})
     assert held.plan((0.7, 0.0, 0.0)).at(1.0)[0].tolist() == [0.1, 0.0, 0.0]
+
+
+def test_the_limits_themselves_are_accepted(tmp_path: Path) -> None:
+    p = _write(tmp_path, "[[waypoints]]\npos=[0,0,1]\nduration=0.05\n" * 10_000 + "")
+    assert len(load_script(p).waypoints) == 10_000
+    p = _write(tmp_path, "[[waypoints]]\npos=[0,0,1]\nduration=300\nhold=300\n")
+    assert load_script(p).total_duration == 600
+
+
+def test_a_scene_path_in_a_script_is_relative_to_the_script(tmp_path: Path, monkeypatch) -> None:
+    (tmp_path / "demos").mkdir()
+    p = tmp_path / "demos" / "x.script.toml"
+    p.write_text('scene = "../scenes/my.toml"\n[[waypoints]]\npos=[0,0,1]\nduration=1\n')
+    monkeypatch.chdir(SCENES)  # anywhere but the script's folder
+    want = (tmp_path / "scenes" / "my.toml").resolve()
+    assert Path(load_script(p).scene).resolve() == want
+    assert Path(load_script(os.path.relpath(p, SCENES)).scene).resolve() == want
+    p.write_text('scene = "peg_in_hole"\n[[waypoints]]\npos=[0,0,1]\nduration=1\n')
+    assert load_script(p).scene == "peg_in_hole"  # a name is a built-in scene

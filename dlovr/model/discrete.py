@@ -466,12 +466,15 @@ class DiscreteSituation:
 
     def __post_init__(self) -> None:
         c = self.contacts
-        if len(c) < 2:
-            raise ValueError("a discrete situation has at least the V_S and the V_E contact")
-        if c[0].state.dlo != "V" or c[-1].state.dlo != "V":
+        if not c or c[0].state.dlo != "V" or c[-1].state.dlo != "V":
             raise ValueError("a discrete situation starts and ends with a V contact")
+        if len(c) < 3:
+            raise ValueError(
+                "a discrete situation has the V_S contact, at least one E contact (the DLO's interior "
+                "points) and the V_E contact, e.g. V/G & E/N & V/N"
+            )
         if any(x.state.dlo != "E" for x in c[1:-1]):
-            raise ValueError("interior contacts of a discrete situation are E contacts")
+            raise ValueError("interior contacts of a discrete situation are E contacts (V only at the ends)")
 
     def format(self, unicode: bool = False) -> str:
         return (" ∧ " if unicode else " & ").join(x.format(unicode) for x in self.contacts)
@@ -516,6 +519,11 @@ def discretize(
 
 _DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$")
 
+#: Distinct faces a written discrete contact may name, by environment type: a face (or coplanar
+#: faces of several objects, as many as there are), an edge (its two faces, up to two edges side by
+#: side in a groove: ``E/(F1∩F3) + E/(F2∩F4)``), a vertex (three faces, or four where four meet).
+FACE_COUNTS: dict[str, tuple[int, int | None]] = {"F": (1, None), "E^P": (2, 4), "E^L": (2, 4), "V": (3, 4)}
+
 
 def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact:
     t = text.strip()
@@ -534,6 +542,16 @@ def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact
             raise NotationError(f"{where}: {e}") from None
         if st.env in ("N", "G"):
             raise NotationError(f"{where}: {st.name} touches no faces")
+        twice = sorted({f for f in names if names.count(f) > 1})
+        if twice:
+            raise NotationError(f"{where}: face {twice[0]} is listed twice in {t!r}")
+        lo, hi = FACE_COUNTS[st.env]
+        if len(names) < lo or (hi is not None and len(names) > hi):
+            what = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}[st.env]
+            want = f"{lo} to {hi}" if hi is not None else f"at least {lo}"
+            raise NotationError(
+                f"{where}: {st.name} is {what} contact and names {want} faces, got {len(names)} in {t!r}"
+            )
     return DiscreteContact(st, names)
 
 
@@ -561,6 +579,7 @@ def parse_any(text: str) -> Situation | DiscreteSituation:
 
 __all__ = [
     "AUX_STATES",
+    "FACE_COUNTS",
     "STATES",
     "ContactFacts",
     "DiscreteContact",

@@ -18,6 +18,11 @@ from dlovr.recording.reader import Recording, kept_states
 
 def compile_recording(path: str | Path, hold: float | None = None) -> Any:
     """Compile a recording into a program (MODEL.md §5); reads only the contact-state channel."""
+    return _compile(path, hold)[0]
+
+
+def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
+    """The program of a recording, and why the recording ended early (its end marker says) or None."""
     from dlovr.model.program import PoseTrack, compile_program
 
     rec = Recording(path)
@@ -30,7 +35,8 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
         track = PoseTrack(t, pos, quat.reshape(-1, 4))
     except (KeyError, TypeError, ValueError) as e:
         raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
-    return compile_program(states, track, name=Path(path).stem, source=Path(path).name)
+    prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name)
+    return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -42,7 +48,8 @@ CACHE_NAME = ".dlovr-compile-cache.json"
 
 @dataclass(frozen=True)
 class CompileResult:
-    """Outcome for one recording: ``error`` is None on success; ``skipped`` when unchanged."""
+    """Outcome for one recording: ``error`` is None on success; ``skipped`` when unchanged;
+    ``warning``: why the recording ended early (a diverged simulation), its program being partial."""
 
     path: str
     json_path: str | None
@@ -50,6 +57,7 @@ class CompileResult:
     risky: int = 0
     skipped: bool = False
     error: str | None = None
+    warning: str | None = None
 
 
 def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
@@ -121,13 +129,14 @@ def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileR
     except (OSError, ValueError, AttributeError):
         pass  # no usable cache or program: compile again
     try:
-        prog = compile_recording(p)
+        prog, ended = _compile(p)
     except RecordingError as e:
         return CompileResult(str(p), None, error=str(e))
     out.mkdir(parents=True, exist_ok=True)
     jpath.write_text(prog.dumps())
     tpath.write_text(prog.listing())
-    return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"])
+    warning = f"{p}: the recording ends early ({ended}): its program is partial" if ended else None
+    return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"], warning=warning)
 
 
 def record_compiled(results: Sequence[CompileResult], out_dir: str | None) -> None:

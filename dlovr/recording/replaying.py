@@ -97,7 +97,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
                 bad = int(np.argmax(want.view(np.uint64) != got.view(np.uint64)))
                 divergence = (
                     f"state differs at checkpoint step {int(k)} (t={k * dt:.3f} s), element {bad}: "
-                    f"recorded {want[bad]!r}, replayed {got[bad]!r}"
+                    f"recorded {float(want[bad])!r}, replayed {float(got[bad])!r}"
                 )
         if progress is not None and (i % 500 == 0 or i == len(steps) - 1):
             progress(i + 1, len(steps))

@@ -312,6 +312,8 @@ class DemoRecorder:
             path, bundle, scene_name=scene.name, dt=dt, extra_metadata=meta, pieces=sim.pieces, **kw
         )
         self.path = self.rec.path
+        #: Why the demonstration ended early (e.g. the simulation diverged), written in the end marker.
+        self.end_reason: str | None = None
         self.start_step = int(sim.step_index)
         self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
         self._radius = float(scene.dlo.radius)
@@ -362,6 +364,7 @@ class DemoRecorder:
                     "step": int(self.sim.step_index),
                     "t": float(self.sim.time),
                     "end": True,
+                    **({"end_reason": self.end_reason} if self.end_reason else {}),
                 }
                 self.rec.contact_state(int(self.sim.step_index), end)
             self.rec.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from hypothesis import strategies as st
 
 from dlovr.model.discrete import (
     AUX_STATES,
+    FACE_COUNTS,
     STATES,
     ContactFacts,
     DiscreteContact,
@@ -341,6 +343,33 @@ def test_discrete_notation_roundtrip_and_errors():
         parse_discrete_situation("E/N & V/N")
 
 
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("V/G & E/N & V/E^LS[a.F1]", "an edge contact and names 2 to 4 faces, got 1"),
+        ("V/G & E/E^P[a.F1] & V/N", "an edge contact and names 2 to 4 faces, got 1"),
+        ("V/G & E/N & V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]", "a vertex contact and names 3 to 4 faces, got 5"),
+        ("V/G & E/N & V/VI[a.F1,a.F2]", "a vertex contact and names 3 to 4 faces, got 2"),
+        ("V/G & E/N & V/F[a.F1,a.F1]", "face a.F1 is listed twice"),
+        ("V/G & V/N", "at least one E contact"),
+        ("V/G & E/N & V/N & E/N & V/N", "V only at the ends"),
+    ],
+)
+def test_discrete_notation_refuses_wrong_face_counts_and_structure(text, message):
+    with pytest.raises(NotationError, match=re.escape(message)):
+        parse_discrete_situation(text)
+
+
+def test_discrete_notation_accepts_the_face_counts_of_each_type():
+    for text in (
+        "V/G & E/F[a.F1,b.F1,c.F1] & V/F[a.F1]",  # coplanar faces of several objects
+        "V/G & E/E^LS[a.F1,a.F3,b.F2,b.F4] & V/E^LI[a.F1,a.F2]",  # a groove of two edges; an edge
+        "V/G & E/VS[a.F1,a.F2,a.F3] & V/VS[a.F1,a.F2,a.F3,a.F4]",  # corners of three and four faces
+        "V/G & E/E^P & V/VT",  # faces are optional
+    ):
+        assert parse_discrete_situation(text).format() == text
+
+
 all_names = st.sampled_from([*STATES, *AUX_STATES])
 
 
@@ -348,13 +377,15 @@ all_names = st.sampled_from([*STATES, *AUX_STATES])
 def discrete_situations(draw):
     def contact(dlo):
         name = draw(all_names.filter(lambda n: n.startswith(dlo)))
-        fs = () if name.endswith(("/N", "/G")) else tuple(draw(st.lists(
+        lo, hi = FACE_COUNTS.get(state(name).env, (0, 0))
+        n = draw(st.sampled_from([0, *range(lo, (hi or 5) + 1)])) if lo else 0  # faces are optional
+        fs = tuple(draw(st.lists(
             st.builds(lambda o, k: f"{o}.F{k}", st.sampled_from(["a", "box", "hole_b"]), st.integers(0, 20)),
-            max_size=3, unique=True)))  # fmt: skip
+            min_size=n, max_size=n, unique=True)))  # fmt: skip
         return DiscreteContact(state(name), fs)
 
     return DiscreteSituation(
-        (contact("V"), *[contact("E") for _ in range(draw(st.integers(0, 5)))], contact("V"))
+        (contact("V"), *[contact("E") for _ in range(draw(st.integers(1, 5)))], contact("V"))
     )
 
 
