@@ -33,7 +33,7 @@ duration = 0.5
 pos = [-0.15, 0.0, 0.45]
 duration = 0.7
 """
-TOUCH = Path(__file__).parent / "data" / "touch_table.script.toml"
+TOUCH = Path(__file__).parents[1] / "data" / "touch_table.script.toml"
 
 
 def cli(*args):

@@ -17,7 +17,7 @@ from dlovr.recording import Recording, recover, replay
 from dlovr.recording.format import TOPIC_CHECKPOINT
 from dlovr.recording.integrity import scan
 
-SCRIPT = Path(__file__).parent / "data" / "touch_table.script.toml"
+SCRIPT = Path(__file__).parents[1] / "data" / "touch_table.script.toml"
 
 
 @pytest.fixture(scope="module")
