@@ -292,11 +292,19 @@ class FactBook:
 # --------------------------------------------------------------------------------------------------
 
 
-def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
-    """Contact vector C of eq. 2 as a unit 3-vector (world frame).
+def _pinch_tol(n_faces: int, merge_deg: float) -> float:
+    """Below this length the faces' summed normals cancel (normals within ``merge_deg`` count as one
+    direction, so a sum of ``n_faces`` unit normals shorter than this is zero)."""
+    return max(1e-9, n_faces * float(np.sin(np.radians(merge_deg))))
+
+
+def contact_vector(facts: ContactFacts, gripper: bool = False, merge_deg: float = 0.01) -> np.ndarray:
+    """Contact vector C of eq. 2 as a 3-vector (world frame): unit, or zero.
 
     Sum of ``-N(F)`` over the distinct real faces (internal ones excluded), normalised. The gripper
-    contact gives its z axis; free space gives the zero vector (the only contact that may).
+    contact gives its z axis; free space gives the zero vector. A **pinch** also gives the zero
+    vector: faces whose normals cancel (two opposite faces, the DLO clamped between them; normals
+    within ``merge_deg`` degrees count as one direction), see :func:`pinch_axis`.
     """
     if gripper:
         if facts.gripper_z is None:
@@ -308,11 +316,39 @@ def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
         return np.zeros(3)
     c = -np.sum([np.asarray(f.normal, dtype=float) for f in real.values()], axis=0)
     norm = float(np.linalg.norm(c))
-    if norm < 1e-9:
-        raise ValueError(
-            f"contact vector of faces {sorted(real)} is zero: an ideal DLO cannot touch opposite faces"
-        )
+    if norm < _pinch_tol(len(real), merge_deg):
+        return np.zeros(3)  # a pinch
     return c / norm
+
+
+def pinch_axis(facts: ContactFacts, merge_deg: float = 0.01) -> np.ndarray | None:
+    """The axis of a pinch (unit, world frame), ``None`` when the contact is no pinch.
+
+    A pinch is a contact whose real faces' normals cancel (:func:`contact_vector` is zero although
+    faces are touched). When they all lie on one line (two opposite faces: the DLO clamped between
+    them), the axis is the outward normal of the first face in canonical (object, number) order; a
+    detector then compares the sensed force with the line of this axis, either sign. Normals that
+    cancel without sharing a line (three or more faces around the DLO) leave no axis: the zero
+    vector of the result is a pinch, but ``None`` is returned and only the force's size is usable.
+    """
+    real = _real_faces(facts)
+    if not real:
+        return None
+    normals = np.array([_unit(f.normal) for f in real])
+    if float(np.linalg.norm(normals.sum(axis=0))) >= _pinch_tol(len(real), merge_deg):
+        return None
+    if _rank(normals, merge_deg) != 1:
+        return None
+    return normals[0]
+
+
+def _real_faces(facts: ContactFacts) -> list[FaceFact]:
+    """Distinct real (not internal) faces of a contact, in canonical order."""
+    real: dict[str, FaceFact] = {}
+    for f in facts.faces:
+        if not f.internal:
+            real.setdefault(f.name, f)
+    return [real[n] for n in sort_faces(real)]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -431,15 +467,26 @@ def classify_contact(
 class DiscreteContact:
     """A discrete contact: its state and (annotation, part of the value) the faces it touches.
 
-    ``vector`` is the contact vector of eq. 2 (unit, world frame; annotation, not compared).
+    Annotations (not compared): ``vector`` is the contact vector of eq. 2 (unit, world frame; zero
+    for free space and for a pinch); ``axis`` the axis of a pinch between two opposite faces (unit,
+    world frame, see :func:`pinch_axis`); ``span`` the inclusive range of DLO point indices the
+    contact covers, when known (a simulation knows it, a hand-written sequence does not).
     """
 
     state: DiscreteState
     faces: tuple[str, ...] = ()
     vector: Vec3 | None = field(default=None, compare=False)
+    span: tuple[int, int] | None = field(default=None, compare=False)
+    axis: Vec3 | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "faces", sort_faces(self.faces))
+
+    @property
+    def is_pinch(self) -> bool:
+        """A contact with faces whose contact vector is zero: the DLO is clamped between opposite
+        faces (the normals cancel), so no single direction of force is expected."""
+        return bool(self.faces) and self.vector is not None and not any(self.vector)
 
     @property
     def card(self) -> int:
@@ -490,17 +537,20 @@ def discretize_contact(
     """Discrete contact of one topological contact, using the scene facts in ``book``."""
     dlo: Literal["V", "E"] = "E" if contact.dlo.kind == "E" else "V"
     gripper = any(e.kind == "G" for e in contact.env)
+    span = contact.dlo.span
     if contact.is_free:
-        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0))
+        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0), span)
     facts = book.for_contact(contact)
     st = classify_contact(dlo, facts, params, gripper=gripper)
     try:
-        c = contact_vector(facts, gripper=gripper)
+        c = contact_vector(facts, gripper=gripper, merge_deg=params.normal_merge_deg)
         vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
-    except ValueError:
+    except ValueError:  # a gripper contact without its z axis
         vec = None
+    a = None if gripper else pinch_axis(facts, params.normal_merge_deg)
+    axis: Vec3 | None = None if a is None else (float(a[0]), float(a[1]), float(a[2]))
     real = tuple(f.name for f in facts.faces if not f.internal)
-    return DiscreteContact(st, real, vec)
+    return DiscreteContact(st, real, vec, span, axis)
 
 
 def discretize(
@@ -579,5 +629,6 @@ __all__ = [
     "parse_any",
     "parse_discrete_contact",
     "parse_discrete_situation",
+    "pinch_axis",
     "state",
 ]
