@@ -322,15 +322,12 @@ def contact_vector(facts: ContactFacts, gripper: bool = False, merge_deg: float 
 
 
 def pinch_axis(facts: ContactFacts, merge_deg: float = 0.01) -> np.ndarray | None:
-    """The axis of a pinch (unit, world frame), ``None`` when the contact is no pinch.
+    """The axis of a pinch (unit, world frame), ``None`` when the contact is no pinch or has no axis.
 
-    A pinch is a contact whose real faces' normals cancel (:func:`contact_vector` is zero although
-    faces are touched). When they all lie on one line (two opposite faces: the DLO clamped between
-    them), the axis is the outward normal of the first face in canonical (object, number) order; a
-    detector then compares the sensed force with the line of this axis, either sign. Normals that
-    cancel without sharing a line (three or more faces around the DLO) leave no axis: the zero
-    vector of the result is a pinch, but ``None`` is returned and only the force's size is usable.
-    """
+    A pinch is a contact whose real faces' normals cancel (:func:`contact_vector` is zero). When
+    they lie on one line (two opposite faces clamping the DLO), the axis is the outward normal of the
+    first face in canonical order: a detector compares the force with that line, either sign.
+    Normals that cancel around the DLO (three or more faces) leave no axis: only the force's size."""
     real = _real_faces(facts)
     if not real:
         return None
@@ -610,25 +607,8 @@ def parse_any(text: str) -> Situation | DiscreteSituation:
 
 
 __all__ = [
-    "AUX_STATES",
-    "STATES",
-    "ContactFacts",
-    "DiscreteContact",
-    "DiscreteSituation",
-    "DiscreteState",
-    "FaceFact",
-    "FactBook",
-    "ModelParams",
-    "PairFact",
-    "Stability",
-    "classify_contact",
-    "contact_vector",
-    "discretize",
-    "discretize_contact",
-    "face_object",
-    "parse_any",
-    "parse_discrete_contact",
-    "parse_discrete_situation",
-    "pinch_axis",
-    "state",
-]
+    "AUX_STATES", "STATES", "ContactFacts", "DiscreteContact", "DiscreteSituation", "DiscreteState",
+    "FaceFact", "FactBook", "ModelParams", "PairFact", "Stability", "classify_contact", "contact_vector",
+    "discretize", "discretize_contact", "face_object", "parse_any", "parse_discrete_contact",
+    "parse_discrete_situation", "pinch_axis", "state",
+]  # fmt: skip
