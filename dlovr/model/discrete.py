@@ -1,10 +1,10 @@
-"""Discrete contact state model (paper §IV, MODEL.md §3).
+"""Discrete contact state model (paper §IV; docs/model.md, section 3).
 
 Pure Python + numpy. The classifier turns one topological contact into its discrete state from plain
 geometric facts (:class:`FaceFact`, :class:`PairFact`) that the geometry module computes from a scene
 (or a test writes by hand). All vectors are unit vectors in the world frame; angles are in degrees.
 
-Notation of a discrete situation (MODEL.md §3.2, §4.1), ASCII and Unicode::
+Notation of a discrete situation (docs/model.md, section 3.1), ASCII and Unicode::
 
     V/G & E/N & E/F[block.F1] & E/E^P[block.F1,block.F2] & V/N
     V/G ∧ E/N ∧ E/F[block.F1] ∧ E/E^P[block.F1,block.F2] ∧ V/N
@@ -216,7 +216,7 @@ class PairFact:
 
 @dataclass(frozen=True)
 class ModelParams:
-    """Parameters of the model (MODEL.md). Angles in degrees.
+    """Parameters of the model (docs/model.md, section 7). Angles in degrees.
 
     ``critical_angle_deg``: a concave opening at or above it is semi-stable (§3.3).
     ``parallel_tol_deg``: a DLO edge within this angle of an environment edge is a line contact.
@@ -349,7 +349,7 @@ def _real_faces(facts: ContactFacts) -> list[FaceFact]:
 
 
 # --------------------------------------------------------------------------------------------------
-# The classifier (MODEL.md §3.3)
+# The classifier (docs/model.md, section 3.2)
 # --------------------------------------------------------------------------------------------------
 
 
@@ -398,7 +398,7 @@ def classify_contact(
     params: ModelParams = ModelParams(),
     gripper: bool = False,
 ) -> DiscreteState:
-    """Discrete state of one (single or multiple) contact at a DLO point (MODEL.md §3.3).
+    """Discrete state of one (single or multiple) contact at a DLO point (docs/model.md, 3.2).
 
     1. Environment type from the rank of the real faces' normals (1 -> F, 2 -> E, 3 -> V).
     2. Concave or convex per pair of faces with distinct normals, from ``facts.pairs``.
@@ -553,7 +553,7 @@ def discretize_contact(
 def discretize(
     situation: Situation, book: FactBook, params: ModelParams = ModelParams()
 ) -> DiscreteSituation:
-    """Discrete situation of a topological one (MODEL.md §3.3 for every contact)."""
+    """Discrete situation of a topological one (docs/model.md, 3.2, for every contact)."""
     return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
 
 

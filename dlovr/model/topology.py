@@ -1,4 +1,4 @@
-"""Topological contact model (paper §III, MODEL.md §2).
+"""Topological contact model (paper §III; docs/model.md, section 2).
 
 Pure values: no simulator, no geometry. A *contact situation* is the ordered sequence of single or
 multiple contacts from the gripped start vertex ``V_S`` to the end vertex ``V_E``.
@@ -8,7 +8,7 @@ environment primitives. The point index, the index range and the DLO vector of a
 annotations (they do not take part in ``==`` or ``hash``), so that a contact zone sliding along the
 cable is still the same contact situation.
 
-Notation (MODEL.md §2), ASCII for files and terminals and Unicode for people::
+Notation (docs/model.md, section 2), ASCII for files and terminals and Unicode for people::
 
     VS/G & E3/N & E9/box.F1 + E9/table.F1 & E14/N & VE/N
     V_S/G_z ∧ E_3/N ∧ E_9/box.F1 + E_9/table.F1 ∧ E_14/N ∧ V_E/N
