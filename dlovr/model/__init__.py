@@ -7,6 +7,7 @@
 - :mod:`dlovr.model.transitions`: principal contacts, matching and transition classes (§V), and the
   debouncing of a simulated sequence.
 - :mod:`dlovr.model.program`: macro programs compiled from a demonstration (§VI).
+- :mod:`dlovr.model.sequence`: sequences of situations written one per line, untimed or timed.
 
 Everything here imports only the standard library and numpy (a test checks), so the model is tested
 and reused without a simulator. See ``docs/model.md`` for the rules in words.
