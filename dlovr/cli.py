@@ -58,18 +58,23 @@ def _load_facts(path: str):
     type=click.Path(dir_okay=False),
     help="JSON with face normals, face-pair relations and DLO vectors, needed for topological lines.",
 )
-def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) -> None:
+@click.option("--hold", type=click.FloatRange(min=0.0), help="Timed input: hold time, s (default 0.01).")
+@click.option("--flight", type=click.FloatRange(min=0.0), help="Timed input: flight time, s (default 0.3).")
+def transitions_cmd(
+    file: str, as_json: bool, unicode: bool, facts: str | None, hold: float | None, flight: float | None
+) -> None:
     """Classify the transitions of a sequence of situations, one per line of FILE.
 
     Lines hold discrete situations (``V/G & E/N & V/F[box.F1]``) or topological ones
-    (``VS/G & E3/N & VE/box.F1``, which need --facts); ``#`` starts a comment.
+    (``VS/G & E3/N & VE/box.F1``, which need --facts); ``#`` starts a comment. A line may start with
+    a time in seconds (``0.012  V/G & E/N & V/N``): then every line must, and the sequence is
+    debounced as a simulation's is (flicker within --hold, brief intermediate states, flights within
+    --flight) before it is classified; each row shows when its kept situation began.
     """
-    import dataclasses
     import json
 
-    from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize, parse_any
-    from dlovr.model.topology import NotationError, Situation
-    from dlovr.model.transitions import classify_sequence
+    from dlovr.model.sequence import SequenceError, debounce_sequence, parse_sequence
+    from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S, classify_sequence, format_classes
 
     try:
         with open(file, encoding="utf-8") as fh:
@@ -78,56 +83,57 @@ def transitions_cmd(file: str, as_json: bool, unicode: bool, facts: str | None) 
         raise UserError(f"{file}: cannot read: {e.strerror}") from None
     except UnicodeDecodeError:
         raise UserError(f"{file}: not a UTF-8 text file") from None
-    book_vectors = _load_facts(facts) if facts else None
-    rows: list[tuple[int, Situation | None, DiscreteSituation]] = []
-    for lineno, line in enumerate(lines, 1):
-        text = line.split("#", 1)[0].strip()
-        if not text:
-            continue
-        try:
-            sit = parse_any(text)
-        except NotationError as e:
-            raise UserError(f"{file}:{lineno}: {e}") from None
-        if isinstance(sit, DiscreteSituation):
-            rows.append((lineno, None, sit))
-            continue
-        if book_vectors is None:
-            raise UserError(
-                f"{file}:{lineno}: a topological situation needs geometric facts: give --facts FILE"
-            )
-        book, vectors = book_vectors
-        contacts = tuple(
-            dataclasses.replace(c, dlo=dataclasses.replace(c.dlo, vector=vectors.get(c.dlo.index)))
-            if c.dlo.index is not None
-            else c
-            for c in sit.contacts
-        )
-        try:
-            disc = discretize(Situation(contacts), book, ModelParams())  # type: ignore[arg-type]
-        except (KeyError, ValueError) as e:
-            msg = e.args[0] if e.args else repr(e)
-            raise UserError(f"{file}:{lineno}: cannot classify {sit}: {msg}") from None
-        rows.append((lineno, sit, disc))
-    if not rows:
-        raise UserError(f"{file}: no situations (every line is empty or a comment)")
-    steps = classify_sequence([r[2] for r in rows])
+    book, vectors = _load_facts(facts) if facts else (None, None)
+    try:
+        rows = parse_sequence(lines, book, vectors)  # type: ignore[arg-type]
+    except SequenceError as e:
+        raise UserError(f"{file}:{e.line}: {e}" if e.line else f"{file}: {e}") from None
+    if rows[0].t is None:
+        if hold is not None or flight is not None:
+            raise UserError(f"{file}: --hold and --flight debounce timed input; no line starts with a time")
+        steps = classify_sequence([r.discrete for r in rows])
+        if as_json:
+            out = [
+                {
+                    "step": s.index + 1,
+                    "line": r.line,
+                    "topological": r.topological.format() if r.topological is not None else None,
+                    "discrete": s.situation.format(),
+                    "classes": list(s.classes),
+                    "label": s.label,
+                }
+                for s, r in zip(steps, rows, strict=True)
+            ]
+            click.echo(json.dumps(out, indent=2, ensure_ascii=False))
+            return
+        click.echo(f"{'step':>4}  {'class':<5}  situation")
+        for s in steps:
+            click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
+        return
+    kept = debounce_sequence(
+        rows, DEFAULT_HOLD_S if hold is None else hold, DEFAULT_FLIGHT_S if flight is None else flight
+    )
     if as_json:
         out = [
             {
-                "step": s.index + 1,
-                "line": r[0],
-                "topological": r[1].format() if r[1] is not None else None,
-                "discrete": s.situation.format(),
-                "classes": list(s.classes),
-                "label": s.label,
+                "step": i,
+                "line": k.line.line,
+                "t": k.kept.start,
+                "duration": round(k.kept.duration, 9),
+                "through_free": k.kept.through_free,
+                "topological": k.line.topological.format() if k.line.topological is not None else None,
+                "discrete": k.kept.situation.format(),
+                "classes": list(k.classes),
+                "label": format_classes(k.classes),
             }
-            for s, r in zip(steps, rows, strict=True)
+            for i, k in enumerate(kept, 1)
         ]
         click.echo(json.dumps(out, indent=2, ensure_ascii=False))
         return
-    click.echo(f"{'step':>4}  {'class':<5}  situation")
-    for s in steps:
-        click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
+    click.echo(f"{'step':>4}  {'t [s]':>9}  {'class':<5}  situation")
+    for i, k in enumerate(kept, 1):
+        label, sit = format_classes(k.classes), k.kept.situation.format(unicode)
+        click.echo(f"{i:>4}  {k.kept.start:9.3f}  {label:<5}  {sit}")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -399,7 +405,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     import io
     import json
 
-    from dlovr.model.transitions import classify_step
+    from dlovr.model.transitions import kept_classes
     from dlovr.recording import Recording, kept_states
 
     rec = Recording(recording)
@@ -422,9 +428,9 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
                 "duration": _t(k.duration),
                 "topological": k.topological or "",
                 "discrete": k.situation.format(),
-                "classes": list(classify_step(kept[i - 1].situation, k.situation)) if i else [],
+                "classes": list(classes),
             }
-            for i, k in enumerate(kept)
+            for k, classes in zip(kept, kept_classes(kept), strict=True)
         ]
     if fmt == "json":
         click.echo(json.dumps(rows, indent=2))

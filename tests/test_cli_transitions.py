@@ -1,4 +1,4 @@
-"""`dlovr transitions FILE [--json] [--facts F]`."""
+"""`dlovr transitions FILE [--json] [--facts F] [--hold S] [--flight S]`, untimed and timed input."""
 
 from __future__ import annotations
 
@@ -137,3 +137,79 @@ def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
         assert f"{facts}: {where}" in r.stderr, (raw, r.stderr)
         assert "Error(" not in r.stderr and "Traceback" not in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1
+
+
+# --------------------------------------------------------------------------------------------------
+# Timed input: debounced before it is classified
+# --------------------------------------------------------------------------------------------------
+
+RIDGE = "V/G & E/N & V/E^LI[a.F1,a.F2]"
+FREE = "V/G & E/N & V/N"
+LANDED = "V/G & E/N & V/F[a.F2]"
+LYING = "V/G & E/N & E/F[a.F1] & V/N"
+
+
+def timed(tmp_path, rows):
+    f = tmp_path / "timed.txt"
+    f.write_text("# time  situation\n" + "".join(f"{t}  {s}\n" for t, s in rows))
+    return f
+
+
+def test_timed_lines_are_debounced_and_show_when_each_kept_situation_began(tmp_path):
+    f = timed(
+        tmp_path,
+        [
+            (0.0, FREE),
+            (0.5, LYING),
+            (0.6, LYING),
+            (0.602, "V/G & E/N & E/E^LI[a.F1,a.F2] & V/N"),  # a 4 ms excursion through two states
+            (0.604, "V/G & E/N & E/E^P[a.F1,a.F2] & V/N"),
+            (0.606, LYING),
+            (1.0, RIDGE),
+            (1.2, FREE),  # a 0.1 s flight
+            (1.3, LANDED),
+            (2.0, LANDED),
+        ],
+    )
+    r = invoke("transitions", str(f))
+    assert r.exit_code == 0, r.output
+    rows = [row.split() for row in r.output.splitlines()[1:]]
+    expected = [("0.000", "-"), ("0.500", "E"), ("1.000", "I"), ("1.300", "S,E")]
+    assert [(row[1], row[2]) for row in rows] == expected
+    assert r.output.splitlines()[0].split()[:4] == ["step", "t", "[s]", "class"]
+    data = json.loads(invoke("transitions", str(f), "--json").output)
+    assert [(d["line"], d["t"], d["label"]) for d in data] == [
+        (2, 0.0, "-"), (3, 0.5, "E"), (8, 1.0, "I"), (10, 1.3, "S,E"),
+    ]  # fmt: skip
+    assert data[3]["through_free"] and data[3]["duration"] == 0.7 and data[1]["duration"] == 0.5
+    # with the hold and flight times given: the 2 ms excursion is kept, the flight is not one
+    r = invoke("transitions", str(f), "--json", "--hold", "0.001", "--flight", "0.05")
+    labels = [d["label"] for d in json.loads(r.output)]
+    assert labels == ["-", "E", "I", "S", "C", "I", "S", "E"]
+
+
+def test_timed_and_untimed_lines_do_not_mix_and_times_do_not_go_back(tmp_path):
+    f = tmp_path / "mixed.txt"
+    f.write_text(f"0.0  {FREE}\n{LYING}\n")
+    r = invoke("transitions", str(f))
+    assert r.exit_code == 2 and f"{f}:2:" in r.output and "every line starts with a time" in r.output
+    f.write_text(f"{FREE}\n0.5  {LYING}\n")
+    r = invoke("transitions", str(f))
+    assert r.exit_code == 2 and f"{f}:2:" in r.output
+    f.write_text(f"0.5  {FREE}\n0.2  {LYING}\n")
+    r = invoke("transitions", str(f))
+    assert r.exit_code == 2 and f"{f}:2:" in r.output and "before the previous" in r.output
+    f.write_text(f"0.5  {FREE}\n1e999  {LYING}\n")
+    assert invoke("transitions", str(f)).exit_code == 2
+    f.write_text(f"{FREE}\n{LYING}\n")
+    r = invoke("transitions", str(f), "--hold", "0.02")
+    assert r.exit_code == 2 and "timed input" in r.output
+    assert invoke("transitions", str(timed(tmp_path, [(0, FREE)])), "--hold", "-1").exit_code == 2
+
+
+def test_untimed_input_is_not_debounced(tmp_path):
+    f = tmp_path / "untimed.txt"
+    f.write_text(f"{LYING}\nV/G & E/N & E/E^LI[a.F1,a.F2] & V/N\n{LYING}\n")
+    r = invoke("transitions", str(f), "--json")
+    assert [d["label"] for d in json.loads(r.output)] == ["-", "I", "S"]
+    assert "t" not in json.loads(r.output)[0]

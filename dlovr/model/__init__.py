@@ -10,6 +10,7 @@
 - :mod:`dlovr.model.network`: transition networks merged from several demonstrations (§VI, §VII).
 - :mod:`dlovr.model.planning`: network programs: the macro toward the goal at every node, identifying
   the node reached and planning again (§VI).
+- :mod:`dlovr.model.sequence`: sequences of situations written one per line, untimed or timed.
 
 Everything here imports only the standard library, numpy and networkx (a test checks that no simulator,
 mesh, UI or file-format library is), so the model is tested and reused without a simulator. See

@@ -1,10 +1,10 @@
-"""Discrete contact state model (paper §IV, MODEL.md §3).
+"""Discrete contact state model (paper §IV; docs/model.md, section 3).
 
 Pure Python + numpy. The classifier turns one topological contact into its discrete state from plain
 geometric facts (:class:`FaceFact`, :class:`PairFact`) that the geometry module computes from a scene
 (or a test writes by hand). All vectors are unit vectors in the world frame; angles are in degrees.
 
-Notation of a discrete situation (MODEL.md §3.2, §4.1), ASCII and Unicode::
+Notation of a discrete situation (docs/model.md, section 3.1), ASCII and Unicode::
 
     V/G & E/N & E/F[block.F1] & E/E^P[block.F1,block.F2] & V/N
     V/G ∧ E/N ∧ E/F[block.F1] ∧ E/E^P[block.F1,block.F2] ∧ V/N
@@ -17,13 +17,13 @@ value.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Literal
 
 import numpy as np
 
+from dlovr.model.facts import ContactFacts, FaceFact, FactBook, ModelParams, PairFact
 from dlovr.model.topology import (
     Contact,
     NotationError,
@@ -178,125 +178,23 @@ def state(name: str) -> DiscreteState:
 
 
 # --------------------------------------------------------------------------------------------------
-# Geometric facts and parameters (inputs of the classifier)
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class FaceFact:
-    """One face: its name (``obj.F3``), owning object, outward unit normal (world frame).
-
-    ``internal`` marks a face that a convex decomposition introduced inside a solid: it never counts.
-    """
-
-    name: str
-    obj: str
-    normal: Vec3
-    internal: bool = False
-
-
-@dataclass(frozen=True)
-class PairFact:
-    """How two faces meet: concave or convex, and the free-space opening angle in degrees.
-
-    The opening angle is 180 - α for a concave pair and 180 + α for a convex one, α being the angle
-    between the normals. ``crease`` is the unit direction of their common line (world frame), if known.
-    """
-
-    a: str
-    b: str
-    concave: bool
-    opening_deg: float
-    crease: Vec3 | None = None
-
-    @property
-    def key(self) -> frozenset[str]:
-        return frozenset((self.a, self.b))
-
-
-@dataclass(frozen=True)
-class ModelParams:
-    """Parameters of the model (MODEL.md). Angles in degrees.
-
-    ``critical_angle_deg``: a concave opening at or above it is semi-stable (§3.3).
-    ``parallel_tol_deg``: a DLO edge within this angle of an environment edge is a line contact.
-    ``tip_angle_deg``: the end-vertex rule (§2): the tip touches only when pointing into the surface
-    by more than this.
-    ``normal_merge_deg``: normals closer than this count as one direction when ranking (§3.3 step 1).
-    """
-
-    critical_angle_deg: float = 170.0
-    parallel_tol_deg: float = 10.0
-    tip_angle_deg: float = 15.0
-    normal_merge_deg: float = 0.01
-
-    def __post_init__(self) -> None:
-        if not 90.0 < self.critical_angle_deg <= 180.0:
-            raise ValueError(f"critical_angle_deg must be in (90, 180], got {self.critical_angle_deg}")
-        if not 0.0 <= self.parallel_tol_deg < 90.0:
-            raise ValueError(f"parallel_tol_deg must be in [0, 90), got {self.parallel_tol_deg}")
-        if not 0.0 <= self.tip_angle_deg < 90.0:
-            raise ValueError(f"tip_angle_deg must be in [0, 90), got {self.tip_angle_deg}")
-        if not 0.0 <= self.normal_merge_deg < 45.0:
-            raise ValueError(f"normal_merge_deg must be in [0, 45), got {self.normal_merge_deg}")
-
-
-@dataclass(frozen=True)
-class ContactFacts:
-    """The geometric facts about one (single or multiple) contact that the classifier needs.
-
-    ``faces``: every face of the contact's primitives. ``pairs``: how each pair of its real faces
-    with distinct normals meets. ``dlo_vector``: the DLO vector at the contact (any length, world
-    frame), needed for edge contacts. ``crease``: direction of the environment edge, if the caller
-    knows it (else taken from the normals). ``gripper_z``: the gripper's z axis for ``G`` contacts.
-    """
-
-    faces: tuple[FaceFact, ...]
-    pairs: tuple[PairFact, ...] = ()
-    dlo_vector: Vec3 | None = None
-    crease: Vec3 | None = None
-    gripper_z: Vec3 | None = None
-
-
-class FactBook:
-    """Geometric facts about a whole scene, keyed by face name; builds :class:`ContactFacts`.
-
-    ``faces`` maps face names to :class:`FaceFact`; ``pairs`` lists :class:`PairFact` for face pairs
-    (in either order).
-    """
-
-    def __init__(self, faces: Mapping[str, FaceFact], pairs: list[PairFact] | tuple[PairFact, ...] = ()):
-        self.faces = dict(faces)
-        self.pairs = {p.key: p for p in pairs}
-
-    def for_contact(self, contact: Contact, dlo_vector: Vec3 | None = None) -> ContactFacts:
-        """Facts for one topological contact; raises ``KeyError`` naming a face or pair not known."""
-        names = contact.faces
-        missing = [f for f in names if f not in self.faces]
-        if missing:
-            raise KeyError(f"no facts for face {missing[0]}")
-        facts = tuple(self.faces[f] for f in names)
-        pairs = tuple(
-            self.pairs[frozenset((a, b))]
-            for i, a in enumerate(names)
-            for b in names[i + 1 :]
-            if frozenset((a, b)) in self.pairs
-        )
-        z = next((e.z for e in contact.env if e.kind == "G"), None)
-        vec = dlo_vector if dlo_vector is not None else contact.dlo.vector
-        return ContactFacts(facts, pairs, vec, None, z)
-
-
-# --------------------------------------------------------------------------------------------------
 # Contact vector (eq. 2)
 # --------------------------------------------------------------------------------------------------
 
 
-def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
-    """Contact vector C of eq. 2 as a unit 3-vector (world frame).
+def _pinch_tol(n_faces: int, merge_deg: float) -> float:
+    """Below this length the faces' summed normals cancel (normals within ``merge_deg`` count as one
+    direction, so a sum of ``n_faces`` unit normals shorter than this is zero)."""
+    return max(1e-9, n_faces * float(np.sin(np.radians(merge_deg))))
+
+
+def contact_vector(facts: ContactFacts, gripper: bool = False, merge_deg: float = 0.01) -> np.ndarray:
+    """Contact vector C of eq. 2 as a 3-vector (world frame): unit, or zero.
 
     Sum of ``-N(F)`` over the distinct real faces (internal ones excluded), normalised. The gripper
-    contact gives its z axis; free space gives the zero vector (the only contact that may).
+    contact gives its z axis; free space gives the zero vector. A **pinch** also gives the zero
+    vector: faces whose normals cancel (two opposite faces, the DLO clamped between them; normals
+    within ``merge_deg`` degrees count as one direction), see :func:`pinch_axis`.
     """
     if gripper:
         if facts.gripper_z is None:
@@ -308,15 +206,40 @@ def contact_vector(facts: ContactFacts, gripper: bool = False) -> np.ndarray:
         return np.zeros(3)
     c = -np.sum([np.asarray(f.normal, dtype=float) for f in real.values()], axis=0)
     norm = float(np.linalg.norm(c))
-    if norm < 1e-9:
-        raise ValueError(
-            f"contact vector of faces {sorted(real)} is zero: an ideal DLO cannot touch opposite faces"
-        )
+    if norm < _pinch_tol(len(real), merge_deg):
+        return np.zeros(3)  # a pinch
     return c / norm
 
 
+def pinch_axis(facts: ContactFacts, merge_deg: float = 0.01) -> np.ndarray | None:
+    """The axis of a pinch (unit, world frame), ``None`` when the contact is no pinch or has no axis.
+
+    A pinch is a contact whose real faces' normals cancel (:func:`contact_vector` is zero). When
+    they lie on one line (two opposite faces clamping the DLO), the axis is the outward normal of the
+    first face in canonical order: a detector compares the force with that line, either sign.
+    Normals that cancel around the DLO (three or more faces) leave no axis: only the force's size."""
+    real = _real_faces(facts)
+    if not real:
+        return None
+    normals = np.array([_unit(f.normal) for f in real])
+    if float(np.linalg.norm(normals.sum(axis=0))) >= _pinch_tol(len(real), merge_deg):
+        return None
+    if _rank(normals, merge_deg) != 1:
+        return None
+    return normals[0]
+
+
+def _real_faces(facts: ContactFacts) -> list[FaceFact]:
+    """Distinct real (not internal) faces of a contact, in canonical order."""
+    real: dict[str, FaceFact] = {}
+    for f in facts.faces:
+        if not f.internal:
+            real.setdefault(f.name, f)
+    return [real[n] for n in sort_faces(real)]
+
+
 # --------------------------------------------------------------------------------------------------
-# The classifier (MODEL.md §3.3)
+# The classifier (docs/model.md, section 3.2)
 # --------------------------------------------------------------------------------------------------
 
 
@@ -365,7 +288,7 @@ def classify_contact(
     params: ModelParams = ModelParams(),
     gripper: bool = False,
 ) -> DiscreteState:
-    """Discrete state of one (single or multiple) contact at a DLO point (MODEL.md §3.3).
+    """Discrete state of one (single or multiple) contact at a DLO point (docs/model.md, 3.2).
 
     1. Environment type from the rank of the real faces' normals (1 -> F, 2 -> E, 3 -> V).
     2. Concave or convex per pair of faces with distinct normals, from ``facts.pairs``.
@@ -431,15 +354,26 @@ def classify_contact(
 class DiscreteContact:
     """A discrete contact: its state and (annotation, part of the value) the faces it touches.
 
-    ``vector`` is the contact vector of eq. 2 (unit, world frame; annotation, not compared).
+    Annotations (not compared): ``vector`` is the contact vector of eq. 2 (unit, world frame; zero
+    for free space and for a pinch); ``axis`` the axis of a pinch between two opposite faces (unit,
+    world frame, see :func:`pinch_axis`); ``span`` the inclusive range of DLO point indices the
+    contact covers, when known (a simulation knows it, a hand-written sequence does not).
     """
 
     state: DiscreteState
     faces: tuple[str, ...] = ()
     vector: Vec3 | None = field(default=None, compare=False)
+    span: tuple[int, int] | None = field(default=None, compare=False)
+    axis: Vec3 | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "faces", sort_faces(self.faces))
+
+    @property
+    def is_pinch(self) -> bool:
+        """A contact with faces whose contact vector is zero: the DLO is clamped between opposite
+        faces (the normals cancel), so no single direction of force is expected."""
+        return bool(self.faces) and self.vector is not None and not any(self.vector)
 
     @property
     def card(self) -> int:
@@ -493,23 +427,26 @@ def discretize_contact(
     """Discrete contact of one topological contact, using the scene facts in ``book``."""
     dlo: Literal["V", "E"] = "E" if contact.dlo.kind == "E" else "V"
     gripper = any(e.kind == "G" for e in contact.env)
+    span = contact.dlo.span
     if contact.is_free:
-        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0))
+        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0), span)
     facts = book.for_contact(contact)
     st = classify_contact(dlo, facts, params, gripper=gripper)
     try:
-        c = contact_vector(facts, gripper=gripper)
+        c = contact_vector(facts, gripper=gripper, merge_deg=params.normal_merge_deg)
         vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
-    except ValueError:
+    except ValueError:  # a gripper contact without its z axis
         vec = None
+    a = None if gripper else pinch_axis(facts, params.normal_merge_deg)
+    axis: Vec3 | None = None if a is None else (float(a[0]), float(a[1]), float(a[2]))
     real = tuple(f.name for f in facts.faces if not f.internal)
-    return DiscreteContact(st, real, vec)
+    return DiscreteContact(st, real, vec, span, axis)
 
 
 def discretize(
     situation: Situation, book: FactBook, params: ModelParams = ModelParams()
 ) -> DiscreteSituation:
-    """Discrete situation of a topological one (MODEL.md §3.3 for every contact)."""
+    """Discrete situation of a topological one (docs/model.md, 3.2, for every contact)."""
     return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
 
 
@@ -578,25 +515,8 @@ def parse_any(text: str) -> Situation | DiscreteSituation:
 
 
 __all__ = [
-    "AUX_STATES",
-    "FACE_COUNTS",
-    "STATES",
-    "ContactFacts",
-    "DiscreteContact",
-    "DiscreteSituation",
-    "DiscreteState",
-    "FaceFact",
-    "FactBook",
-    "ModelParams",
-    "PairFact",
-    "Stability",
-    "classify_contact",
-    "contact_vector",
-    "discretize",
-    "discretize_contact",
-    "face_object",
-    "parse_any",
-    "parse_discrete_contact",
-    "parse_discrete_situation",
-    "state",
-]
+    "AUX_STATES", "FACE_COUNTS", "STATES", "ContactFacts", "DiscreteContact", "DiscreteSituation",
+    "DiscreteState", "FaceFact", "FactBook", "ModelParams", "PairFact", "Stability", "classify_contact",
+    "contact_vector", "discretize", "discretize_contact", "face_object", "parse_any",
+    "parse_discrete_contact", "parse_discrete_situation", "pinch_axis", "state",
+]  # fmt: skip

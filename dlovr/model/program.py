@@ -1,9 +1,11 @@
-"""Program generation (paper §VI, MODEL.md §5): a demonstration becomes a sequence of macros.
+"""Program generation (paper §VI, docs/model.md): a demonstration becomes a sequence of macros.
 
 Pure Python + numpy. Input: the demonstration's kept contact situations with their times (see
 :class:`dlovr.model.transitions.Debouncer`) and the gripper pose trajectory. Each transition that has a
 class becomes a **macro**: a guarded motion of the gripper (the demonstrated displacement over that
-stretch) that ends when the detection algorithm of its class sees the expected transition.
+stretch) that ends when the detection algorithm of its class sees the expected transition. It names
+the principal contacts that change (from and to, with faces) and its risk. The motion after the last
+classed transition is a final macro to the demonstrated end pose, without detection.
 
 Frames and units: positions in metres and quaternions ``wxyz`` in the world frame; the relative motion
 is expressed in the gripper frame at the macro's start; times in seconds; forces in newtons.
@@ -23,6 +25,9 @@ import numpy as np
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation
 from dlovr.model.transitions import (
     CLASS_NAMES,
+    CLASS_ORDER,
+    changes,
+    classify_change,
     classify_step,
     format_classes,
     principal,
@@ -30,20 +35,26 @@ from dlovr.model.transitions import (
 )
 from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
-PROGRAM_VERSION = 1
-"""Version of the program JSON format (``version`` field); bump on incompatible changes."""
+PROGRAM_VERSION = 2
+"""Version of the program JSON format (``version`` field); bump on incompatible changes.
+
+2: macros name the principal contacts that change (``changes``), carry a ``risk`` (none, caution,
+risky) instead of ``risky``, a ``kind`` (``transition`` or ``final``: the motion after the last
+classed transition), and expected contacts carry a pinch ``axis``."""
 
 
 @dataclass(frozen=True)
 class TimedSituation:
     """A kept contact situation: when it began (s), how long it held (s), and optionally the
-    topological notation it came from and the largest normal force on the cable then (N)."""
+    topological notation it came from, the largest normal force on the cable then (N), and whether
+    it was reached by a flight (:attr:`dlovr.model.transitions.Kept.through_free`)."""
 
     t: float
     duration: float
     situation: DiscreteSituation
     topological: str | None = None
     force: float | None = None
+    through_free: bool = False
 
 
 @dataclass(frozen=True)
@@ -103,7 +114,7 @@ def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
 
 
 # --------------------------------------------------------------------------------------------------
-# Detection algorithms, one per class (§V.B, MODEL.md §5)
+# Detection algorithms, one per class (§V.B, docs/model.md)
 # --------------------------------------------------------------------------------------------------
 
 DETECTORS: dict[str, dict[str, Any]] = {
@@ -134,6 +145,14 @@ DETECTORS: dict[str, dict[str, Any]] = {
     },
 }
 RISKY = frozenset({"S", "I"})
+RISK_OF_CLASS = {"C": "none", "E": "none", "T": "caution", "I": "risky", "S": "risky"}
+"""Risk of a transition class (§IV.B, §VI): stable ones none, semi-stable caution, instable risky."""
+RISK_LEVELS = ("none", "caution", "risky")
+
+
+def risk(classes: Sequence[str]) -> str:
+    """The risk of a macro: that of its riskiest class (``none`` for no class)."""
+    return max((RISK_OF_CLASS[c] for c in classes), key=RISK_LEVELS.index, default="none")
 
 
 @dataclass(frozen=True)
@@ -145,28 +164,60 @@ class Detection:
 
 @dataclass(frozen=True)
 class ContactSpec:
-    """A principal contact a macro expects: its state with face names and its contact vector."""
+    """A principal contact a macro expects: its state with face names and its contact vector (unit,
+    world frame). A pinch (the DLO clamped between opposite faces) has the zero vector and, when its
+    faces' normals share one line, that line's ``axis`` (unit, world frame): a detector then looks
+    for force along the axis, either sign (docs/model.md, Contact vectors)."""
 
     state: str
     vector: tuple[float, float, float] | None
+    axis: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class ContactChange:
+    """One principal contact that changes in a macro's transition and its classes.
+
+    ``from_contact``/``to_contact``: before and after, ``None`` for free space ``N`` (a contact
+    established or released)."""
+
+    classes: tuple[str, ...]
+    from_contact: ContactSpec | None
+    to_contact: ContactSpec | None
 
 
 @dataclass(frozen=True)
 class Macro:
+    """One guarded motion of a program.
+
+    ``kind``: ``transition`` (ends when its detection sees the transition ``classes``) or ``final``
+    (the motion after the last classed transition, to the demonstrated end pose, no detection).
+    ``t``: when the demonstrated transition happened, or the demonstration's end (s). ``changes``:
+    the principal contacts that change; ``from_contacts``/``to_contacts``: all principal contacts
+    of the whole situations before and after. ``risk``: ``none`` (C, E), ``caution`` (T) or
+    ``risky`` (I, S).
+    """
+
     index: int
+    kind: str
     classes: tuple[str, ...]
     t: float
     from_situation: str
     to_situation: str
+    changes: tuple[ContactChange, ...]
     from_contacts: tuple[ContactSpec, ...]
     to_contacts: tuple[ContactSpec, ...]
     motion: Motion
     detection: tuple[Detection, ...]
-    risky: bool
+    risk: str
 
     @property
     def label(self) -> str:
-        return format_classes(self.classes)
+        return "end" if self.kind == "final" else format_classes(self.classes)
+
+    @property
+    def risky(self) -> bool:
+        return self.risk == "risky"
 
 
 @dataclass(frozen=True)
@@ -189,9 +240,12 @@ class Program:
         """A readable text listing of the program."""
         lines = [f"program {self.name}  (from {self.source}, format v{self.version})"]
         for m in self.macros:
-            risk = "  RISKY" if m.risky else ""
             mv = m.motion
-            lines.append(f"{m.index:>3}  {m.label:<4} t={m.t:8.3f}s{risk}")
+            lines.append(f"{m.index:>3}  {m.label:<4} t={m.t:8.3f}s  risk {m.risk}")
+            for c in m.changes:
+                lines.append(
+                    f"       {format_classes(c.classes):<4} {_name(c.from_contact)} -> {_name(c.to_contact)}"
+                )
             lines.append(f"       from {m.from_situation}")
             lines.append(f"       to   {m.to_situation}")
             lines.append(
@@ -202,14 +256,25 @@ class Program:
             for det in m.detection:
                 params = ", ".join(f"{k}={v:g}" for k, v in det.params.items())
                 lines.append(f"       until {det.algorithm} ({params})  [{CLASS_NAMES[det.cls]}]")
+            if m.kind == "final":
+                lines.append("       to the demonstrated end pose (no detection)")
         s = self.summary
-        lines.append(f"{s.get('macros', 0)} macros, {s.get('risky', 0)} risky")
+        lines.append(
+            f"{s.get('macros', 0)} macros (the last one final), {s.get('risky', 0)} risky, "
+            f"{s.get('caution', 0)} caution"
+        )
         return "\n".join(lines) + "\n"
 
 
+def _name(c: ContactSpec | None) -> str:
+    return "N" if c is None else c.state
+
+
 def _spec(c: DiscreteContact) -> ContactSpec:
-    vec = None if c.vector is None else tuple(round(float(x), 9) + 0.0 for x in c.vector)
-    return ContactSpec(c.format(), vec)  # type: ignore[arg-type]
+    def tup(v: tuple[float, ...] | None) -> tuple[float, float, float] | None:
+        return None if v is None else tuple(round(float(x), 9) + 0.0 for x in v)  # type: ignore[return-value]
+
+    return ContactSpec(c.format(), tup(c.vector), tup(c.axis))
 
 
 def _principals(s: DiscreteSituation) -> tuple[ContactSpec, ...]:
@@ -224,38 +289,76 @@ def _detection(cls: str, force: float | None) -> Detection:
     return Detection(cls, d["algorithm"], params)
 
 
+def _changes(prev: TimedSituation, cur: TimedSituation) -> tuple[ContactChange, ...]:
+    out = []
+    for ch in changes(prev.situation, cur.situation, cur.through_free):
+        classes = classify_change(ch)
+        if classes:
+            x = _spec(ch.x[0]) if ch.x else None
+            y = _spec(ch.y[0]) if ch.y else None
+            out.append(ContactChange(tuple(c for c in CLASS_ORDER if c in classes), x, y))
+    return tuple(out)
+
+
 def compile_program(
     states: Sequence[TimedSituation], poses: PoseTrack, name: str = "program", source: str = ""
 ) -> Program:
-    """Compile a demonstration into a program of macros (MODEL.md §5).
+    """Compile a demonstration into a program of macros (docs/model.md, Programs).
 
     Every step between consecutive kept situations that has a transition class becomes a macro;
-    steps without one (``-``) extend the motion of the next macro.
+    steps without one (``-``) extend the motion of the next macro. The motion after the last classed
+    transition, to the end of ``poses``, is the final macro.
     """
+    if not states:
+        raise ValueError("a program needs at least one contact situation")
     macros: list[Macro] = []
     anchor = 0
     for k in range(1, len(states)):
         prev, cur = states[k - 1], states[k]
-        classes = classify_step(prev.situation, cur.situation)
+        classes = classify_step(prev.situation, cur.situation, cur.through_free)
         if not classes:
             continue
         start = states[anchor]
         macros.append(
             Macro(
                 index=len(macros) + 1,
+                kind="transition",
                 classes=classes,
                 t=round(cur.t, 9),
                 from_situation=prev.situation.format(),
                 to_situation=cur.situation.format(),
+                changes=_changes(prev, cur),
                 from_contacts=_principals(prev.situation),
                 to_contacts=_principals(cur.situation),
                 motion=motion_between(poses, start.t, cur.t),
                 detection=tuple(_detection(c, cur.force if c == "E" else None) for c in classes),
-                risky=bool(RISKY & set(classes)),
+                risk=risk(classes),
             )
         )
         anchor = k
-    summary = {"macros": len(macros), "risky": sum(m.risky for m in macros)}
+    start, last = states[anchor], states[-1]
+    end = max(float(poses.t[-1]), start.t)
+    macros.append(
+        Macro(
+            index=len(macros) + 1,
+            kind="final",
+            classes=(),
+            t=round(end, 9),
+            from_situation=start.situation.format(),
+            to_situation=last.situation.format(),
+            changes=(),
+            from_contacts=_principals(start.situation),
+            to_contacts=_principals(last.situation),
+            motion=motion_between(poses, start.t, end),
+            detection=(),
+            risk="none",
+        )
+    )
+    summary = {
+        "macros": len(macros),
+        "risky": sum(m.risk == "risky" for m in macros),
+        "caution": sum(m.risk == "caution" for m in macros),
+    }
     return Program(name, source, tuple(macros), PROGRAM_VERSION, summary)
 
 

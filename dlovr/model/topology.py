@@ -1,4 +1,4 @@
-"""Topological contact model (paper §III, MODEL.md §2).
+"""Topological contact model (paper §III; docs/model.md, section 2).
 
 Pure values: no simulator, no geometry. A *contact situation* is the ordered sequence of single or
 multiple contacts from the gripped start vertex ``V_S`` to the end vertex ``V_E``.
@@ -8,7 +8,7 @@ environment primitives. The point index, the index range and the DLO vector of a
 annotations (they do not take part in ``==`` or ``hash``), so that a contact zone sliding along the
 cable is still the same contact situation.
 
-Notation (MODEL.md §2), ASCII for files and terminals and Unicode for people::
+Notation (docs/model.md, section 2), ASCII for files and terminals and Unicode for people::
 
     VS/G & E3/N & E9/box.F1 + E9/table.F1 & E14/N & VE/N
     V_S/G_z ∧ E_3/N ∧ E_9/box.F1 + E_9/table.F1 ∧ E_14/N ∧ V_E/N
@@ -295,7 +295,7 @@ def contract(
 def tip_touches(
     last_vector: Sequence[float], normals: Sequence[Sequence[float]], tip_angle_deg: float = 15.0
 ) -> bool:
-    """End-vertex rule (MODEL.md §2): is the tip itself the contact?
+    """End-vertex rule (docs/model.md, paper §III): is the tip itself the contact?
 
     ``last_vector`` is the DLO vector of the last segment pointing towards the tip (for ``V_S``: the
     first segment reversed), ``normals`` the outward unit normals of the faces at the tip's contact
@@ -327,25 +327,40 @@ def situation_from_points(
     """Contact situation from the primitives every point touches, with the end-vertex rule.
 
     ``vectors[i]`` is D_i = p_{i+1} - p_i for i < n (len n or n+1); ``face_normal`` gives a face's
-    outward unit normal. A cable end keeps its contacts only when :func:`tip_touches` says the tip
-    itself is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``.
+    outward unit normal. A cable end is in contact itself only when :func:`tip_touches` says the tip
+    is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``.
+
+    A contact that the rule takes away from a tip is never dropped: the last segment touches at a
+    shallow angle, so it is an ``E`` contact of that segment, written at the last interior point
+    (``… ∧ E_{n-1}/F ∧ V_E/N``; ``E_1`` for ``V_S``), together with what that point touches itself.
+    (A DLO of two points has no interior point: its tip keeps the contact.)
     """
     env = [list(e) for e in point_env]
     n = len(env) - 1
     vecs = [tuple(v) for v in (vectors.tolist() if hasattr(vectors, "tolist") else vectors)]
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
-    ends = [(n, vecs[n - 1])]
+    ends = [(n, n - 1, vecs[n - 1])]
     if not gripped:
-        ends.append((0, tuple(-x for x in vecs[0])))
-    for i, d in ends:
+        ends.append((0, 1, tuple(-x for x in vecs[0])))
+    for i, inner, d in ends:
         names = sort_faces(f for e in env[i] for f in e.faces)
-        if names and not tip_touches(d, [face_normal(f) for f in names], tip_angle_deg):
+        if names and n >= 2 and not tip_touches(d, [face_normal(f) for f in names], tip_angle_deg):
+            env[inner] = _merge_primitives(env[inner], env[i])
             env[i] = []
     if gripped:
         env[0] = [EnvPrimitive("G", (), gripper_z)]
     full = vecs if len(vecs) == n + 1 else [*vecs, vecs[-1]]
     return contract(env, full)  # type: ignore[arg-type]
+
+
+def _merge_primitives(a: Iterable[EnvPrimitive], b: Iterable[EnvPrimitive]) -> list[EnvPrimitive]:
+    """The primitives of ``a`` and ``b``, once each; a primitive whose faces are a proper subset of
+    another's adds nothing and is left out (as for the contacts of one point)."""
+    s = {e for e in (*a, *b) if e.kind != "N"}
+    return sorted(
+        e for e in s if not (e.kind == "faces" and any(o != e and set(e.faces) < set(o.faces) for o in s))
+    )
 
 
 # --------------------------------------------------------------------------------------------------

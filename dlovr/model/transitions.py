@@ -1,19 +1,25 @@
-"""Transition classes between contact situations (paper §V, MODEL.md §4) and debouncing (§4.2).
+"""Transition classes between contact situations (paper §V, docs/model.md) and debouncing.
 
 Pure Python. Between two consecutive discrete situations:
 
 1. each situation's *successional contacts* (runs of environment contacts between free ones) are
    found and their *principal contacts* (highest card, eq. 3) taken;
-2. successional contacts of the two situations are matched by shared objects and order along the DLO;
-3. each change of principal contact ``X -> Y`` is classified by the first rule of :data:`RULES` that
-   applies; a step's classes are the union over its changes (e.g. ``S,E``), ``-`` when none changed.
+2. successional contacts of the two situations are matched (:func:`match`): identical principal
+   contacts first, then shared faces, then shared objects, ties by overlap along the DLO;
+3. within a matched pair the two sets of principal contacts are paired one to one (ties: several
+   principal contacts of equal card, :func:`pair_principals`);
+4. each changed pair ``X -> Y`` is classified by the first rule of :data:`RULES` that applies; a
+   step's classes are the union over its pairs (e.g. ``S,E``), ``-`` when none changed.
+
+A per-step stream of situations is first debounced (:class:`Debouncer`): flicker, brief
+intermediate states, flights.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
-from typing import Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 
@@ -53,47 +59,157 @@ def _objects(contacts: Sequence[DiscreteContact]) -> frozenset[str] | None:
     return frozenset(o for c in contacts for o in c.objects)
 
 
-def match(
-    before: Sequence[Sequence[DiscreteContact]], after: Sequence[Sequence[DiscreteContact]]
-) -> list[tuple[int | None, int | None]]:
-    """Match successional contacts of two situations by shared objects and order along the DLO.
-
-    Two successional contacts may match when they share an object (or when object names are not
-    known); the order along the DLO is kept and as many pairs as possible are made (dynamic
-    programming, ties towards the start of the DLO). Returns ``(i, j)`` pairs, with ``None`` on the
-    side where a successional contact appears (``(None, j)``) or disappears (``(i, None)``).
-    """
-    oa = [_objects(r) for r in before]
-    ob = [_objects(r) for r in after]
-
-    def ok(i: int, j: int) -> bool:
-        return oa[i] is None or ob[j] is None or bool(oa[i] & ob[j])
-
-    n, m = len(before), len(after)
-    best = [[0] * (m + 1) for _ in range(n + 1)]
-    for i in range(n - 1, -1, -1):
-        for j in range(m - 1, -1, -1):
-            best[i][j] = max(best[i + 1][j], best[i][j + 1], best[i + 1][j + 1] + 1 if ok(i, j) else 0)
-    pairs: list[tuple[int | None, int | None]] = []
-    i = j = 0
-    while i < n and j < m:
-        if ok(i, j) and best[i][j] == best[i + 1][j + 1] + 1:
-            pairs.append((i, j))
-            i += 1
-            j += 1
-        elif best[i + 1][j] >= best[i][j + 1]:
-            pairs.append((i, None))
-            i += 1
-        else:
-            pairs.append((None, j))
-            j += 1
-    pairs.extend((k, None) for k in range(i, n))
-    pairs.extend((None, k) for k in range(j, m))
-    return pairs
+def _faces(contacts: Sequence[DiscreteContact]) -> frozenset[str]:
+    return frozenset(f for c in contacts for f in c.faces)
 
 
 # --------------------------------------------------------------------------------------------------
-# The rules (MODEL.md §4), first that applies wins
+# Positions along the DLO
+# --------------------------------------------------------------------------------------------------
+
+Interval = tuple[float, float]
+"""A stretch of the DLO, half open ``[lo, hi)``: in DLO point indices when every contact of both
+situations carries its index range, else in fractions of the situation's contact sequence."""
+
+
+def contact_positions(a: DiscreteSituation, b: DiscreteSituation) -> tuple[list[Interval], list[Interval]]:
+    """Where each contact of ``a`` and of ``b`` lies along the DLO, in units common to both.
+
+    With index ranges (``span``) on every contact, the points covered; else (a hand-written sequence)
+    contact ``k`` of ``L`` covers ``[k/L, (k+1)/L)``, so the two ends of the DLO line up.
+    """
+    if all(c.span is not None for s in (a, b) for c in s.contacts):
+        return tuple(  # type: ignore[return-value]
+            [(float(c.span[0]), float(c.span[1]) + 1.0) for c in s.contacts] for s in (a, b)  # type: ignore[index]
+        )
+    return tuple(  # type: ignore[return-value]
+        [(k / len(s.contacts), (k + 1) / len(s.contacts)) for k in range(len(s.contacts))] for s in (a, b)
+    )
+
+
+def _hull(ivs: Sequence[Interval]) -> Interval:
+    return (min(i[0] for i in ivs), max(i[1] for i in ivs))
+
+
+def _overlap(p: Interval, q: Interval) -> float:
+    return max(0.0, min(p[1], q[1]) - max(p[0], q[0]))
+
+
+def _distance(p: Interval, q: Interval) -> float:
+    return abs((p[0] + p[1]) - (q[0] + q[1])) / 2.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Matching successional contacts, pairing principal contacts (docs/model.md, Matching and Ties)
+# --------------------------------------------------------------------------------------------------
+
+
+def _in_order(n: int) -> list[Interval]:
+    """``n`` stretches one after the other along the DLO, in fractions of its length."""
+    return [(k / max(n, 1), (k + 1) / max(n, 1)) for k in range(n)]
+
+
+def _greedy(scored: list[tuple[tuple[float, ...], int, int]]) -> dict[int, int]:
+    """One-to-one pairs, best score first (ties: lower indices first)."""
+    pairs: dict[int, int] = {}
+    used: set[int] = set()
+    for _, i, j in sorted(scored, key=lambda s: (tuple(-x for x in s[0]), s[1], s[2])):
+        if i not in pairs and j not in used:
+            pairs[i] = j
+            used.add(j)
+    return pairs
+
+
+def match(
+    before: Sequence[Sequence[DiscreteContact]],
+    after: Sequence[Sequence[DiscreteContact]],
+    pos_before: Sequence[Interval] | None = None,
+    pos_after: Sequence[Interval] | None = None,
+) -> list[tuple[int | None, int | None]]:
+    """Match the successional contacts of two situations (which new one continues which old one).
+
+    Two successional contacts may match only when they share an object (or when object names are not
+    known). Preference, best first: identical principal contacts (same states, same faces; matched
+    and unchanged); then shared faces; then shared objects; ties go to the pair whose stretches of
+    the DLO (``pos_*``, see :func:`contact_positions`; default: the order of the runs) overlap most,
+    then lie closest. Returns ``(i, j)`` pairs in the order of ``before``, then ``(None, j)`` for the
+    successional contacts that appear, in DLO order; ``(i, None)`` for one that disappears.
+    """
+    n, m = len(before), len(after)
+    pa = list(pos_before) if pos_before is not None else _in_order(n)
+    pb = list(pos_after) if pos_after is not None else _in_order(m)
+    scored = []
+    for i, x in enumerate(before):
+        ox, fx, px = _objects(x), _faces(x), set(principal(x))
+        for j, y in enumerate(after):
+            oy = _objects(y)
+            known = ox is not None and oy is not None
+            if known and not (ox & oy):  # type: ignore[operator]
+                continue  # never pairs two successional contacts that share no object
+            score = (
+                float(px == set(principal(y))),
+                float(bool(fx & _faces(y))),
+                float(known and bool(ox & oy)),  # type: ignore[operator]
+                _overlap(pa[i], pb[j]),
+                -_distance(pa[i], pb[j]),
+            )
+            scored.append((score, i, j))
+    pairs = _greedy(scored)
+    out: list[tuple[int | None, int | None]] = [(i, pairs.get(i)) for i in range(n)]
+    taken = set(pairs.values())
+    out.extend((None, j) for j in range(m) if j not in taken)
+    return out
+
+
+def pair_principals(
+    x: Sequence[DiscreteContact],
+    y: Sequence[DiscreteContact],
+    before: Sequence[DiscreteContact] = (),
+    after: Sequence[DiscreteContact] = (),
+    pos_x: Sequence[Interval] | None = None,
+    pos_y: Sequence[Interval] | None = None,
+) -> list[tuple[DiscreteContact | None, DiscreteContact | None]]:
+    """The changed pairs between two sets of principal contacts (ties of equal card, set semantics).
+
+    ``x``/``y``: the principal contacts of a matched pair of successional contacts (either may be
+    empty: the successional contact appears or disappears); ``before``/``after``: all contacts of the
+    two whole situations; ``pos_*``: where each principal contact lies along the DLO. Identical
+    contacts are unchanged. The rest are paired one to one, preferring contacts absent from the other
+    situation altogether, then shared faces, then shared objects, then the nearest. A leftover that
+    is still present, unchanged, in the other situation (it only left or joined the principal set) is
+    unchanged; any other leftover pairs with ``None`` (free space ``N``). Unchanged pairs are left out.
+    """
+    px = list(pos_x) if pos_x is not None else [(0.0, 0.0)] * len(x)
+    py = list(pos_y) if pos_y is not None else [(0.0, 0.0)] * len(y)
+    xs = [k for k, c in enumerate(x) if c not in y]
+    ys = [k for k, c in enumerate(y) if c not in x]
+    scored = []
+    for i in xs:
+        a = x[i]
+        for j in ys:
+            b = y[j]
+            oa, ob = _objects((a,)), _objects((b,))
+            score = (
+                float(a not in after) + float(b not in before),
+                float(bool(set(a.faces) & set(b.faces))),
+                float(oa is not None and ob is not None and bool(oa & ob)),
+                -_distance(px[i], py[j]),
+            )
+            scored.append((score, i, j))
+    pairs = _greedy(scored)
+    out: list[tuple[DiscreteContact | None, DiscreteContact | None]] = []
+    taken = set(pairs.values())
+    for i in xs:
+        if i in pairs:
+            out.append((x[i], y[pairs[i]]))
+        elif x[i] not in after:
+            out.append((x[i], None))
+    out.extend((None, y[j]) for j in ys if j not in taken and y[j] not in before)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# The rules (docs/model.md, Transition classes), first that applies wins
 # --------------------------------------------------------------------------------------------------
 
 
@@ -101,8 +217,9 @@ def match(
 class Change:
     """One change of principal contact ``X -> Y`` between matched successional contacts.
 
-    ``x``/``y`` are the principal contacts before/after (empty: free space ``N``); ``x_run``/``y_run``
-    the whole successional contacts. ``through_free``: the DLO passed through ``N`` on the way.
+    ``x``/``y`` are the principal contacts before/after (empty: free space ``N``); a step's changes
+    (:func:`changes`) hold one contact on each side at most. ``x_run``/``y_run`` are the whole
+    successional contacts. ``through_free``: the DLO passed through ``N`` on the way (a flight).
     """
 
     x: tuple[DiscreteContact, ...]
@@ -147,6 +264,11 @@ def new_obstacle(ch: Change) -> bool:
     return False
 
 
+def snaps(ch: Change) -> bool:
+    """Rule ``S``: ``X`` is instable and the DLO left it: ``Y`` is not instable, or it flew there."""
+    return is_instable(ch.x) and (not is_instable(ch.y) or (bool(ch.y) and ch.through_free))
+
+
 def _lands_elsewhere(ch: Change) -> bool:
     ox, oy = _objects(ch.x), _objects(ch.y)
     new = ox is not None and oy is not None and bool(oy - ox)
@@ -155,7 +277,7 @@ def _lands_elsewhere(ch: Change) -> bool:
 
 @dataclass(frozen=True)
 class Rule:
-    """One row of MODEL.md §4: a class and when it applies."""
+    """One row of the rule table (docs/model.md): a class and when it applies."""
 
     name: str
     applies: Callable[[Change], bool]
@@ -167,7 +289,7 @@ def _const(c: str) -> Callable[[Change], str]:
 
 
 RULES: tuple[Rule, ...] = (
-    Rule("S", lambda ch: bool(ch.x) and is_instable(ch.x), lambda ch: "S,E" if _lands_elsewhere(ch) else "S"),
+    Rule("S", snaps, lambda ch: "S,E" if _lands_elsewhere(ch) else "S"),
     Rule("E-free", lambda ch: not ch.x or not ch.y, _const("E")),
     Rule("I", lambda ch: is_instable(ch.y), _const("I")),
     Rule("T", lambda ch: is_semi_stable(ch.x) or is_semi_stable(ch.y), _const("T")),
@@ -176,8 +298,10 @@ RULES: tuple[Rule, ...] = (
 )
 """The class rules in order; the first that applies to a change gives its class.
 
-MODEL.md lists ``E`` (a successional contact appears or disappears) first "unless rule ``S``
-applies"; putting ``S`` first is the same rule without the exception clause.
+The paper's order lists ``E`` (a successional contact appears or disappears) first "unless rule
+``S`` applies"; putting ``S`` first is the same rule without the exception clause. ``I`` covers one
+instable state to another (``V/E^LI -> V/VI``: still held at a ridge or corner), except after a
+flight through ``N``, which is ``S,E``.
 """
 
 
@@ -196,13 +320,42 @@ def _sorted_classes(classes: set[str]) -> tuple[str, ...]:
 
 
 def changes(before: DiscreteSituation, after: DiscreteSituation, through_free: bool = False) -> list[Change]:
-    """The changes of principal contact between two situations (one per matched pair)."""
-    a, b = successional_contacts(before), successional_contacts(after)
-    out = []
-    for i, j in match(a, b):
-        xr = a[i] if i is not None else ()
-        yr = b[j] if j is not None else ()
-        out.append(Change(principal(xr), principal(yr), xr, yr, through_free))
+    """The changed pairs of principal contacts between two situations, in DLO order.
+
+    Successional contacts are matched (:func:`match`), then their principal contacts paired
+    (:func:`pair_principals`); each changed pair is one :class:`Change` (``X -> N`` and ``N -> Y``
+    included). An empty list: no principal contact changed.
+    """
+    pos_a, pos_b = contact_positions(before, after)
+    runs_a, runs_b = before.successional(), after.successional()
+    ca, cb = before.contacts, after.contacts
+
+    def principal_at(run: tuple[int, ...], contacts: tuple[DiscreteContact, ...]) -> list[int]:
+        top = principal([contacts[k] for k in run])
+        seen: list[DiscreteContact] = []
+        out = []
+        for k in run:
+            if contacts[k] in top and contacts[k] not in seen:
+                seen.append(contacts[k])
+                out.append(k)
+        return out
+
+    out: list[Change] = []
+    pairs = match(
+        [tuple(ca[k] for k in r) for r in runs_a],
+        [tuple(cb[k] for k in r) for r in runs_b],
+        [_hull([pos_a[k] for k in r]) for r in runs_a],
+        [_hull([pos_b[k] for k in r]) for r in runs_b],
+    )
+    for i, j in pairs:
+        ra = runs_a[i] if i is not None else ()
+        rb = runs_b[j] if j is not None else ()
+        ka, kb = principal_at(ra, ca), principal_at(rb, cb)
+        xr, yr = tuple(ca[k] for k in ra), tuple(cb[k] for k in rb)
+        for x, y in pair_principals(
+            [ca[k] for k in ka], [cb[k] for k in kb], ca, cb, [pos_a[k] for k in ka], [pos_b[k] for k in kb]
+        ):
+            out.append(Change((x,) if x else (), (y,) if y else (), xr, yr, through_free))
     return out
 
 
@@ -212,7 +365,11 @@ def classify_step(
     through_free: bool = False,
     rules: Sequence[Rule] = RULES,
 ) -> tuple[str, ...]:
-    """Transition classes of the step ``before -> after``; ``()`` is written ``-``."""
+    """Transition classes of the step ``before -> after``; ``()`` is written ``-``.
+
+    ``through_free``: the DLO passed through free space ``N`` on the way (a flight, kept situations
+    mark it in :attr:`Kept.through_free`).
+    """
     found: set[str] = set()
     for ch in changes(before, after, through_free):
         found.update(classify_change(ch, rules))
@@ -246,8 +403,26 @@ def classify_sequence(situations: Sequence[DiscreteSituation], rules: Sequence[R
     return steps
 
 
+class _KeptLike(Protocol):
+    situation: Any
+
+
+def kept_classes(kept: Sequence[_KeptLike]) -> list[tuple[str, ...]]:
+    """Classes of the transition into each kept situation (``()`` for the first), flights included.
+
+    ``kept``: :class:`Kept` entries, or anything with ``situation`` and optionally ``through_free``
+    (e.g. :class:`dlovr.model.program.TimedSituation`).
+    """
+    return [
+        classify_step(kept[i - 1].situation, k.situation, bool(getattr(k, "through_free", False)))
+        if i
+        else ()
+        for i, k in enumerate(kept)
+    ]
+
+
 # --------------------------------------------------------------------------------------------------
-# Debouncing a per-step stream of situations (MODEL.md §4.2)
+# Debouncing a per-step stream of situations (docs/model.md, From a simulation to a sequence)
 # --------------------------------------------------------------------------------------------------
 
 S = TypeVar("S", bound=Hashable)
@@ -255,40 +430,69 @@ S = TypeVar("S", bound=Hashable)
 DEFAULT_HOLD_S = 0.01
 """Default flicker hold time (s): NOTES.md measured that about 10 ms keeps real semi-stable states."""
 
+DEFAULT_FLIGHT_S = 0.3
+"""Default flight time (s): a DLO tip falls 4 cm in about 0.09 s."""
+
 
 @dataclass
 class Kept(Generic[S]):
-    """A kept situation: when it began and until when it held (seconds, simulation time)."""
+    """A kept situation: when it began and until when it held (seconds, simulation time).
+
+    ``through_free``: it was reached by a flight (the DLO left an instable contact for free space
+    and landed here within the flight time; the flight lasted from the previous kept situation's
+    ``end`` to this one's ``start``). ``left``: when the stream first left it (``None`` while it
+    holds; bookkeeping for flicker).
+    """
 
     situation: S
     start: float
     end: float
+    through_free: bool = False
+    left: float | None = field(default=None, compare=False, repr=False)
 
     @property
     def duration(self) -> float:
         return self.end - self.start
 
 
+def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: DiscreteSituation) -> bool:
+    """Is ``before -> free -> after`` a flight: an instable principal contact released to ``N``, then
+    a contact established again?"""
+    released = any(is_instable(ch.x) and not ch.y for ch in changes(before, free))
+    landed = any(not ch.x and ch.y for ch in changes(free, after))
+    return released and landed
+
+
 @dataclass
 class Debouncer(Generic[S]):
     """Turns a per-step stream of situations into the demonstration's distinct situations.
 
-    - flicker ``A -> B -> A`` with ``B`` shorter than ``hold`` (s) counts as ``A`` throughout;
-    - a short ``B`` in ``A -> B -> C`` (``C != A``) is kept when ``transient(B)`` (semi-stable or
-      instable: it tells what kind of transition happened), else dropped as noise;
+    - **flicker**: an excursion ``A -> B1 -> … -> Bk -> A`` that returns to ``A`` within ``hold``
+      (s, from leaving ``A`` to coming back) counts as ``A`` throughout, whatever the ``Bi``;
+    - a brief ``B`` (shorter than ``hold``) in ``A -> B -> C`` (``C != A``) is kept when
+      ``transient(B)`` (semi-stable or instable: it tells what kind of transition happened), else
+      dropped as noise;
+    - **flight**: ``A -> F -> C`` where ``lands(A, F, C)`` (``A`` releases an instable contact to
+      ``N`` in ``F``, ``C`` establishes a contact again) and ``F`` held less than ``flight`` (s):
+      ``F`` is not kept, and ``C`` is marked :attr:`Kept.through_free` (the step ``A -> C`` is
+      classed ``S,E``); a longer ``F`` is kept;
     - every kept situation records its start and end time.
 
-    Feed samples in time order with :meth:`push`; :attr:`kept` is the result so far (its last one
-    or two entries may still change while the stream goes on).
+    Feed samples in time order with :meth:`push`; :attr:`kept` is the result so far (its last
+    entries may still change while the stream goes on, for up to ``max(hold, flight)``).
     """
 
     hold: float
     transient: Callable[[S], bool]
+    flight: float = DEFAULT_FLIGHT_S
+    lands: Callable[[S, S, S], bool] = is_flight  # type: ignore[assignment]
     kept: list[Kept[S]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.hold < 0:
             raise ValueError(f"hold time must be >= 0 s, got {self.hold}")
+        if self.flight < 0:
+            raise ValueError(f"flight time must be >= 0 s, got {self.flight}")
 
     def push(self, t: float, situation: S) -> None:
         k = self.kept
@@ -296,18 +500,37 @@ class Debouncer(Generic[S]):
             k[-1].end = t
             return
         if k:
-            k[-1].end = t
-        run = Kept(situation, t, t)
-        if len(k) >= 2 and k[-1].duration < self.hold:
-            a, b = k[-2], k[-1]
-            if a.situation == situation:  # flicker A -> B -> A
-                k.pop()
-                a.end = t
+            k[-1].end = k[-1].left = t
+        # flicker: back to an earlier situation within the hold time of leaving it
+        for j in range(len(k) - 2, -1, -1):
+            left = k[j].left
+            if left is not None and t - left >= self.hold:
+                break
+            if k[j].situation == situation:
+                del k[j + 1 :]
+                k[j].end, k[j].left = t, None
                 return
-            if not self.transient(b.situation):  # brief stable noise
+        through = False
+        if not self._flies(t, situation) and len(k) >= 2:
+            b = k[-1]
+            if b.duration < self.hold and not self.transient(b.situation):  # brief stable noise
                 k.pop()
-                a.end = b.end
-        k.append(run)
+                k[-1].end = b.end
+                through = b.through_free
+        if self._flies(t, situation):
+            k.pop()  # the free interval; the one before it keeps its end (when it was left)
+            through = True
+        k.append(Kept(situation, t, t, through))
+
+    def _flies(self, t: float, situation: S) -> bool:
+        """Does ``situation`` end a flight that began with the last kept situation?"""
+        k = self.kept
+        return (
+            len(k) >= 2
+            and t - k[-1].start < self.flight
+            and k[-2].situation != situation
+            and self.lands(k[-2].situation, k[-1].situation, situation)
+        )
 
     def feed(self, samples: Sequence[tuple[float, S]]) -> list[Kept[S]]:
         for t, s in samples:

@@ -10,7 +10,7 @@ The model (see ``../shared/NOTES.md``, "The cable in MuJoCo 4.0"):
 - the gripper: a mocap body ``gripper`` whose z axis is ``G_z``. The rod starts straight, leaving the
   gripper along ``-G_z`` (point ``i`` at ``gripper.pos - i * seg * G_z``): ``G_z`` points from the cable
   into the gripper, so the identity orientation holds the cable hanging straight down, and the
-  gripper's contact vector ``C(V_S/G_z) = z`` (MODEL.md eq. 2) is, like ``-N(F)`` of a face, the
+  gripper's contact vector ``C(V_S/G_z) = z`` (eq. 2, docs/model.md) is, like ``-N(F)`` of a face, the
   direction in which the gripper blocks the cable. It is held by two
   ``<connect>`` equalities (points 0 and 1) and a joint equality locking the first twist joint
   ``dlo_twist_0`` (so a dragged cable does not roll).

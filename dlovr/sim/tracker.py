@@ -4,8 +4,8 @@ Pure (numpy + the model + geometry; no MuJoCo): it reads the cable points and, w
 contact arrays of :class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach
 normal forces). Contacts are labelled geometrically (NOTES.md): a point touches a piece when its
 centerline is within ``radius + enter_tol`` of it, and keeps touching until it is farther than
-``radius + leave_tol`` (hysteresis). The per-step situations are debounced (MODEL.md §4.2) into the
-demonstration's kept situations.
+``radius + leave_tol`` (hysteresis). The per-step situations are debounced (docs/model.md: flicker,
+brief intermediate states, flights) into the demonstration's kept situations.
 """
 
 from __future__ import annotations
@@ -19,7 +19,14 @@ import numpy as np
 from dlovr.geometry import LabelBudgets, SceneGeometry, primitives_per_point
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
-from dlovr.model.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
+from dlovr.model.transitions import (
+    DEFAULT_FLIGHT_S,
+    DEFAULT_HOLD_S,
+    Debouncer,
+    Kept,
+    is_transient,
+    kept_classes,
+)
 
 
 @dataclass(frozen=True)
@@ -71,8 +78,9 @@ class ContactState:
 class ContactTracker:
     """Turns simulation steps into contact situations, debounced into the demonstration's sequence.
 
-    ``hold`` (s) is the flicker hold time of MODEL.md §4.2. ``changes`` lists every step at which the
-    raw situation changed (what a recording stores); ``kept`` the debounced situations.
+    ``hold`` (s) is the flicker hold time and ``flight`` (s) the flight time of the debouncing
+    (docs/model.md, :class:`dlovr.model.transitions.Debouncer`). ``changes`` lists every step at
+    which the raw situation changed (what a recording stores); ``kept`` the debounced situations.
 
     ``reuse``: a step that queries the same (point, piece) pairs as the step of the last labelling,
     with every queried point closer to where it was then than its slack
@@ -85,13 +93,14 @@ class ContactTracker:
     geometry: SceneGeometry
     params: ModelParams = field(default_factory=ModelParams)
     hold: float = DEFAULT_HOLD_S
+    flight: float = DEFAULT_FLIGHT_S
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
     changes: list[ContactState] = field(default_factory=list)
     reuse: bool = True
 
     def __post_init__(self) -> None:
-        self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
+        self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient, self.flight)
         self._touching = np.zeros(0, dtype=np.int64)  # (point << 20 | piece id) in contact
         self._signature: tuple[Any, ...] | None = None
         self._piece_map: tuple[Any, np.ndarray] | None = None
@@ -108,7 +117,7 @@ class ContactTracker:
 
         A recording starts this way, and its replay too, so both see the same contact states.
         """
-        self._debouncer = Debouncer(self.hold, is_transient)
+        self._debouncer = Debouncer(self.hold, is_transient, self.flight)
         self._touching = np.zeros(0, dtype=np.int64)
         self._signature = self._situation = None
         self._labels = self._pairs_memo = None
@@ -341,11 +350,10 @@ class ContactTracker:
         return state
 
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
-        """The kept situations with the classes of the transition into each (``()`` for the first)."""
+        """The kept situations with the classes of the transition into each (``()`` for the first;
+        a landing after a flight is classed with the flight, ``S,E``)."""
         kept = self.kept
-        return [
-            (k, classify_step(kept[i - 1].situation, k.situation) if i else ()) for i, k in enumerate(kept)
-        ]
+        return list(zip(kept, kept_classes(kept), strict=True))
 
 
 def _same(a: np.ndarray, b: np.ndarray | None) -> bool:

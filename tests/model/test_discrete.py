@@ -1,4 +1,5 @@
-"""Discrete contact states (MODEL.md §3): card (eq. 3), stability, contact vector (eq. 2), classifier."""
+"""Discrete contact states (docs/model.md, paper §IV): card (eq. 3), stability, contact vector (eq. 2),
+classifier, pinches."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from dlovr.model.discrete import (
     contact_vector,
     discretize,
     parse_discrete_situation,
+    pinch_axis,
     state,
 )
 from dlovr.model.topology import NotationError, parse_situation
@@ -129,10 +131,34 @@ def test_contact_vector_gripper_is_its_z_axis():
     np.testing.assert_allclose(contact_vector(ContactFacts((), gripper_z=(0, 0, 2)), gripper=True), [0, 0, 1])
 
 
-def test_contact_vector_free_space_is_zero_and_only_it():
+def test_contact_vector_free_space_is_zero():
     np.testing.assert_array_equal(contact_vector(ContactFacts(())), np.zeros(3))
-    with pytest.raises(ValueError, match="opposite faces"):
-        contact_vector(ContactFacts((ff("a.F1", UP), ff("b.F1", (0, 0, -1)))))
+    assert pinch_axis(ContactFacts(())) is None
+
+
+def test_a_pinch_between_opposite_faces_is_a_defined_case():
+    # the DLO clamped between a floor (b.F1, up) and a ceiling (a.F2, down): the normals cancel
+    floor, ceiling = ff("b.F1", UP), ff("a.F2", (0, 0, -1))
+    facts = ContactFacts((floor, ceiling))
+    np.testing.assert_array_equal(contact_vector(facts), np.zeros(3))  # eq. 2 sums to zero
+    np.testing.assert_array_equal(pinch_axis(facts), [0, 0, -1])  # the first face's (a.F2) normal
+    assert classify_contact("E", facts) == STATES["E/F"]  # one normal direction: a face contact
+    book = FactBook({f.name: f for f in (floor, ceiling)})
+    (_, c, _) = discretize(parse_situation("VS/G & E3/a.F2 + E3/b.F1 & VE/N"), book).contacts
+    assert c.format() == "E/F[a.F2,b.F1]" and c.is_pinch
+    assert c.vector == (0.0, 0.0, 0.0) and c.axis == (0.0, 0.0, -1.0)
+    # within the merge angle of opposite still pinches; a wedge does not
+    tilt = ff("a.F2", (math.sin(math.radians(0.005)), 0, -1))
+    assert pinch_axis(ContactFacts((floor, tilt))) is not None
+    wedge = ContactFacts((floor, ff("a.F2", (0.3, 0, -1))))
+    assert pinch_axis(wedge) is None and abs(np.linalg.norm(contact_vector(wedge)) - 1) < 1e-9
+    # normals that cancel around the DLO (three faces at 120°): zero vector, no axis
+    angles = (0.0, 2 * math.pi / 3, 4 * math.pi / 3)
+    ring = ContactFacts(tuple(ff(f"r.F{k}", (math.cos(a), math.sin(a), 0)) for k, a in enumerate(angles)))
+    assert pinch_axis(ring) is None and np.linalg.norm(contact_vector(ring)) < 1e-4
+    # a face contact is no pinch
+    (_, one, _) = discretize(parse_situation("VS/G & E3/b.F1 & VE/N"), book).contacts
+    assert not one.is_pinch and one.axis is None
 
 
 @given(
@@ -142,10 +168,10 @@ def test_contact_vector_free_space_is_zero_and_only_it():
 )
 def test_contact_vector_is_unit(normals):
     facts = ContactFacts(tuple(ff(f"o.F{i}", n) for i, n in enumerate(normals)))
-    try:
-        c = contact_vector(facts)
-    except ValueError:
-        return  # faces whose normals cancel: rejected, never a zero vector
+    c = contact_vector(facts)
+    if not c.any():  # faces whose normals cancel: a pinch
+        assert np.linalg.norm(np.sum([f.normal for f in facts.faces], axis=0)) < 1e-3
+        return
     assert abs(np.linalg.norm(c) - 1) < 1e-9
 
 

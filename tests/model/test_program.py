@@ -1,4 +1,5 @@
-"""Program generation (MODEL.md §5): macros, motions, detection algorithms, risk, JSON Schema."""
+"""Program generation (docs/model.md, paper §VI): macros, changing contacts, final macro, motions,
+detection algorithms, risk, pinches, JSON Schema."""
 
 from __future__ import annotations
 
@@ -13,10 +14,12 @@ import pytest
 from dlovr.model.discrete import parse_discrete_situation as P
 from dlovr.model.program import (
     DETECTORS,
+    PROGRAM_VERSION,
     PoseTrack,
     TimedSituation,
     compile_program,
     program_schema,
+    risk,
 )
 from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
@@ -37,12 +40,78 @@ def straight_track(n=11):
 
 def test_fig11_program_has_one_macro_per_classed_transition_in_order():
     prog = compile_program(fig11_states(), straight_track(), name="peg", source="fig11.txt")
-    assert [m.label for m in prog.macros] == ["E", "C", "C", "C", "E", "I", "S,E", "E"]
-    assert prog.summary == {"macros": 8, "risky": 2}
-    assert [m.risky for m in prog.macros] == [False, False, False, False, False, True, True, False]
+    assert [m.label for m in prog.macros] == ["E", "C", "C", "C", "E", "I", "S,E", "E", "end"]
+    assert prog.summary == {"macros": 9, "risky": 2, "caution": 0}
+    assert [m.risky for m in prog.macros] == [False, False, False, False, False, True, True, False, False]
     s_e = prog.macros[6]
     assert [d.algorithm for d in s_e.detection] == [DETECTORS["S"]["algorithm"], DETECTORS["E"]["algorithm"]]
     assert s_e.to_contacts[0].state == "E/E^LS[block.F2,holeB.F5]"
+
+
+def test_each_macro_names_the_principal_contacts_that_change():
+    prog = compile_program(fig11_states(), straight_track())
+
+    def named(m):
+        def state(c):
+            return c and c.state
+
+        return [(",".join(c.classes), state(c.from_contact), state(c.to_contact)) for c in m.changes]
+
+    assert named(prog.macros[0]) == [("E", None, "V/F[block.F1]")]  # established: from N
+    assert named(prog.macros[2]) == [("C", "E/F[block.F1]", "E/E^P[block.F1,block.F2]")]  # Fig. 11 step 5
+    assert named(prog.macros[6]) == [
+        ("S,E", "V/VI[block.F2,holeA.F3,holeA.F4]", "E/E^LS[block.F2,holeB.F5]")
+    ]
+    # step 10: E/E^LS stays, the new principal V/VS is established beside it
+    assert named(prog.macros[7]) == [("E", None, "V/VS[block.F2,holeB.F5,holeC.F7]")]
+
+
+def test_the_motion_after_the_last_classed_transition_is_a_final_macro():
+    states = fig11_states()[:4]  # ... step 3 (C), step 4 (-): the final macro starts at step 3
+    prog = compile_program(states, straight_track())
+    final = prog.macros[-1]
+    assert [m.kind for m in prog.macros] == ["transition", "transition", "final"]
+    assert final.label == "end" and final.classes == () and final.detection == () and final.changes == ()
+    assert final.risk == "none" and final.t == 10.0  # the end of the pose track
+    assert final.from_situation == states[2].situation.format()
+    assert final.to_situation == states[3].situation.format()
+    assert final.motion.duration == 8.0
+    np.testing.assert_allclose(final.motion.world, [0.8, 0.0, 0.0])
+    # a demonstration without a classed transition is one final macro
+    only = compile_program(fig11_states()[:1], straight_track())
+    assert [m.kind for m in only.macros] == ["final"] and only.macros[0].motion.duration == 10.0
+
+
+def test_risk_is_none_caution_or_risky():
+    assert [risk(c) for c in [(), ("C",), ("E",), ("T",), ("I",), ("S", "E"), ("T", "C")]] == [
+        "none", "none", "none", "caution", "risky", "risky", "caution",
+    ]  # fmt: skip
+    a, b = P("V/G & E/N & E/F[a.F1] & V/N"), P("V/G & E/N & E/E^LT[a.F1,a.F2] & V/N")
+    prog = compile_program([TimedSituation(0, 1, a), TimedSituation(1, 1, b)], straight_track(2))
+    assert prog.macros[0].risk == "caution" and prog.summary["caution"] == 1
+
+
+def test_a_flight_compiles_to_one_S_E_macro():
+    ridge, landed = P("V/G & E/N & V/E^LI[a.F1,a.F2]"), P("V/G & E/N & V/F[a.F2]")
+    states = [TimedSituation(0, 1, ridge), TimedSituation(1.1, 1, landed, through_free=True)]
+    assert compile_program(states, straight_track(3)).macros[0].classes == ("S", "E")
+    states[1] = TimedSituation(1.1, 1, landed)
+    assert compile_program(states, straight_track(3)).macros[0].classes == ("S",)
+
+
+def test_a_pinch_is_expected_with_its_zero_vector_and_axis():
+    from dataclasses import replace
+
+    a = P("V/G & E/N & E/F[a.F1] & V/N")
+    b = P("V/G & E/N & E/F[a.F1,b.F2] & V/N")
+    pinch = replace(b.contacts[2], vector=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0))
+    b = type(b)((b.contacts[0], b.contacts[1], pinch, b.contacts[3]))
+    prog = compile_program([TimedSituation(0, 1, a), TimedSituation(1, 1, b)], straight_track(2))
+    (change,) = prog.macros[0].changes
+    assert change.to_contact.vector == (0.0, 0.0, 0.0) and change.to_contact.axis == (0.0, 0.0, 1.0)
+    data = json.loads(prog.dumps())
+    jsonschema.validate(data, program_schema())
+    assert data["macros"][0]["changes"][0]["to_contact"]["axis"] == [0.0, 0.0, 1.0]
 
 
 def test_a_step_without_class_extends_the_next_macros_motion():
@@ -91,19 +160,28 @@ def test_program_json_validates_against_the_shipped_schema_and_is_deterministic(
     prog = compile_program(fig11_states(), straight_track(), name="peg", source="fig11.txt")
     data = json.loads(prog.dumps())
     jsonschema.validate(data, program_schema())
-    assert data["version"] == 1
+    assert data["version"] == 2 == PROGRAM_VERSION
     assert (
         prog.dumps()
         == compile_program(fig11_states(), straight_track(), name="peg", source="fig11.txt").dumps()
     )
-    bad = dict(data, version=2)
+    bad = dict(data, version=1)
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(bad, program_schema())
+    final_with_detection = dict(data["macros"][-1], detection=data["macros"][0]["detection"])
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(dict(data, macros=[final_with_detection]), program_schema())
+    without_changes = dict(data["macros"][0], changes=[])
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(dict(data, macros=[without_changes]), program_schema())
 
 
 def test_listing_is_readable():
     text = compile_program(fig11_states(), straight_track(), name="peg").listing()
-    assert "S,E" in text and "RISKY" in text and text.strip().endswith("8 macros, 2 risky")
+    assert "S,E" in text and "risk risky" in text
+    assert "E/F[block.F1] -> E/E^P[block.F1,block.F2]" in text and "N -> V/F[block.F1]" in text
+    assert "to the demonstrated end pose (no detection)" in text
+    assert text.strip().endswith("9 macros (the last one final), 2 risky, 0 caution")
 
 
 def test_pose_track_validation():

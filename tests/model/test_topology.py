@@ -1,4 +1,5 @@
-"""Topological contact model (MODEL.md §2): values, notation, parser, contraction, successional contacts."""
+"""Topological contact model (docs/model.md, paper §III): values, notation, parser, contraction,
+successional contacts."""
 
 from __future__ import annotations
 
@@ -163,7 +164,7 @@ def test_format_is_canonical(s):
 
 
 # --------------------------------------------------------------------------------------------------
-# End-vertex rule (MODEL.md §2)
+# End-vertex rule (docs/model.md, paper §III)
 # --------------------------------------------------------------------------------------------------
 
 
@@ -210,3 +211,26 @@ def test_situation_from_points_applies_gripper_and_end_vertex_rule():
     assert s.contacts[0].is_free  # V_S lying flat, not gripped: not a tip contact
     with pytest.raises(ValueError, match="DLO vectors"):
         situation_from_points(env, flat[:2], normals.__getitem__)
+
+
+def test_a_shallow_tip_contact_is_never_dropped_it_is_an_E_contact_of_the_last_segment():
+    floor, wall = faces("t.F1"), faces("w.F2")
+    normals = {"t.F1": (0.0, 0.0, 1.0), "w.F2": (-1.0, 0.0, 0.0)}
+    flat = [(1.0, 0.0, 0.0)] * 4
+    env = [[], [], [], [], [floor]]  # only the tip touches, the last segment lies on the floor
+    s = situation_from_points(env, flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/N & E3/t.F1 & VE/N"
+    assert s.contacts[2].dlo.span == (3, 3)
+    shallow = [*flat[:3], _down(10)]  # at the tip angle or less: still the segment's contact
+    assert situation_from_points(env, shallow, normals.__getitem__).format() == "VS/G & E1/N & E3/t.F1 & VE/N"
+    # the last interior point touches a wall itself: one multiple contact there
+    env = [[], [], [], [wall], [floor]]
+    s = situation_from_points(env, flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/N & E3/t.F1 + E3/w.F2 & VE/N"
+    # the same for V_S when it is not gripped
+    env = [[floor], [], [], [], []]
+    s = situation_from_points(env, flat, normals.__getitem__, gripped=False)
+    assert s.format() == "VS/N & E1/t.F1 & E2/N & VE/N"
+    # a tip pointing into the face keeps its own contact
+    s = situation_from_points([[], [], [], [], [floor]], [*flat[:3], _down(45)], normals.__getitem__)
+    assert s.format() == "VS/G & E2/N & VE/t.F1"

@@ -1,8 +1,10 @@
-"""Transition classes (MODEL.md §4), the Fig. 11 golden case (§4.1) and debouncing (§4.2)."""
+"""Transition classes (docs/model.md, paper §V): rules, matching, ties, the Fig. 11 golden case, and
+debouncing (flicker, brief intermediate states, flights)."""
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -10,14 +12,18 @@ import pytest
 from dlovr.model.discrete import parse_discrete_contact
 from dlovr.model.discrete import parse_discrete_situation as P
 from dlovr.model.transitions import (
+    DEFAULT_FLIGHT_S,
     RULES,
     Change,
     Debouncer,
+    changes,
     classify_change,
     classify_sequence,
     classify_step,
     is_transient,
+    kept_classes,
     match,
+    pair_principals,
     principal,
     successional_contacts,
 )
@@ -81,7 +87,7 @@ def ch(x, y, y_run=None, through_free=False):
     return Change(xs, ys, xs, yr, through_free)
 
 
-# (name, change, expected classes with the rules in MODEL.md order)
+# (name, change, expected classes with the rules in the documented order)
 RULE_CASES = [
     ("appear", ch([], ["E/F[a.F1]"]), ("E",)),
     ("disappear", ch(["E/F[a.F1]"], []), ("E",)),
@@ -91,7 +97,12 @@ RULE_CASES = [
     ("snap-same-object", ch(["E/E^LI[a.F1,a.F2]"], ["E/F[a.F2]"]), ("S",)),
     ("snap-new-object", ch(["V/VI[b.F2,h.F3,h.F4]"], ["E/E^LS[b.F2,k.F5]"]), ("S", "E")),
     ("snap-through-free", ch(["V/E^LI[a.F1,a.F2]"], ["V/F[a.F2]"], through_free=True), ("S", "E")),
-    ("snap-to-instable", ch(["V/E^LI[a.F1,a.F2]"], ["V/VI[a.F1,a.F2,a.F3]"]), ("S",)),  # S before I
+    ("instable-to-instable", ch(["V/E^LI[a.F1,a.F2]"], ["V/VI[a.F1,a.F2,a.F3]"]), ("I",)),  # still held
+    (
+        "flight-to-instable",
+        ch(["V/E^LI[a.F1,a.F2]"], ["V/VI[a.F1,a.F2,a.F3]"], through_free=True),
+        ("S", "E"),
+    ),
     ("enter-instable", ch(["V/E^LS[b.F2,h.F3]"], ["V/VI[b.F2,h.F3,h.F4]"]), ("I",)),
     ("semi-to-instable", ch(["E/E^LT[a.F1,a.F2]"], ["E/E^LI[a.F2,a.F3]"]), ("I",)),  # I before T
     ("into-semi", ch(["E/F[a.F1]"], ["E/E^LT[a.F1,a.F2]"]), ("T",)),
@@ -163,9 +174,9 @@ B_INST = P("V/G & E/N & E/E^LI[a.F1,a.F2] & V/N")
 C = P("V/G & E/N & E/F[a.F2] & V/N")
 
 
-def run(seq, hold=0.02, dt=0.002):
+def run(seq, hold=0.02, dt=0.002, debouncer=None):
     """seq: list of (situation, number of steps)."""
-    d = Debouncer(hold, is_transient)
+    d = debouncer or Debouncer(hold, is_transient)
     t = 0.0
     for sit, n in seq:
         for _ in range(n):
@@ -204,3 +215,145 @@ def test_is_transient_uses_principal_contacts():
     assert not is_transient(P("V/G & E/N & E/F[a.F1] & E/E^LI[a.F1,a.F2] & V/N"))  # principal E/F stable
     with pytest.raises(ValueError):
         Debouncer(-1.0, is_transient)
+
+
+def test_flicker_through_several_states_is_suppressed():
+    # A -> Bi (2 ms) -> Bs (2 ms) -> A: one excursion back to A within the hold time
+    kept = run([(A, 50), (B_INST, 1), (B_STABLE, 1), (A, 50)], hold=0.01)
+    assert [k.situation for k in kept] == [A]
+    kept = run([(A, 50), (B_INST, 2), (B_SEMI, 2), (B_STABLE, 2), (A, 50)], hold=0.02)
+    assert [k.situation for k in kept] == [A]
+    # measured from leaving A: a longer excursion is kept (the brief stable state as noise)
+    kept = run([(A, 50), (B_INST, 5), (B_STABLE, 2), (A, 50)], hold=0.01)
+    assert [k.situation for k in kept] == [A, B_INST, A]
+
+
+# --------------------------------------------------------------------------------------------------
+# Matching (which successional contact continues which) and ties (several principal contacts)
+# --------------------------------------------------------------------------------------------------
+
+RIDGE_TIP = "V/E^LI[table.F1,table.F2]"
+BOTH = P(f"V/G & E/N & E/F[table.F1] & E/N & {RIDGE_TIP}")
+
+
+def test_matching_keeps_the_unchanged_instable_run_when_the_near_run_lifts():
+    near_lifts = P(f"V/G & E/N & {RIDGE_TIP}")
+    a, b = successional_contacts(BOTH), successional_contacts(near_lifts)
+    assert match(a, b) == [(0, None), (1, 0)]
+    assert classify_step(BOTH, near_lifts) == ("E",)
+    far_lifts = P("V/G & E/N & E/F[table.F1] & E/N & V/N")  # the mirror case: the tip snaps off
+    assert classify_step(BOTH, far_lifts) == ("S",)
+
+
+def test_matching_prefers_shared_faces_then_objects_and_never_pairs_strangers():
+    a = successional_contacts(P("V/G & E/F[t.F1] & E/N & E/F[t.F2] & V/N"))
+    b = successional_contacts(P("V/G & E/N & E/E^P[t.F2,t.F3] & V/N"))
+    assert match(a, b) == [(0, None), (1, 0)]  # shares t.F2, although the first run comes first
+    c = successional_contacts(P("V/G & E/N & E/F[u.F1] & V/N"))
+    assert match(a, c) == [(0, None), (1, None), (None, 0)]
+
+
+def _with_spans(sit, spans):
+    return type(sit)(tuple(replace(c, span=s) for c, s in zip(sit.contacts, spans, strict=True)))
+
+
+def test_matching_ties_go_to_the_most_overlapping_stretch_of_the_dlo():
+    before = P("V/G & E/N & E/F[t.F1] & E/N & E/F[t.F1] & E/N & V/N")
+    after = P("V/G & E/N & E/E^P[t.F1,t.F2] & E/N & V/N")
+    # the new crossing lies where the second run lay: that run changed (C), the first lifted (E)
+    b = _with_spans(before, [(0, 0), (1, 4), (5, 10), (11, 19), (20, 26), (27, 39), (40, 40)])
+    a = _with_spans(after, [(0, 0), (1, 21), (22, 24), (25, 39), (40, 40)])
+    pairs = [(ch.x, ch.y) for ch in changes(b, a)]
+    assert [tuple(c.format() for c in x + y) for x, y in pairs] == [
+        ("E/F[t.F1]",),
+        ("E/F[t.F1]", "E/E^P[t.F1,t.F2]"),
+    ]
+    assert pairs[1][0][0].span == (20, 26)
+    a = _with_spans(after, [(0, 0), (1, 6), (7, 9), (10, 39), (40, 40)])
+    assert changes(b, a)[0].x[0].span == (5, 10)  # now the first run's stretch
+    # overlap wins over nearness: a long run overlapping the new stretch, a short one nearer to it
+    before = P("V/G & E/F[t.F1] & E/N & E/F[t.F1] & E/N & V/N")
+    b = _with_spans(before, [(0, 0), (1, 30), (31, 33), (34, 36), (37, 39), (40, 40)])
+    a = _with_spans(after, [(0, 0), (1, 27), (28, 33), (34, 39), (40, 40)])
+    assert [c.x[0].span for c in changes(b, a)] == [(1, 30), (34, 36)]
+    assert [c.y for c in changes(b, a)][1] == ()
+
+
+def test_ties_pair_principal_contacts_as_sets():
+    # principals {E/E^P, E/E^LI} (card 6 both): E/E^P becomes E/F, E/E^LI stays -> C, not S
+    before = P("V/G & E/N & E/E^P[a.F1,a.F2] & E/E^LI[a.F3,a.F4] & V/N")
+    after = P("V/G & E/N & E/F[a.F1] & E/E^LI[a.F3,a.F4] & V/N")
+    (run_b,), (run_a,) = successional_contacts(before), successional_contacts(after)
+    assert [c.state.name for c in principal(run_b)] == ["E/E^P", "E/E^LI"]
+    pairs = pair_principals(principal(run_b), principal(run_a), before.contacts, after.contacts)
+    assert [(x.format(), y.format()) for x, y in pairs] == [("E/E^P[a.F1,a.F2]", "E/F[a.F1]")]
+    assert classify_step(before, after) == ("C",)
+    # a principal contact that vanishes altogether pairs with N
+    gone = P("V/G & E/N & E/F[a.F1] & V/N")
+    assert classify_step(before, gone) == ("S", "C")
+
+
+def test_ties_prefer_contacts_absent_from_the_other_situation():
+    # E/E^P[b] was there before (not principal): pair the vanished E/F with it anyway (Fig. 11, step 5)
+    x = P("V/G & E/N & E/F[b.F1] & E/E^P[b.F1,b.F2] & V/N")
+    y = P("V/G & E/N & E/E^P[b.F1,b.F2] & V/N")
+    assert classify_step(x, y) == ("C",)
+    # both principals share a face with the new E/F and the ridge lies nearer to it, but the ridge
+    # is still there: E/E^P -> E/F (C), not E/E^LI -> E/F (S) with E/E^P -> N (E)
+    x = P("V/G & E/N & E/E^LI[a.F1,a.F3] & E/E^P[a.F1,a.F2] & V/N")
+    y = P("V/G & E/N & E/F[a.F1] & E/E^LI[a.F1,a.F3] & V/N")
+    assert classify_step(x, y) == ("C",)
+    # a new principal beside one that stays (Fig. 11, step 10): the new one pairs with N
+    x = P("V/G & E/N & E/E^LS[b.F2,h.F5] & V/E^LS[b.F2,h.F5]")
+    y = P("V/G & E/N & E/E^LS[b.F2,h.F5] & V/VS[b.F2,h.F5,c.F7]")
+    assert [(ch.x, [c.format() for c in ch.y]) for ch in changes(x, y)] == [((), ["V/VS[b.F2,c.F7,h.F5]"])]
+
+
+def test_instable_to_instable_is_I_in_whole_situations():
+    a = P("V/G & E/N & V/E^LI[h.F2,h.F5]")
+    assert classify_step(a, P("V/G & E/N & V/VI[h.F2,h.F3,h.F5]")) == ("I",)
+    assert classify_step(a, P("V/G & E/N & V/E^LI[h.F3,h.F5]")) == ("I",)  # faces alone changed
+    assert classify_step(a, P("V/G & E/N & V/F[h.F2]")) == ("S",)
+
+
+# --------------------------------------------------------------------------------------------------
+# Flight (S,E through N)
+# --------------------------------------------------------------------------------------------------
+
+RIDGE = P("V/G & E/N & V/E^LI[a.F1,a.F2]")
+FREE = P("V/G & E/N & V/N")
+LANDED = P("V/G & E/N & V/F[a.F2]")
+
+
+def test_a_short_flight_is_one_S_E_transition():
+    for n_free in (3, 30, 140):  # 6 ms (shorter than the hold time), 60 ms, 280 ms
+        d = Debouncer(0.02, is_transient, flight=0.3)
+        kept = run([(RIDGE, 50), (FREE, n_free), (LANDED, 50)], debouncer=d)
+        assert [k.situation for k in kept] == [RIDGE, LANDED], n_free
+        assert kept[1].through_free and not kept[0].through_free
+        assert kept[0].end == pytest.approx(0.1) and kept[1].start == pytest.approx(0.1 + 0.002 * n_free)
+        assert kept_classes(kept) == [(), ("S", "E")]
+    assert Debouncer(0.02, is_transient).flight == DEFAULT_FLIGHT_S == 0.3
+
+
+def test_a_long_free_interval_is_kept_S_then_E():
+    kept = run([(RIDGE, 50), (FREE, 160), (LANDED, 50)], hold=0.02)  # 320 ms > 0.3 s
+    assert [k.situation for k in kept] == [RIDGE, FREE, LANDED]
+    assert kept_classes(kept) == [(), ("S",), ("E",)]
+    kept = run([(RIDGE, 50), (FREE, 30), (LANDED, 50)], debouncer=Debouncer(0.02, is_transient, flight=0.05))
+    assert [k.situation for k in kept] == [RIDGE, FREE, LANDED]
+
+
+def test_no_flight_without_an_instable_release_or_a_landing():
+    lying = P("V/G & E/N & V/F[a.F1]")
+    kept = run([(lying, 50), (FREE, 30), (LANDED, 50)], hold=0.02)  # lifted off a stable contact
+    assert [k.situation for k in kept] == [lying, FREE, LANDED]
+    ridge = P("V/G & E/F[b.F1] & E/N & V/E^LI[a.F1,a.F2]")
+    off = P("V/G & E/F[b.F1] & E/N & V/N")
+    kept = run([(ridge, 50), (off, 30), (FREE, 50)], hold=0.02)  # then the other run lifts: no landing
+    assert [k.situation for k in kept] == [ridge, off, FREE]
+    elsewhere = P("V/G & E/F[b.F1] & E/N & V/N")  # landing with another part of the cable is a landing
+    kept = run([(RIDGE, 50), (FREE, 30), (elsewhere, 50)], hold=0.02)
+    assert [k.situation for k in kept] == [RIDGE, elsewhere] and kept_classes(kept)[1] == ("S", "E")
+    with pytest.raises(ValueError, match="flight"):
+        Debouncer(0.01, is_transient, flight=-1.0)

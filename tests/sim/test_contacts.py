@@ -152,6 +152,37 @@ def test_changes_and_debounced_kept_situations(geom):
     assert tr.changes == [st] and len(tr.kept) == 1
 
 
+def _line(a, b, n=21):
+    return np.linspace(a, b, n)
+
+
+RIDGE_TIP = _line([0.0, 0.125, 0.2], [0.3 + 0.6 * R, 0.125, 0.1 + 0.6 * R])  # tip on the L block's ridge
+LANDED_TIP = _line([-0.1, 0.125, 0.2], [0.2, 0.125, 0.1 + 0.9 * R])  # tip pointing into the top face
+
+
+def flight(tracker, n_free):
+    """Tip on a ridge for 40 ms, ``n_free`` steps of 2 ms in the air, then 40 ms on the block's top
+    face (the same object: without the flight the step would be a plain S)."""
+    up = RIDGE_TIP + np.array([0.0, 0.0, 0.05])
+    seq = [RIDGE_TIP] * 20 + [up] * n_free + [LANDED_TIP] * 20
+    for k, pts in enumerate(seq):
+        tracker.update(Rec(pts, step=k, time=round(k * 0.002, 9)))
+    return tracker
+
+
+def test_the_tracker_classes_a_flight_S_E_and_passes_its_flight_time(geom):
+    tr = flight(ContactTracker(geom, hold=0.01), 50)  # 100 ms in the air: within the 0.3 s default
+    assert [k.situation.format() for k in tr.kept] == [
+        "V/G & E/N & V/E^LI[lblock.F1,lblock.F5]",
+        "V/G & E/N & V/F[lblock.F1]",
+    ]
+    assert [c for _, c in tr.transitions()] == [(), ("S", "E")]
+    tr = flight(ContactTracker(geom, hold=0.01, flight=0.05), 50)  # longer than its flight time
+    assert [c for _, c in tr.transitions()] == [(), ("S",), ("E",)]
+    tr.restart(Rec(RIDGE_TIP))
+    assert [c for _, c in flight(tr, 10).transitions()][-1] == ("S", "E")  # 20 ms: a flight again
+
+
 def _labels(geom, pts, pi, pc, thresholds):
     """Per point: its hits as (piece id, faces, side of every threshold)."""
     pt, pid, dist, faces, _ = geom.pair_hits(pts, pi, pc, contact_tol=1e-3)
