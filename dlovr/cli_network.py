@@ -25,7 +25,7 @@ def _write_text(path: str, text: str) -> None:
         raise NetworkInputError(f"{path}: cannot write: {e.strerror}") from None
 
 
-@click.command("network")
+@click.command("network", short_help="Merge recordings of one scene into a transition network.")
 @click.argument("recordings", nargs=-1, required=True, type=click.Path())
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Network JSON to write."

@@ -131,8 +131,12 @@ def test_times_in_json_and_csv_are_rounded(touch):
 
 
 def test_one_macro_is_singular(tmp_path):
+    from dlovr.cli_common import _plural
+
+    assert [_plural(n, "macro") for n in (1, 2, 0)] == ["1 macro", "2 macros", "0 macros"]
     r = cli("compile", SAMPLES / "l_block.mcap", "-o", tmp_path)
-    assert r.exit_code == 0 and ": 1 macro, " in r.output, r.output
+    n = json.loads((tmp_path / "l_block.program.json").read_text())["summary"]["macros"]
+    assert r.exit_code == 0 and f": {_plural(n, 'macro')}, " in r.output, r.output
 
 
 def test_help_summaries_are_whole_sentences():

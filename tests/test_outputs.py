@@ -44,22 +44,25 @@ def one_line_exit_2(r, path: str, why: str) -> None:
 def test_unwritable_outputs_give_one_line_and_exit_2(short_script, tmp_path):
     for args, path, why in (
         (("record", "--script", short_script, "-o", "/proc/x.mcap"), "/proc/x.mcap", "No such file"),
-        (("record", "--script", short_script, "-o", "/dev/full"), "/dev/full", "No space left"),
+        (("record", "--script", short_script, "-o", "/dev/full", "--force"), "/dev/full", "No space left"),
         (("demo", "--script", short_script, "-o", "/proc/d.mcap"), "/proc/d.mcap", "No such file"),
         (("recover", SAMPLE, "-o", "/proc/f.mcap"), "/proc/f.mcap", "No such file"),
-        (("recover", SAMPLE, "-o", "/dev/full"), "/dev/full", "No space left"),
+        (("recover", SAMPLE, "-o", "/dev/full", "--force"), "/dev/full", "No space left"),
         (("compile", SAMPLE, "-o", "/proc/xx"), "/proc/xx", "cannot create directory"),
         (("scene", "export", "table", "-o", "/proc/m.xml"), "/proc/m.xml", "No such file"),
         (("scene", "export", "table", "-o", "/dev/full"), "/dev/full", "No space left"),
     ):
         one_line_exit_2(cli(*args), path, why)
     assert not Path("/proc/x.mcap").exists() and Path("/dev/full").is_char_device()
+    # without --force an existing output (even a device) is refused before anything is written
+    one_line_exit_2(cli("record", "--script", short_script, "-o", "/dev/full"), "/dev/full", "exists")
 
 
 @pytest.mark.skipif(not LINUX, reason="needs Linux's /dev/full")
 def test_unwritable_output_in_a_fresh_process_has_no_traceback(short_script):
     r = subprocess.run(
-        [sys.executable, "-m", "dlovr", "record", "--script", str(short_script), "-o", "/dev/full"],
+        [sys.executable, "-m", "dlovr", "record", "--script", str(short_script)]
+        + ["-o", "/dev/full", "--force"],
         capture_output=True,
         text=True,
     )

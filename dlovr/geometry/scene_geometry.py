@@ -104,8 +104,8 @@ class SceneGeometry(_Labelling, _PairFacts):
     ) -> Situation:
         """Topological situation of a cable polyline (point 0 = V_S, last = V_E).
 
-        ``V_S`` touches the gripper when ``gripped``; the end-vertex rule (MODEL.md §2) is applied by
-        :func:`dlovr.model.topology.situation_from_points`.
+        ``V_S`` touches the gripper when ``gripped``; the end-vertex rule (docs/model.md, section 2) is
+        applied by :func:`dlovr.model.topology.situation_from_points`.
         """
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         if len(pts) < 2:
@@ -121,7 +121,7 @@ class SceneGeometry(_Labelling, _PairFacts):
         )
 
     def discrete_situation(self, points: np.ndarray, **kw) -> DiscreteSituation:
-        """Discrete situation of a cable polyline: :meth:`situation` then the model (MODEL.md §3.3)."""
+        """Discrete situation of a cable polyline: :meth:`situation`, then the model (docs/model.md, 3.2)."""
         return discretize(self.situation(points, **kw), self.fact_book(), self.params)
 
     # ---------------------------------------------------------------- description

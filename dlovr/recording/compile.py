@@ -17,7 +17,7 @@ from dlovr.recording.reader import Recording, kept_states
 
 
 def compile_recording(path: str | Path, hold: float | None = None) -> Any:
-    """Compile a recording into a program (MODEL.md §5); reads only the contact-state channel."""
+    """Compile a recording into a program (docs/model.md, section 6); reads only the contact-state channel."""
     return _compile(path, hold)[0]
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from mcap.reader import make_reader
 
 from dlovr import __version__
-from dlovr.model.transitions import DEFAULT_HOLD_S
+from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
 from dlovr.recording.format import (
     DECODE_ERRORS,
@@ -144,6 +144,12 @@ class Recording:
             raise RecordingError(f"{p}: metadata has an invalid hold time") from None
         if not (0 <= self.hold < 1e3):
             raise RecordingError(f"{p}: implausible hold time {self.hold}")
+        try:  # recordings made before flights were debounced carry none: the default
+            self.flight = float(self.metadata.get("flight", DEFAULT_FLIGHT_S))
+        except ValueError:
+            raise RecordingError(f"{p}: metadata has an invalid flight time") from None
+        if not (0 <= self.flight < 1e3):
+            raise RecordingError(f"{p}: implausible flight time {self.flight}")
 
     def count(self, topic: str) -> int:
         return self._counts.get(topic, 0)
@@ -246,7 +252,6 @@ _FIELD_ERRORS = (KeyError, IndexError, TypeError, ValueError, AttributeError, Ov
 
 def situation_from_payload(payload: Mapping[str, Any]) -> Any:
     """The discrete situation of a contact-state message, with its contact vectors."""
-    from dataclasses import replace
 
     from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
 
@@ -255,15 +260,29 @@ def situation_from_payload(payload: Mapping[str, Any]) -> Any:
     if len(contacts) == len(sit.contacts):
         sit = DiscreteSituation(
             tuple(
-                replace(c, vector=tuple(m["vector"])) if m.get("vector") is not None else c
+                _restored(c, m)
                 for c, m in zip(sit.contacts, contacts, strict=True)
             )
         )
     return sit
 
 
+def _restored(contact: Any, message: Mapping[str, Any]) -> Any:
+    """A parsed discrete contact with the contact vector and DLO span its message carries."""
+    from dataclasses import replace
+
+    changes: dict[str, Any] = {}
+    if message.get("vector") is not None:
+        changes["vector"] = tuple(message["vector"])
+    span = message.get("span")
+    if span is not None:
+        changes["span"] = (int(span[0]), int(span[1]))
+    return replace(contact, **changes) if changes else contact
+
+
 def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
-    """The recording's contact situations debounced as in MODEL.md §4.2, as ``TimedSituation``s."""
+    """The recording's contact situations debounced as in docs/model.md (section 5: flicker, brief
+    intermediate states, flights), as ``TimedSituation``s."""
     from dlovr.model.program import TimedSituation
     from dlovr.model.transitions import Debouncer, is_transient
 
@@ -271,7 +290,7 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
     if not payloads:
         raise RecordingError(f"{recording.path}: recording has no contact states")
     hold = recording.hold if hold is None else hold
-    deb: Debouncer[Any] = Debouncer(hold, is_transient)
+    deb: Debouncer[Any] = Debouncer(hold, is_transient, flight=recording.flight)
     first: dict[Any, Mapping[str, Any]] = {}
     out = []
     try:
@@ -285,7 +304,9 @@ def kept_states(recording: Recording, hold: float | None = None) -> list[Any]:
             stop = k.end if i + 1 < len(deb.kept) else end
             force = max((c.get("force", 0.0) for c in p.get("contacts", [])), default=0.0)
             top = p.get("topological")
-            out.append(TimedSituation(k.start, round(stop - k.start, 9), k.situation, top, force))
+            out.append(
+                TimedSituation(k.start, round(stop - k.start, 9), k.situation, top, force, k.through_free)
+            )
     except RecordingError:  # already names the file and the problem
         raise
     except _FIELD_ERRORS as e:  # NotationError is a ValueError

@@ -73,7 +73,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
                 f"{rec.path}: time step {rec.dt} differs from the scene's {sim.model.opt.timestep}"
             )
     tracker = sim.tracker
-    tracker.hold = rec.hold  # taken by restart() below
+    tracker.hold, tracker.flight = rec.hold, rec.flight  # taken by restart() below
     first = cps[0]
     if len(first.state) != len(sim.get_state().mj):
         raise RecordingError(f"{rec.path}: checkpoint size does not match the embedded scene's model")

@@ -306,7 +306,11 @@ class DemoRecorder:
     def __init__(self, path: str | Path, scene: Any, sim: Any, tracker: Any, **kw: Any):
         dt = float(sim.model.opt.timestep)
         self.sim, self.tracker = sim, tracker
-        meta = {"hold": repr(float(tracker.hold)), **dict(kw.pop("extra_metadata", None) or {})}
+        meta = {
+            "hold": repr(float(tracker.hold)),
+            "flight": repr(float(tracker.flight)),
+            **dict(kw.pop("extra_metadata", None) or {}),
+        }
         bundle = SceneBundle.from_path(scene.path)
         self.rec = Recorder(
             path, bundle, scene_name=scene.name, dt=dt, extra_metadata=meta, pieces=sim.pieces, **kw

@@ -1,0 +1,273 @@
+"""The ``dlovr`` commands that simulate, record and read recordings: ``demo``, ``record``, ``replay``,
+``states``, ``recover`` (registered on the main group by :mod:`dlovr.cli`)."""
+
+from __future__ import annotations
+
+import click
+
+from dlovr.cli_common import (
+    UserError,
+    _builtin_script,
+    _one_line,
+    _plural,
+    _progress,
+    _refuse_existing,
+    _scene,
+    _script,
+    _t,
+)
+
+
+def run_demonstration(scene_ref: str | None, script_path: str | None, out: str | None, label: str):
+    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker).
+
+    Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
+    relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
+    it cannot be written, the partial file is removed and the run stops with one line.
+    """
+    import os
+    from contextlib import nullcontext
+
+    from dlovr.outputs import output_error, prepare_output, remove_partial
+    from dlovr.recording import DemoRecorder, StopSignals, finish_on_sigterm
+    from dlovr.sim import SimulationDiverged, Simulator
+
+    if script_path is None:
+        if scene_ref is None:
+            raise UserError("give --scene NAME|PATH or --script FILE")
+        scene = _scene(scene_ref)
+        script = _script(_builtin_script(scene_ref))
+    else:
+        script = _script(script_path)
+        if scene_ref is not None:
+            scene = _scene(scene_ref)
+        else:
+            scene = _scene(script.scene, script) if script.scene else _scene("table")
+    try:
+        sim = Simulator(scene, track=True)
+    except ValueError as e:
+        raise UserError(f"{scene.path}: {e}") from None
+    tracker = sim.tracker
+    nsteps = round(script.total_duration / sim.model.opt.timestep)
+    existed = out is not None and os.path.lexists(out)
+    if out is not None:
+        prepare_output(out)
+    stop = StopSignals() if out else None  # while recording, a signal ends it between two steps
+    try:
+        with finish_on_sigterm(), stop or nullcontext():
+            recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
+            with recorder as rec, _progress(nsteps, label) as bar:
+                try:
+                    for k, record in enumerate(sim.run(script), 1):
+                        if rec is not None:
+                            rec.step(record)
+                        if k % 100 == 0:
+                            bar.update(100)
+                        if stop is not None and stop.signum is not None:
+                            break
+                except SimulationDiverged as e:
+                    if rec is not None:  # the end marker says so; compile warns
+                        rec.end_reason = str(e)
+                    saved = f"; the recording up to there is kept: {out}" if out else ""
+                    raise click.ClickException(f"{e}{saved}") from None
+    except OSError as e:
+        if out is None:
+            raise
+        removed = not existed and remove_partial(out)
+        raise UserError(str(output_error(out, e)) + (" (partial file removed)" if removed else "")) from None
+    if stop is not None and stop.signum is not None:
+        kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
+        click.echo(f"interrupted ({stop.name}): {kept}", err=True)
+        raise SystemExit(stop.exit_code)
+    return scene, tracker
+
+
+def _states_table(rows: list[dict]) -> str:
+    lines = [f"{'step':>4}  {'t [s]':>8}  {'class':<5}  topological  |  discrete"]
+    for i, r in enumerate(rows, 1):
+        cls = ",".join(r["classes"]) or "-"
+        lines.append(f"{i:>4}  {r['t']:8.3f}  {cls:<5}  {r['topological']}  |  {r['discrete']}")
+    return "\n".join(lines)
+
+
+def _kept_rows(tracker) -> list[dict]:
+    """Fig. 11 style rows from a tracker: kept situations with their topological form and classes."""
+    by_start = {}
+    for st in tracker.changes:
+        by_start.setdefault((st.t, st.discrete), st)
+    rows = []
+    for kept, classes in tracker.transitions():
+        st = by_start.get((kept.start, kept.situation))
+        rows.append(
+            {
+                "t": _t(kept.start),
+                "duration": _t(kept.duration),
+                "topological": st.topological.format() if st else "",
+                "discrete": kept.situation.format(),
+                "classes": list(classes),
+            }
+        )
+    return rows
+
+
+@click.command("demo", short_help="Run a built-in demonstration headless, print its states.")
+@click.option(
+    "--scene",
+    "scene_ref",
+    help="Built-in scene name or path (default: the script's scene, else peg_in_hole).",
+)
+@click.option("--script", "script_path", type=click.Path(dir_okay=False), help="Demonstration script (TOML).")
+@click.option(
+    "-o", "--record", "out", type=click.Path(dir_okay=False), help="Also record it to this MCAP file."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the situations as JSON.")
+@_one_line
+def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool) -> None:
+    """Run a built-in demonstration headless and print its contact situations (Fig. 11 style)."""
+    import json
+
+    if scene_ref is None and script_path is None:
+        scene_ref = "peg_in_hole"
+    _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
+    rows = _kept_rows(tracker)
+    click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
+
+
+@click.command("record", short_help="Record a scripted demonstration to an MCAP file.")
+@click.option("--scene", "scene_ref", help="Built-in scene name or path (default: the script's scene).")
+@click.option(
+    "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
+)
+@click.option(
+    "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
+)
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+@_one_line
+def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
+    """Record a scripted demonstration headless to an MCAP file.
+
+    An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
+    two steps: the file is kept, finished, and replays and verifies (`dlovr replay --verify`).
+
+    Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there);
+    130 (Ctrl-C, SIGINT) or 143 (SIGTERM) interrupted, the recording so far kept.
+    """
+    _refuse_existing(out, force)
+    _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
+    click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
+
+
+@click.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
+@_one_line
+def replay_cmd(recording: str, verify: bool) -> None:
+    """Re-simulate a recording from its embedded scene and command stream.
+
+    Exit status: 0 replayed (with --verify: bit-identical); 1 with --verify: the replay diverged from
+    the recording; 2 the recording cannot be read (damaged, not a recording, ...).
+    """
+    from dlovr.recording import replay
+
+    with _progress(1, "replay") as bar:
+        done = [0]
+
+        def progress(k: int, total: int) -> None:
+            bar.length = total
+            bar.update(k - done[0])
+            done[0] = k
+
+        res = replay(recording, verify=verify, progress=progress)
+    for w in res.warnings:
+        click.echo(f"warning: {w}", err=True)
+    rtf = res.sim_time / res.wall_time if res.wall_time > 0 else float("inf")
+    click.echo(
+        f"replayed {res.steps} steps ({res.sim_time:.2f} s) in {res.wall_time:.2f} s, {rtf:.1f}x real time"
+    )
+    if verify:
+        if res.divergence:
+            raise click.ClickException(f"{recording}: replay diverged: {res.divergence}")
+        click.echo("verified: every checkpoint bit-identical, contact states identical")
+
+
+@click.command("states", short_help="Print a recording's contact situations and transitions.")
+@click.argument("recording", type=click.Path(dir_okay=False))
+@click.option(
+    "--format", "fmt", type=click.Choice(["table", "json", "csv"]), default="table", show_default=True
+)
+@click.option("--raw", is_flag=True, help="Every recorded change, not debounced.")
+@_one_line
+def states_cmd(recording: str, fmt: str, raw: bool) -> None:
+    """Print a recording's contact situations and transitions (reads only the contact-state channel)."""
+    import csv
+    import io
+    import json
+
+    from dlovr.model.transitions import kept_classes
+    from dlovr.recording import Recording, kept_states
+
+    rec = Recording(recording)
+    if raw:
+        rows = [
+            {
+                "t": _t(p["t"]),
+                "topological": p["topological"],
+                "discrete": p["discrete"],
+                "classes": p.get("classes", []),
+            }
+            for p in rec.states()
+            if not p.get("end")  # the end marker repeats the last situation
+        ]
+    else:
+        kept = kept_states(rec)
+        rows = [
+            {
+                "t": _t(k.t),
+                "duration": _t(k.duration),
+                "topological": k.topological or "",
+                "discrete": k.situation.format(),
+                "classes": list(classes),
+            }
+            for k, classes in zip(kept, kept_classes(kept), strict=True)
+        ]
+    if fmt == "json":
+        click.echo(json.dumps(rows, indent=2))
+    elif fmt == "csv":
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["t", "classes", "topological", "discrete"])
+        for r in rows:
+            w.writerow([r["t"], ",".join(r["classes"]) or "-", r["topological"], r["discrete"]])
+        click.echo(buf.getvalue(), nl=False)
+    else:
+        click.echo(_states_table(rows))
+
+
+@click.command("recover", short_help="Rescue a recording whose writer was killed.")
+@click.argument("broken", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
+@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+@_one_line
+def recover_cmd(broken: str, out: str, force: bool) -> None:
+    """Rescue every intact part of a damaged recording or of one whose writer was killed.
+
+    Damaged chunks are skipped (and listed with their time ranges), every intact one is kept. A file
+    whose writer was killed is cut at its last checkpoint (at most the last 2 s of simulated time are
+    lost), so that it replays and verifies. Exit status: 0 written; 2 nothing recoverable or bad input.
+    """
+    from pathlib import Path
+
+    from dlovr.outputs import atomic_output
+    from dlovr.recording import RecordingError, recover
+
+    if Path(broken).resolve() == Path(out).resolve():
+        raise RecordingError(f"{out}: recover writes a new file; choose another output path")
+    _refuse_existing(out, force)
+    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+        rep = recover(broken, tmp)
+    click.echo(
+        f"wrote {out}: {_plural(rep.messages, 'message')}, {_plural(rep.attachments, 'attachment')}, "
+        f"{rep.last_time_s:.2f} s"
+    )
+    for line in rep.skipped:
+        click.echo(f"skipped {line}", err=True)
