@@ -141,7 +141,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
 )
-@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+@click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @_one_line
 def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
     """Record a scripted demonstration headless to an MCAP file.
@@ -246,7 +246,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 @click.command("recover", short_help="Rescue a recording whose writer was killed.")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
-@click.option("--force", is_flag=True, help="Overwrite the output file if it exists.")
+@click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @_one_line
 def recover_cmd(broken: str, out: str, force: bool) -> None:
     """Rescue every intact part of a damaged recording or of one whose writer was killed.

@@ -61,8 +61,7 @@ def test_unwritable_outputs_give_one_line_and_exit_2(short_script, tmp_path):
 @pytest.mark.skipif(not LINUX, reason="needs Linux's /dev/full")
 def test_unwritable_output_in_a_fresh_process_has_no_traceback(short_script):
     r = subprocess.run(
-        [sys.executable, "-m", "dlovr", "record", "--script", str(short_script)]
-        + ["-o", "/dev/full", "--force"],
+        [sys.executable, "-m", "dlovr", "record", "--script", str(short_script), "-o", "/dev/full", "-f"],
         capture_output=True,
         text=True,
     )
