@@ -105,6 +105,30 @@ def test_record_stop_compiles_and_replays(server: DemoServer):
     server.live()
 
 
+def test_time_box_stays_inside_the_slider_range(server: DemoServer):
+    """The *Time [s]* box shows the slider's value: live, the present; scrubbing, clamped to the range."""
+    wait_for(lambda: server.status()["t"] > 1.2, what="the simulation to run")
+    panel = server.timeline_panel
+    panel.update(force=True)
+    sl = panel.slider
+    assert sl.min <= sl.value <= sl.max and sl.value == sl.max > 1.0
+    server.scrub(sl.max + 5.0)  # past the end: the box shows the end, not the request
+    assert sl.value == sl.max
+    server.scrub(0.5)
+    assert sl.value == 0.5
+    server.live()
+
+
+def test_exposure_warning_only_off_loopback():
+    from dlovr.ui.server import exposure_warning
+
+    for host in ("127.0.0.1", "localhost", "::1", "127.0.0.5", "[::1]"):
+        assert exposure_warning(host, 8080) is None, host
+    for host in ("0.0.0.0", "::", "", "192.168.1.4", "example.org"):
+        w = exposure_warning(host, 8080)
+        assert w is not None and "anyone who can reach port 8080" in w and "write recordings" in w
+
+
 def test_reset_pause_and_scene_switch(server: DemoServer):
     wait_for(lambda: server.status()["t"] > 0.2, what="the simulation to run")
     server.pause(True)
@@ -224,7 +248,7 @@ def test_page_loads_with_scene_record_button_and_situation(server: DemoServer, b
     page = open_page(browser, server.url)
     page.get_by_text("Discrete:").first.wait_for(timeout=10_000)
     page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
-    page.get_by_text("Gripper force:").first.wait_for(timeout=10_000)
+    page.get_by_text("Gripper wrench:").first.wait_for(timeout=10_000)
     time.sleep(0.5)
     img = iio.imread(page.locator("canvas").first.screenshot(), extension=".png")
     assert img[..., :3].astype(float).std() > 5.0, "the 3D canvas looks blank"

@@ -16,8 +16,10 @@ recording in progress is independent of the tabs and is finished by :meth:`DemoS
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import socket
+import sys
 import threading
 import time
 from pathlib import Path
@@ -310,9 +312,31 @@ class DemoServer:
             self.hold()  # it went away mid-drag: the gripper stays where it is now
 
 
+def exposure_warning(host: str, port: int) -> str | None:
+    """The warning printed when ``host`` is not a loopback address (None for a loopback one)."""
+    h = host.strip().strip("[]")
+    if h.lower() == "localhost":
+        return None
+    try:
+        if ipaddress.ip_address(h).is_loopback:
+            return None
+    except ValueError:
+        pass  # a host name, or "" (every interface): treat as reachable from outside
+    where = h or "every interface"
+    return (
+        f"dlovr serve: WARNING: listening on {where}, not on loopback: anyone who can reach port {port} "
+        "can drive the simulation and write recordings on this machine (there is no authentication); "
+        "use --host 127.0.0.1 unless that is what you want"
+    )
+
+
 def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
-    """Run the server until Ctrl-C (used by ``dlovr serve``)."""
+    """Run the server until Ctrl-C (used by ``dlovr serve``); warns on stderr when ``host`` is not
+    loopback."""
     srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
+    warning = exposure_warning(host, srv.port)
+    if warning is not None:
+        print(warning, file=sys.stderr, flush=True)
     print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
     try:
         while True:

@@ -94,6 +94,9 @@ class TimelinePanel:
             )
         srv.flush()
         self.live_btn.visible = True
+        v = min(max(round(float(t), 2), float(self.slider.min)), float(self.slider.max))
+        if v != self.slider.value:  # the Time [s] box follows (a server-side set calls back without client)
+            self.slider.value = v
         return snap
 
     def live(self) -> None:
@@ -121,8 +124,12 @@ class TimelinePanel:
             return
         self._key = key
         self.timeline_html.content = tl.html()
-        self.slider.min = round(tl.start, 2)
-        self.slider.max = round(max(tl.end, tl.start + 0.01), 2)
+        lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
+        self.slider.min, self.slider.max = lo, hi
+        # the number box shows the slider's value: keep it inside the range (live: the present)
+        v = hi if app._view is None else min(max(float(self.slider.value), lo), hi)
+        if v != self.slider.value:
+            self.slider.value = v
         files = self.recording_files()
         if tuple(files) != tuple(self.open_dd.options):
             self.open_dd.options = files
