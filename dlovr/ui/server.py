@@ -4,7 +4,7 @@
 its :class:`dlovr.sim.tracker.ContactTracker` and, while recording, a
 :class:`dlovr.recording.DemoRecorder`. A background thread (:mod:`dlovr.ui.loop`) steps the simulation
 at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the cable, the gripper
-and the contact feedback at ~40 Hz, each update in one ``server.atomic()`` block followed by
+and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block followed by
 ``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
 server-wide): the 3D scene is drawn by :class:`dlovr.ui.viewport.Viewport`, the GUI is built by the
 panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation).
@@ -37,7 +37,12 @@ from dlovr.ui.session import Session
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
 
-PUBLISH_HZ = 40.0
+PUBLISH_HZ = 62.5
+"""Cable frames per second sent to the browsers (the loop of :mod:`dlovr.ui.loop`): a little above the
+browsers' 60 frames/s, so that timer jitter does not bring the count under it."""
+
+PANEL_HZ = 10.0
+"""Updates per second of the panels that change with time (situation text, timeline, force plot)."""
 
 
 HEADLESS_CHROMIUM_ARGS = [
@@ -101,6 +106,7 @@ class DemoServer:
         self.program_text = ""
         self.last_recording: Path | None = None
         self.publish_count = 0
+        self._panels_at = 0.0
         self._rtf = 1.0
         self.viewport = Viewport(self)
         self.state_panel = StatePanel()
@@ -258,15 +264,22 @@ class DemoServer:
             }
 
     def _publish(self) -> None:
+        """One frame of the live view: the cable and the gripper body every time (the real-time loop
+        calls this at ``publish_hz``); the situation text, the timeline and the force plot at most
+        ``PANEL_HZ`` times a second (they cost the browser a re-render each)."""
         srv = self.server
         if srv is None:
             return
+        now = time.perf_counter()
+        slow = now - self._panels_at >= 1.0 / PANEL_HZ
         with self.lock:
             s = self.session
             rec, st = s.record, s.state
-            text = status_markdown(
-                st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
-            )
+            text = None
+            if slow:
+                text = status_markdown(
+                    st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
+                )
             viewing = self._view is not None
         if not viewing:
             pts = np.asarray(rec.points, dtype=float)
@@ -279,10 +292,13 @@ class DemoServer:
                 view.draw_cable(pts, colors, arrows)
                 view.body.position = tuple(map(float, rec.gripper_pos))
                 view.body.wxyz = tuple(map(float, rec.gripper_quat))
-                self.state_panel.show_live(text)
+                if text is not None:
+                    self.state_panel.show_live(text)
             srv.flush()
             self.publish_count += 1
-        self.timeline_panel.update()
+        if slow:
+            self._panels_at = now
+            self.timeline_panel.update()
 
     # -- the GUI ----------------------------------------------------------------------------------
 

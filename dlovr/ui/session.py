@@ -4,6 +4,7 @@ live timeline, shared by the real-time thread and the GUI callbacks under one lo
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -51,13 +52,20 @@ class Session:
                 return format_classes(b.classes)
         return ""
 
-    def advance(self, n: int, target: tuple[np.ndarray, np.ndarray] | None) -> bool:
-        """Step ``n`` times toward ``target``; False (and the state restored) if the sim diverged."""
+    def advance(
+        self, n: int, target: tuple[np.ndarray, np.ndarray] | None, deadline: float | None = None
+    ) -> int | None:
+        """Step up to ``n`` times toward ``target``, stopping early (after at least one step) once
+        ``time.perf_counter()`` reaches ``deadline``; the number of steps taken, or None (and the
+        state restored) if the sim diverged."""
+        done = 0
         with self.lock:
             sim = self.sim
             if target is not None:
                 sim.set_target(target[0], target[1])
             for _ in range(n):
+                if done and deadline is not None and time.perf_counter() >= deadline:
+                    break
                 good = sim.get_state()
                 try:
                     rec = sim.step()
@@ -68,13 +76,14 @@ class Session:
                     )
                     self.record = sim.record()
                     self.note = f"simulation diverged ({e.reason}); gripper stopped, state restored"
-                    return False
+                    return None
                 st = rec.state  # the simulator tracks the contacts (track=True)
                 if self.recorder is not None:
                     self.recorder.step(rec)
                 self.record, self.state = rec, st
+                done += 1
             self._timeline_update()
-            return True
+            return done
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept

@@ -76,14 +76,17 @@ class Viewport:
         joints.batched_positions = np.asarray(pts, dtype=np.float32)
         joints.batched_colors = colors
         if len(arrows):
-            self.arrows = self.app.server.scene.add_arrows(
-                "/contacts/vectors",
-                points=arrows,
-                colors=(30, 60, 220),
-                shaft_radius=0.002,
-                head_radius=0.006,
-                head_length=0.012,
-            )
+            if self.arrows is not None:
+                self.arrows.points = arrows.astype(np.float32)  # moved in place, not re-created
+            else:
+                self.arrows = self.app.server.scene.add_arrows(
+                    "/contacts/vectors",
+                    points=arrows,
+                    colors=(30, 60, 220),
+                    shaft_radius=0.002,
+                    head_radius=0.006,
+                    head_length=0.012,
+                )
         elif self.arrows is not None:
             self.arrows.remove()
             self.arrows = None
