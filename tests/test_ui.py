@@ -7,8 +7,6 @@ path (``window.__viserMutable.sendMessage``), the way a drag in the browser reac
 
 from __future__ import annotations
 
-import os
-import shutil
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -18,7 +16,6 @@ import numpy as np
 import pytest
 
 from dlovr.recording import Recording, replay
-from dlovr.ui import HEADLESS_CHROMIUM_ARGS as CHROMIUM_ARGS
 from dlovr.ui import DemoServer, Stability, point_classes, segment_transforms
 
 
@@ -184,32 +181,6 @@ def test_a_client_leaving_as_the_server_stops_moves_nothing(tmp_path: Path):
 # --------------------------------------------------------------------------------------------------
 # Browser
 # --------------------------------------------------------------------------------------------------
-
-
-def _chromium() -> str:
-    path = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
-    if path is None:
-        msg = (
-            "chromium not found: install it with `sudo apt-get install -y chromium` (Debian/Ubuntu) "
-            "to run the browser tests (never `playwright install`)"
-        )
-        if os.environ.get("CI"):
-            pytest.fail(msg)
-        pytest.skip(msg)
-    return path
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[object]:
-    exe = _chromium()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
 
 
 def open_page(browser, url: str):

@@ -38,6 +38,8 @@ def realtime_loop(app: DemoServer) -> None:
     while not app._stop.is_set():
         now = time.perf_counter()
         if session is not app.session or app._paused:
+            if session is not app.session:  # another scene: its clock starts again
+                rtf_t, rtf_sim = now, app.session.record.time
             session = app.session
             anchor_wall, anchor_steps, done = now, 0, 0
         dt = session.dt

@@ -129,6 +129,7 @@ class DemoServer:
         srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
         self.server = srv
         srv.gui.configure_theme(show_share_button=False, control_width="large")
+        srv.gui.main_panel.dock_right()  # the panel beside the 3D view, not over it (framing)
         srv.scene.configure_environment_map(None)
         srv.scene.add_light_ambient("/ambient", intensity=1.2)
         srv.scene.add_light_directional("/sun", intensity=1.5, position=(1.0, -1.0, 2.0))
@@ -318,9 +319,14 @@ class DemoServer:
     # -- clients ------------------------------------------------------------------------------------
 
     def _on_connect(self, client: Any) -> None:
-        pass
+        """Frame the workspace for the new tab once its camera has reported (its aspect is known)."""
+
+        @client.camera.on_update
+        def _(cam: Any) -> None:
+            self.viewport.camera_update(client)
 
     def _on_disconnect(self, client: Any) -> None:
+        self.viewport.camera_ready.pop(client.client_id, None)
         ended = self._dragging.pop(client.client_id, -1.0)
         if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
             return

@@ -66,6 +66,8 @@ class TimelinePanel:
             app._view_scene = scene
         if app.server is not None:
             app.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
+            if scene.name != app.session.scene.name:
+                app.viewport.frame()  # another scene: frame its workspace
             self.live_btn.visible = True
             self.update(force=True)
             app.scrub(tl.start)
@@ -103,11 +105,14 @@ class TimelinePanel:
         app = self.app
         with app.lock:
             was_other = app._view_scene is not None
+            scene_name = app._view_scene.name if was_other else ""
             app._view = None
             app._view_scene = None
         if app.server is not None:
             if was_other:
                 app.viewport.show_obstacles(app.session.geometry, app.session.scene)
+                if scene_name != app.session.scene.name:
+                    app.viewport.frame()
             self.live_btn.visible = False
 
     def recording_files(self) -> list[str]:

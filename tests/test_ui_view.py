@@ -1,0 +1,87 @@
+"""The demonstrator's view of `dlovr serve` in headless chromium (issue 21): framing, the force plot,
+the faces in contact, the program after a recording.
+
+Each test saves a screenshot of the state it checked under ``tests/artifacts/`` (or the folder named
+by the environment variable ``DLOVR_UI_ARTIFACTS``) for a person to look at; the folder is ignored
+by git. The browser helpers are those of tests/test_ui.py, the ``browser`` fixture is in tests/conftest.py.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from test_ui import open_page, wait_for
+
+from dlovr.ui import DemoServer
+from dlovr.ui.framing import box_corners, projected_extent
+
+ARTIFACTS = Path(os.environ.get("DLOVR_UI_ARTIFACTS", Path(__file__).resolve().parent / "artifacts"))
+
+
+def shot(page, name: str) -> Path:
+    """Save a screenshot of the whole page for review; its path is printed (pytest -s shows it)."""
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    close = page.locator(".mantine-Notification-closeButton")  # "software WebGL" notice over the view
+    for i in range(close.count()):
+        close.nth(i).click()
+    page.screenshot(path=str(path))
+    print(f"screenshot: {path}")
+    return path
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[DemoServer]:
+    srv = DemoServer("table", port=None, recordings_dir=tmp_path / "recordings").start()
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def the_client(srv: DemoServer):
+    clients = list(srv.server.get_clients().values())
+    assert len(clients) == 1
+    return clients[0]
+
+
+def view_fraction(srv: DemoServer) -> tuple[float, float]:
+    """Fractions (width, height) of the client's view that the workspace's box covers, projected with
+    the camera pose, field of view and aspect the browser reported."""
+    cam = the_client(srv).camera
+    lo, hi = srv.viewport.scene_box()
+    return projected_extent(box_corners(lo, hi), cam.position, cam.wxyz, cam.fov, cam.aspect)
+
+
+def framed(srv: DemoServer) -> bool:
+    w, h = view_fraction(srv)
+    return h >= 0.5 and max(w, h) >= 0.75
+
+
+def test_the_scene_is_framed_on_load_on_the_button_and_on_a_scene_switch(server: DemoServer, browser):
+    page = open_page(browser, server.url)
+    wait_for(lambda: the_client(server).client_id in server.viewport.camera_ready, what="the camera")
+    wait_for(lambda: framed(server), timeout=10, what=f"the framing on load, covers {view_fraction(server)}")
+    cam = the_client(server).camera
+    canvas = page.locator("canvas").first.bounding_box()
+    assert canvas is not None and abs(cam.image_width - canvas["width"]) <= 2  # the real view, panel beside
+    shot(page, "framing-on-load")
+
+    # look away, then "Frame scene"
+    with the_client(server).atomic():
+        cam.position = (6.0, 6.0, 4.0)
+        cam.look_at = (3.0, 3.0, 0.0)
+    wait_for(lambda: view_fraction(server)[1] < 0.3, timeout=10, what="the camera to look away")
+    page.get_by_role("button", name="Frame scene").click()
+    wait_for(lambda: framed(server), timeout=10, what=f"the framing by the button, {view_fraction(server)}")
+
+    # another scene: re-framed for its workspace
+    server.load("l_block")
+    wait_for(lambda: framed(server), timeout=10, what=f"the framing of l_block, {view_fraction(server)}")
+    time.sleep(0.5)
+    shot(page, "framing-l-block")
+    page.close()
