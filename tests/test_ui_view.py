@@ -13,8 +13,9 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
-from test_ui import open_page, wait_for
+from test_ui import drag, line_down, open_page, wait_for
 
 from dlovr.ui import DemoServer
 from dlovr.ui.framing import box_corners, projected_extent
@@ -84,4 +85,45 @@ def test_the_scene_is_framed_on_load_on_the_button_and_on_a_scene_switch(server:
     wait_for(lambda: framed(server), timeout=10, what=f"the framing of l_block, {view_fraction(server)}")
     time.sleep(0.5)
     shot(page, "framing-l-block")
+    page.close()
+
+
+PLOTS_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {}).map(
+    (u) => u.chart.data.map((a) => Array.from(a)))"""
+
+
+def plot_data(page) -> list[np.ndarray]:
+    """The data of the page's (only) uPlot chart, as the browser holds it: x, Fx, Fy, Fz, |F|, marks."""
+    plots = page.evaluate(PLOTS_JS)
+    assert len(plots) == 1, f"{len(plots)} plots on the page"
+    return [np.asarray(a, dtype=float) for a in plots[0]]
+
+
+def test_the_force_plot_follows_a_drag_and_marks_the_transitions(server: DemoServer, browser):
+    from dlovr.ui.forces import MARK_HIGH
+
+    page = open_page(browser, server.url)
+    page.wait_for_function("() => Object.keys((window.__viserTestpoints || {}).uplots || {}).length > 0")
+    before = plot_data(page)
+    assert len(before) == 6
+    hanging = float(np.median(before[4]))
+    assert 0.4 < hanging < 0.8  # the weight of the hanging 60 g cable, about 0.59 N
+    p0 = server.status()["gripper_pos"]
+    drag(page, line_down(p0, 0.33, n=14))  # the cable comes down onto the table
+    page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
+
+    def updated() -> bool:
+        d = plot_data(page)
+        return d[0][-1] > before[0][-1] + 1.0 and (d[5] == MARK_HIGH).any()
+
+    wait_for(updated, timeout=15, what="the plot to move on and mark the table contact")
+    # part of the cable comes to lie on the table: the gripper carries less than the whole weight
+    wait_for(lambda: plot_data(page)[4][-1] < hanging - 0.15, timeout=15, what="the lighter load")
+    after = plot_data(page)
+    x, mag = after[0], after[4]
+    assert x[-1] - x[0] <= 5.2 and abs(x[-1] - server.status()["t"]) < 1.0  # the last 5 s, live
+    assert np.all(np.diff(x) >= 0)
+    assert mag.max() - mag.min() > 0.2  # the plot shows the change
+    assert page.get_by_text("transitions (dashed):").first.is_visible()
+    shot(page, "force-plot-after-drag")
     page.close()

@@ -32,7 +32,14 @@ from dlovr.scene import Scene, load_scene
 from dlovr.transforms import quat_mul
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors
 from dlovr.ui.loop import realtime_loop
-from dlovr.ui.panels import RecordingPanel, SimulationPanel, StatePanel, TimelinePanel, status_markdown
+from dlovr.ui.panels import (
+    ForcePanel,
+    RecordingPanel,
+    SimulationPanel,
+    StatePanel,
+    TimelinePanel,
+    status_markdown,
+)
 from dlovr.ui.session import Session
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
@@ -110,6 +117,7 @@ class DemoServer:
         self._rtf = 1.0
         self.viewport = Viewport(self)
         self.state_panel = StatePanel()
+        self.force_panel = ForcePanel(self)
         self.recording_panel = RecordingPanel(self)
         self.timeline_panel = TimelinePanel(self)
         self.simulation_panel = SimulationPanel(self)
@@ -300,6 +308,8 @@ class DemoServer:
         if slow:
             self._panels_at = now
             self.timeline_panel.update()
+            if not viewing:
+                self.force_panel.show_live()
 
     # -- the GUI ----------------------------------------------------------------------------------
 
@@ -307,6 +317,7 @@ class DemoServer:
         gui = self.server.gui
         self.viewport.build_gizmo()
         self.state_panel.build(gui)
+        self.force_panel.build(gui)
         self.recording_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)

@@ -16,6 +16,7 @@ from dlovr.scene import Scene
 from dlovr.sim import SimulationDiverged, Simulator
 from dlovr.sim.tracker import ContactTracker
 from dlovr.ui.drawing import point_classes, point_colors
+from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
 
@@ -34,7 +35,9 @@ class Session:
         self.recorder: DemoRecorder | None = None
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
-        self.timeline = Timeline()
+        self.forces = ForceTrace()  # the gripper force, mean of every 5 steps (10 ms)
+        self.forces.append(self.record.time, self.record.gripper_force)
+        self.timeline = Timeline(forces=self.forces)
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self.note = ""
@@ -81,6 +84,7 @@ class Session:
                 if self.recorder is not None:
                     self.recorder.step(rec)
                 self.record, self.state = rec, st
+                self.forces.add(rec.time, rec.gripper_force)
                 done += 1
             self._timeline_update()
             return done
@@ -126,7 +130,7 @@ class Session:
         self._last_snap_t = r.time
 
     def restart_timeline(self) -> None:
-        self.timeline = Timeline()
+        self.timeline = Timeline(forces=self.forces)
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self._snapshot()

@@ -16,6 +16,7 @@ from dlovr.model.transitions import classify_step, format_classes
 from dlovr.recording import Recording, kept_states
 from dlovr.scene import Scene
 from dlovr.ui.drawing import point_colors
+from dlovr.ui.forces import ForceTrace
 
 BAND_COLORS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#9c755f")
 
@@ -49,6 +50,11 @@ class Timeline:
     bands: list[Band] = field(default_factory=list)
     snapshots: deque = field(default_factory=lambda: deque(maxlen=20000))
     source: str = "live"
+    forces: ForceTrace = field(default_factory=ForceTrace)
+
+    def transition_times(self) -> list[float]:
+        """Start times (s) of the kept situations entered by a classified transition."""
+        return [b.start for b in self.bands if b.classes]
 
     @property
     def end(self) -> float:
@@ -123,6 +129,11 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
         tl.bands.append(Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes)))
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])
+    tl.forces = ForceTrace(every=1)  # the gripper force where the contact state changed
+    for p, t in zip(states, st_t, strict=True):
+        gf = p.get("gripper_force")
+        if gf is not None and len(gf) == 3 and (not len(tl.forces) or t >= tl.forces.t[-1]):
+            tl.forces.append(float(t), np.asarray(gf, dtype=float))
     for t, pts, gp, gq in rec.frames():
         j = max(0, int(np.searchsorted(st_t, t + 1e-9, side="right")) - 1)
         payload = states[j] if states else None

@@ -94,6 +94,7 @@ class TimelinePanel:
                 f"**Timeline ({tl.source}) at {t:.2f} s**\n\n**Discrete:** `{snap.text}`\n\n"
                 f"**Transition into it:** `{cls}`"
             )
+            app.force_panel.show_at(tl, t)
         srv.flush()
         self.live_btn.visible = True
         v = min(max(round(float(t), 2), float(self.slider.min)), float(self.slider.max))
