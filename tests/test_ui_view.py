@@ -127,3 +127,52 @@ def test_the_force_plot_follows_a_drag_and_marks_the_transitions(server: DemoSer
     assert page.get_by_text("transitions (dashed):").first.is_visible()
     shot(page, "force-plot-after-drag")
     page.close()
+
+
+def green_fraction(page) -> float:
+    """Fraction of the 3D view's pixels that are clearly green (a stable face highlighted)."""
+    import imageio.v3 as iio
+
+    img = iio.imread(page.locator("canvas").first.screenshot(), extension=".png")[..., :3].astype(int)
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return float(((g > r + 40) & (g > b + 40)).mean())
+
+
+def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situation(
+    server: DemoServer, browser
+):
+    from dlovr.model.discrete import Stability
+
+    page = open_page(browser, server.url)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    assert server.viewport.faces.shown == {}
+    assert green_fraction(page) < 0.01
+    p0 = server.status()["gripper_pos"]
+    drag(page, line_down(p0, 0.33, n=10))
+    page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
+    wait_for(lambda: server.viewport.faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
+    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the table top drawn green")
+
+    page.get_by_label("Face labels").check()
+    wait_for(lambda: "table.F1" in server.viewport.faces.labels, what="the face labels")
+    faces = server.viewport.faces
+    wait_for(lambda: faces.labels["table.F1"].text == "table.F1: stable", what="the contact named stable")
+    assert faces.labels["table.F2"].text == "table.F2"  # a face not touched: its name only
+    time.sleep(0.5)
+    shot(page, "faces-table-top-stable-labelled")
+
+    # hovering the first situation of the timeline (the cable hanging free) shows its faces: none
+    first = page.locator('.dlovr-timeline > div[data-situation="0"]')
+    first.hover()
+    wait_for(lambda: faces.shown == {}, timeout=10, what="the hovered free situation's faces (none)")
+    wait_for(lambda: green_fraction(page) < 0.01, timeout=10, what="the highlight gone while hovering")
+    shot(page, "faces-hovering-the-free-situation")
+    page.mouse.move(5, 300)  # leave it: the live faces again
+    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the live faces back")
+
+    # clicking it scrubs the cable to that situation
+    first.click()
+    wait_for(lambda: server._view is not None, timeout=10, what="the click to scrub")
+    page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
+    assert server.timeline_panel.slider.value < server.session.timeline.bands[1].start
+    page.close()

@@ -30,7 +30,7 @@ import viser
 
 from dlovr.scene import Scene, load_scene
 from dlovr.transforms import quat_mul
-from dlovr.ui.drawing import contact_arrows, point_classes, point_colors
+from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
 from dlovr.ui.loop import realtime_loop
 from dlovr.ui.panels import (
     ForcePanel,
@@ -294,11 +294,13 @@ class DemoServer:
             pts = np.asarray(rec.points, dtype=float)
             colors = point_colors(point_classes(st, len(pts)))
             arrows = contact_arrows(st, pts)
+            faces = situation_faces(st.discrete if st is not None else None)
             view = self.viewport
             with self._draw_lock, srv.atomic():
                 if self._view is not None:
                     return
                 view.draw_cable(pts, colors, arrows)
+                view.faces.show(faces)
                 view.body.position = tuple(map(float, rec.gripper_pos))
                 view.body.wxyz = tuple(map(float, rec.gripper_quat))
                 if text is not None:

@@ -15,7 +15,7 @@ from dlovr.recording import DemoRecorder
 from dlovr.scene import Scene
 from dlovr.sim import SimulationDiverged, Simulator
 from dlovr.sim.tracker import ContactTracker
-from dlovr.ui.drawing import point_classes, point_colors
+from dlovr.ui.drawing import point_classes, point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
@@ -43,6 +43,7 @@ class Session:
         self.note = ""
         self._class_cache: dict[Any, tuple[str, ...]] = {}
         self._format_cache: dict[Any, str] = {}
+        self._faces_cache: dict[Any, dict[str, Any]] = {}
         self._snapshot()
 
     @property
@@ -98,7 +99,7 @@ class Session:
         for i in range(start, len(kept)):
             k = kept[i]
             classes = self._classes(kept[i - 1].situation, k.situation) if i else ()
-            bands.append(Band(k.start, k.end, self._format(k.situation), classes))
+            bands.append(Band(k.start, k.end, self._format(k.situation), classes, self._faces(k.situation)))
         self._kept_seen = len(kept)
         if grew or self.record.time - self._last_snap_t >= 0.1:
             self._snapshot()
@@ -108,6 +109,11 @@ class Session:
         if key not in self._class_cache:
             self._class_cache[key] = tuple(classify_step(a, b))
         return self._class_cache[key]
+
+    def _faces(self, sit: Any) -> dict[str, Any]:
+        if sit not in self._faces_cache:
+            self._faces_cache[sit] = situation_faces(sit)
+        return self._faces_cache[sit]
 
     def _format(self, sit: Any) -> str:
         if sit not in self._format_cache:
@@ -125,6 +131,7 @@ class Session:
                 r.gripper_pos.copy(),
                 r.gripper_quat.copy(),
                 st.discrete.format(),
+                situation_faces(st.discrete),
             )
         )
         self._last_snap_t = r.time

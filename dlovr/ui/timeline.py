@@ -15,7 +15,7 @@ from dlovr.model.discrete import Stability
 from dlovr.model.transitions import classify_step, format_classes
 from dlovr.recording import Recording, kept_states
 from dlovr.scene import Scene
-from dlovr.ui.drawing import point_colors
+from dlovr.ui.drawing import point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
 
 BAND_COLORS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#9c755f")
@@ -31,6 +31,7 @@ class Snapshot:
     gripper_pos: np.ndarray
     gripper_quat: np.ndarray
     text: str
+    faces: dict[str, Stability] = field(default_factory=dict)  # faces touched, by stability class
 
 
 @dataclass
@@ -41,6 +42,7 @@ class Band:
     end: float
     situation: str
     classes: tuple[str, ...]
+    faces: dict[str, Stability] = field(default_factory=dict)  # faces touched, by stability class
 
 
 @dataclass
@@ -83,33 +85,62 @@ class Timeline:
                 return b
         return self.bands[-1] if self.bands and t >= self.bands[-1].start else None
 
-    def html(self) -> str:
-        """Coloured bands, one per kept situation, transitions marked with their classes."""
+    def html(self, pick_uuid: str | None = None) -> str:
+        """Coloured bands, one per kept situation, transitions marked with their classes, and a list
+        of the last situations.
+
+        With ``pick_uuid`` (a text input of the page), hovering a band or a row sends ``h<i>`` to that
+        input, leaving it sends an empty value, and clicking sends ``c<i>:<ms>`` (``i``: the index of
+        the situation in :attr:`bands`); the server highlights its faces or scrubs to it.
+        """
         t0, t1 = self.start, self.end
         span = max(t1 - t0, 1e-9)
         colors: dict[str, str] = {}
         cells = []
-        for b in self.bands:
+        for i, b in enumerate(self.bands):
             c = colors.setdefault(b.situation, BAND_COLORS[len(colors) % len(BAND_COLORS)])
             w = max(0.5, 100.0 * (b.end - b.start) / span)
             label = format_classes(b.classes) if b.classes else ""
             tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
             border = "border-left:2px solid #000;" if b.classes else ""
-            cells.append(f'<div title="{tip}" style="width:{w:.2f}%;background:{c};{border}"></div>')
+            cells.append(
+                f'<div title="{tip}" data-situation="{i}"{_pick_handlers(pick_uuid, i)} '
+                f'style="width:{w:.2f}%;background:{c};{border}cursor:pointer"></div>'
+            )
         bar = (
             '<div class="dlovr-timeline" style="display:flex;height:14px;width:100%;'
             f'background:#ddd;overflow:hidden;border-radius:3px">{"".join(cells)}</div>'
         )
+        first = max(0, len(self.bands) - 8)
         rows = "".join(
-            f"<li>{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
+            f'<li data-situation="{first + k}"{_pick_handlers(pick_uuid, first + k)} style="cursor:pointer">'
+            f"{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
             f"<code>{html.escape(b.situation)}</code></li>"
-            for b in self.bands[-8:]
+            for k, b in enumerate(self.bands[first:])
         )
         src = html.escape(self.source)
         return (
             f'<div style="font-size:11px">{bar}<div>{src}: {len(self.bands)} situations, '
             f"{t0:.2f}-{t1:.2f} s</div><ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
         )
+
+
+def _pick_handlers(uuid: str | None, index: int) -> str:
+    """Inline mouse handlers of a timeline element: send its situation's index to the text input
+    ``uuid`` through the page's viser connection (``GuiUpdateMessage``, as an input edit does)."""
+    if uuid is None or not all(ch.isalnum() or ch in "-_" for ch in uuid):
+        return ""
+
+    def send(value: str) -> str:
+        return (
+            "window.__viserMutable&&window.__viserMutable.sendMessage("
+            f"{{type:'GuiUpdateMessage',uuid:'{uuid}',updates:{{value:{value}}}}})"
+        )
+
+    return (
+        f' onmouseenter="{send(repr(f"h{index}"))}" onmouseleave="{send(repr(""))}"'
+        f" onclick=\"{send(repr(f'c{index}:') + '+Date.now()')}\""
+    )
 
 
 def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
@@ -126,7 +157,9 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     tl = Timeline(source=Path(path).name)
     for i, k in enumerate(kept):
         classes = classify_step(kept[i - 1].situation, k.situation) if i else ()
-        tl.bands.append(Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes)))
+        tl.bands.append(
+            Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes), situation_faces(k.situation))
+        )
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])
     tl.forces = ForceTrace(every=1)  # the gripper force where the contact state changed
@@ -139,13 +172,15 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
         payload = states[j] if states else None
         classes: list[Stability | None] = [None] * len(pts)
         text = ""
+        faces: dict[str, Stability] = {}
         if payload is not None:
             sit = situation_from_payload(payload)
             text = payload.get("discrete", "")
+            faces = situation_faces(sit)
             for c, m_c in zip(sit.contacts, payload.get("contacts", []), strict=False):
                 span, cls = m_c.get("span"), c.state.stability_class
                 if span and cls is not None:
                     for i in range(max(0, span[0]), min(len(pts) - 1, span[1]) + 1):
                         classes[i] = cls
-        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text))
+        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text, faces))
     return tl, scene, rec

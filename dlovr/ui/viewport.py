@@ -1,6 +1,7 @@
-"""The 3D viewport: the obstacles (with optional face labels), the cable as batched cylinders and
-balls coloured by stability class, the contact vectors, the gripper body and the gizmo that commands
-the gripper target."""
+"""The 3D viewport: the obstacles (with the faces in contact highlighted and optional face labels,
+:mod:`dlovr.ui.highlight`), the cable as batched cylinders and balls coloured by stability class, the
+contact vectors, the gripper body, the gizmo that commands the gripper target, and the camera framing
+(:mod:`dlovr.ui.framing`)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from dlovr.geometry import SceneGeometry
 from dlovr.scene import Scene
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
 from dlovr.ui.framing import FOV, frame_box
+from dlovr.ui.highlight import FaceHighlighter
 
 if TYPE_CHECKING:
     from dlovr.ui.server import DemoServer
@@ -32,6 +34,7 @@ class Viewport:
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
         self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
+        self.faces = FaceHighlighter(app)
 
     def build_gizmo(self) -> None:
         """The transform gizmo: a drag sets the gripper target (:meth:`DemoServer.set_target`)."""
@@ -144,18 +147,7 @@ class Viewport:
                     flat_shading=True,
                 )
             )
-            if self.app.simulation_panel.face_labels:
-                for name, tris, normal in zip(obj.face_names, obj.face_tris, obj.face_normals, strict=True):
-                    tris = np.asarray(tris, dtype=float)
-                    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-                    c3 = (tris.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-12)
-                    self.obstacle_handles.append(
-                        srv.scene.add_label(
-                            f"/obstacles/{obj.name}_labels/{name}",
-                            name,
-                            position=tuple(c3 + 0.01 * np.asarray(normal)),
-                        )
-                    )
+        self.faces.reset(geometry, labels=self.app.simulation_panel.face_labels)
         self.shown_geometry = geometry
 
     def build(self) -> None:

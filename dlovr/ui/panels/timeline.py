@@ -38,6 +38,14 @@ class TimelinePanel:
             self.open_dd = gui.add_dropdown("Recording file", options=self.recording_files())
             self.open_btn = gui.add_button("Open recording")
             self.open_md = gui.add_markdown("")
+            # hovering / clicking a situation in the timeline's HTML lands here (Timeline.html)
+            self.pick = gui.add_text("Situation picked", initial_value="", visible=False)
+        self.pick_uuid: str | None = getattr(getattr(self.pick, "_impl", None), "uuid", None)
+
+        @self.pick.on_update
+        def _(event: Any) -> None:
+            if event.client is not None:
+                self.picked(str(self.pick.value))
 
         @self.slider.on_update
         def _(event: Any) -> None:
@@ -88,6 +96,7 @@ class TimelinePanel:
         view = app.viewport
         with app._draw_lock, srv.atomic():
             view.draw_cable(snap.points, snap.colors, np.zeros((0, 2, 3)))
+            view.faces.show(snap.faces)
             view.body.position, view.body.wxyz = tuple(snap.gripper_pos), tuple(snap.gripper_quat)
             cls = format_classes(band.classes) if band and band.classes else "-"
             app.state_panel.show(
@@ -116,6 +125,25 @@ class TimelinePanel:
                     app.viewport.frame()
             self.live_btn.visible = False
 
+    def picked(self, value: str) -> None:
+        """A situation of the timeline hovered (``h<i>``: highlight its faces), left (``""``) or
+        clicked (``c<i>:<ms>``: show the middle of it, as the slider would)."""
+        app = self.app
+        tl = app._view or app.session.timeline
+        kind = value.partition(":")[0]
+        try:
+            i = int(kind[1:]) if kind[:1] in ("h", "c") else -1
+        except ValueError:
+            return
+        band = tl.bands[i] if 0 <= i < len(tl.bands) else None
+        if app.server is None:
+            return
+        if band is not None and kind == f"c{i}":
+            app.scrub((band.start + band.end) / 2.0)
+        with app._draw_lock, app.server.atomic():
+            app.viewport.faces.pin(band.faces if band is not None else None)
+        app.server.flush()
+
     def recording_files(self) -> list[str]:
         d = self.app.recordings_dir
         files = sorted((p.name for p in d.glob("*.mcap")), reverse=True) if d.is_dir() else []
@@ -129,7 +157,7 @@ class TimelinePanel:
         if not force and key == self._key:
             return
         self._key = key
-        self.timeline_html.content = tl.html()
+        self.timeline_html.content = tl.html(self.pick_uuid)
         lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
         self.slider.min, self.slider.max = lo, hi
         # the number box shows the slider's value: keep it inside the range (live: the present)
