@@ -250,7 +250,7 @@ def test_record_move_stop_in_the_browser(server: DemoServer, browser):
     drag(page, line_down(p0, 0.45, n=8))
     time.sleep(0.5)
     page.get_by_role("button", name="Stop recording").click()
-    page.get_by_text("Program:").first.wait_for(timeout=30_000)
+    page.locator(".dlovr-program").first.wait_for(timeout=30_000)
     assert "macros" in page.locator("body").inner_text()
     assert path.is_file()
     res = replay(path, verify=True)

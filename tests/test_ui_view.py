@@ -176,3 +176,78 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
     assert server.timeline_panel.slider.value < server.session.timeline.bands[1].start
     page.close()
+
+
+def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files(server: DemoServer, browser):
+    from dlovr.ui.program_view import macro_risk
+
+    page = open_page(browser, server.url)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    page.get_by_role("button", name="Start recording").click()
+    wait_for(lambda: server.status()["recording"] is not None, what="the recording to start")
+    p0 = server.status()["gripper_pos"]
+    drag(page, line_down(p0, 0.33, n=10))  # down onto the table ...
+    page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
+    time.sleep(0.5)
+    drag(page, line_down(np.array([p0[0], p0[1], 0.33]), 0.72, n=10))  # ... and up again
+    wait_for(lambda: "table" not in server.status()["discrete"], timeout=20, what="the cable to lift off")
+    time.sleep(0.3)
+    path = server.status()["recording"]
+    page.get_by_role("button", name="Stop recording").click()
+    table = page.locator(".dlovr-program").first
+    table.wait_for(timeout=30_000)
+    prog = server.last_program
+    assert prog is not None and len(prog.macros) >= 2
+    rows = table.locator("tr[data-risk]")
+    assert rows.count() == len(prog.macros)
+    for k, m in enumerate(prog.macros):
+        assert rows.nth(k).get_attribute("data-risk") == macro_risk(m)
+    text = table.inner_text()
+    assert "E" in text and "table.F1" in text  # the class and the faces of the change
+    body = page.locator("body").inner_text()
+    jpath = path.with_name(f"{path.stem}.program.json")
+    assert jpath.is_file() and str(jpath) in body and str(path) in body
+    table.scroll_into_view_if_needed()
+    shot(page, "program-after-recording")
+
+    # the same recording opened and scrubbed: the force plot shows its samples up to that moment
+    tl = server.open_recording(path)
+    t = (tl.start + tl.end) / 2
+    server.scrub(t)
+    title = f"up to {t:.2f} s"
+    wait_for(lambda: title in server.force_panel.plot.title, timeout=10, what="the plot at the moment")
+
+    def at_moment() -> bool:  # the browser's data: samples where the contact state changed, up to t
+        x = plot_data(page)[0]
+        return len(x) >= 2 and x[0] >= t - 5.5 and x[-1] <= t + 1e-6
+
+    wait_for(at_moment, timeout=10, what="the browser's plot data at the moment")
+    page.close()
+
+
+def test_a_risky_program_says_which_macro_and_class():
+    from types import SimpleNamespace as NS
+
+    from dlovr.ui.program_view import macro_change, macro_risk, program_html
+
+    spec = NS(state="V/E^LI[b.E1]", vector=None)
+    macros = (
+        NS(index=1, classes=("E",), t=1.0, from_situation="V/G & V/N", to_situation="V/G & V/F[t.F1]",
+           risky=False),
+        NS(index=2, classes=("T",), t=2.0, from_situation="a", to_situation="b", risky=False),
+        NS(index=3, classes=("I",), t=3.0, from_contacts=(), to_contacts=(spec,), from_situation="b",
+           to_situation="c", risky=True),
+        NS(index=4, classes=(), t=4.0, risk="none", final=True, change_from=None, change_to=spec),
+        NS(index=5, classes=("C",), t=5.0, risk="risky", change_from="E/F[t.F1]", change_to="E/E^P[t.E1]"),
+    )  # fmt: skip
+    prog = NS(name="demo", macros=macros)
+    assert [macro_risk(m) for m in macros] == ["none", "caution", "risky", "none", "risky"]
+    assert macro_change(macros[4]) == ("E/F[t.F1]", "E/E^P[t.E1]")
+    assert macro_change(macros[3]) == ("-", "V/E^LI[b.E1]")
+    assert macro_change(macros[0]) == ("… & V/N", "… & V/F[t.F1]")  # the situations' differing part
+    out = program_html(prog, [("program", "/x/demo.program.json")])
+    assert out.count('data-risk="risky"') == 2 and out.count('data-risk="caution"') == 1
+    assert "Risky program" in out and "macro 3 (I" in out and "instable" in out and "macro 5 (C" in out
+    assert "final" in out and "/x/demo.program.json" in out
+    safe = program_html(NS(name="ok", macros=macros[:2]))
+    assert "Risky program" not in safe

@@ -111,6 +111,7 @@ class DemoServer:
         self._view: Timeline | None = None  # a timeline being scrubbed (None: live view)
         self._view_scene: Scene | None = None
         self.program_text = ""
+        self.last_program: Any = None  # the last recording's compiled program
         self.last_recording: Path | None = None
         self.publish_count = 0
         self._panels_at = 0.0
