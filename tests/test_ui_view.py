@@ -148,7 +148,7 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     assert server.viewport.faces.shown == {}
     assert green_fraction(page) < 0.01
     p0 = server.status()["gripper_pos"]
-    drag(page, line_down(p0, 0.33, n=10))
+    drag(page, line_down(p0, 0.48, n=6))  # the cable's tip comes down onto the table
     page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
     wait_for(lambda: server.viewport.faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
     wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the table top drawn green")
@@ -186,10 +186,10 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     page.get_by_role("button", name="Start recording").click()
     wait_for(lambda: server.status()["recording"] is not None, what="the recording to start")
     p0 = server.status()["gripper_pos"]
-    drag(page, line_down(p0, 0.33, n=10))  # down onto the table ...
+    drag(page, line_down(p0, 0.48, n=6))  # down onto the table ...
     page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
-    time.sleep(0.5)
-    drag(page, line_down(np.array([p0[0], p0[1], 0.33]), 0.72, n=10))  # ... and up again
+    time.sleep(0.3)
+    drag(page, line_down(np.array([p0[0], p0[1], 0.48]), 0.72, n=6))  # ... and up again
     wait_for(lambda: "table" not in server.status()["discrete"], timeout=20, what="the cable to lift off")
     time.sleep(0.3)
     path = server.status()["recording"]
