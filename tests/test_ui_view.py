@@ -44,6 +44,90 @@ def server(tmp_path: Path) -> Iterator[DemoServer]:
         srv.stop()
 
 
+# --------------------------------------------------------------------------------------------------
+# In-process (no browser): the pure helpers
+# --------------------------------------------------------------------------------------------------
+
+
+def _look(position: np.ndarray, look_at: np.ndarray) -> np.ndarray:
+    """wxyz of a viser camera at ``position`` looking at ``look_at`` with +z up (x right, y down)."""
+    import viser.transforms as vtf
+
+    f = (look_at - position) / np.linalg.norm(look_at - position)
+    r = np.cross(f, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    return vtf.SO3.from_matrix(np.stack([r, np.cross(f, r), f], axis=1)).wxyz
+
+
+@pytest.mark.parametrize("aspect", [0.5, 0.95, 1.6, 3.0])
+def test_frame_box_fills_the_limiting_side_and_centres_the_box(aspect: float):
+    from dlovr.ui.framing import FILL, FOV, frame_box
+
+    lo, hi = np.array([-0.5, -0.5, -0.05]), np.array([0.5, 0.5, 0.7])
+    pos, look = frame_box(lo, hi, aspect=aspect)
+    corners = box_corners(lo, hi)
+    w, h = projected_extent(corners, pos, _look(pos, look), FOV, aspect)
+    assert FILL - 0.01 <= max(w, h) <= FILL + 1e-3 and min(w, h) <= FILL + 1e-3
+    # centred: the projection's middle is the image centre
+    from dlovr.transforms import quat_to_matrix
+
+    cam = (corners - pos) @ quat_to_matrix(_look(pos, look))
+    sx, sy = cam[:, 0] / cam[:, 2], cam[:, 1] / cam[:, 2]
+    assert abs(sx.max() + sx.min()) < 0.01 and abs(sy.max() + sy.min()) < 0.01
+
+
+def test_force_trace_means_steps_keeps_order_and_drops_the_oldest_half():
+    from dlovr.ui.forces import ForceTrace
+
+    tr = ForceTrace(every=5, capacity=16)
+    for k in range(1, 11):
+        tr.add(0.002 * k, [k, 0.0, -1.0])
+    assert len(tr) == 2 and np.allclose(tr.t, [0.01, 0.02]) and np.allclose(tr.f[:, 0], [3.0, 8.0])
+    for k in range(40):
+        tr.append(0.03 + 0.01 * k, [0.0, 0.0, k])
+    assert len(tr) <= 16 and np.all(np.diff(tr.t) > 0) and tr.f[-1, 2] == 39
+    t, _ = tr.window(0.385, 0.405)
+    assert t[0] < 0.385 <= t[1] and t[-1] <= 0.405  # one sample before the window, to draw a line in
+    with pytest.raises(ValueError):
+        tr.append(0.0, [0.0, 0.0, 0.0])
+
+
+def test_plot_arrays_mark_each_transition_with_a_vertical_line():
+    from dlovr.ui.forces import MARK_HIGH, MARK_LOW, ForceTrace, plot_arrays
+
+    tr = ForceTrace(every=1)
+    for k in range(101):
+        tr.append(0.1 * k, [0.0, 3.0, 4.0])
+    x, fx, fy, fz, mag, mark = plot_arrays(tr, [2.0, 7.25, 9.0], t_end=10.0, window=5.0)
+    assert all(len(a) == len(x) for a in (fx, fy, fz, mag, mark))
+    assert x[0] < 5.0 + 1e-9 and x[-1] == pytest.approx(10.0) and np.all(np.diff(x) >= 0)
+    assert np.allclose(mag, 5.0)
+    highs = x[mark == MARK_HIGH]
+    assert np.allclose(highs, [7.25, 9.0])  # 2.0 is outside the window
+    for m in highs:  # up and down again at the same x: a vertical line
+        i = int(np.nonzero((x == m) & (mark == MARK_HIGH))[0][0])
+        assert mark[i - 1] == MARK_LOW and mark[i + 1] == MARK_LOW and x[i - 1] == x[i + 1] == m
+    empty = plot_arrays(ForceTrace(), [], t_end=1.0)
+    assert len(empty[0]) == 1
+
+
+def test_situation_faces_take_the_least_stable_class_per_face():
+    from dlovr.model.discrete import Stability, parse_discrete_situation
+    from dlovr.ui.drawing import situation_faces
+
+    sit = parse_discrete_situation("V/G & E/F[t.F1] & E/N & V/E^LI[t.F1,t.F2]")
+    faces = situation_faces(sit)
+    assert faces == {"t.F1": Stability.INSTABLE, "t.F2": Stability.INSTABLE}  # F1: stable and instable
+    assert situation_faces(parse_discrete_situation("V/G & E/F[t.F1] & V/N")) == {"t.F1": Stability.STABLE}
+    assert situation_faces(parse_discrete_situation("V/G & E/N & V/N")) == {}
+    assert situation_faces(None) == {}
+
+
+# --------------------------------------------------------------------------------------------------
+# Browser
+# --------------------------------------------------------------------------------------------------
+
+
 def the_client(srv: DemoServer):
     clients = list(srv.server.get_clients().values())
     assert len(clients) == 1

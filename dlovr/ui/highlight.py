@@ -41,6 +41,7 @@ class FaceHighlighter:
         for h in [*self._meshes.values(), *self.labels.values()]:
             h.remove()
         self._meshes, self.labels, self.shown = {}, {}, {}
+        self.pinned = None  # a situation hovered over the old obstacles means nothing here
         self._faces = {
             name: (np.asarray(tris, dtype=float), np.asarray(normal, dtype=float))
             for obj in geometry.objects

@@ -341,6 +341,9 @@ class DemoServer:
 
     def _on_disconnect(self, client: Any) -> None:
         self.viewport.camera_ready.pop(client.client_id, None)
+        if self.viewport.faces.pinned is not None and not self._stop.is_set():
+            with self._draw_lock:  # it may have gone away while hovering a situation
+                self.viewport.faces.pin(None)
         ended = self._dragging.pop(client.client_id, -1.0)
         if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
             return

@@ -119,6 +119,8 @@ class TimelinePanel:
             app._view = None
             app._view_scene = None
         if app.server is not None:
+            with app._draw_lock:
+                app.viewport.faces.pin(None)
             if was_other:
                 app.viewport.show_obstacles(app.session.geometry, app.session.scene)
                 if scene_name != app.session.scene.name:
