@@ -1,6 +1,6 @@
 """`dlovr serve` as a browser sees it: cable updates per second and gizmo-to-cable latency.
 
-Run: ``.venv/bin/python benchmarks/bench_ui.py [--scene table] [--seconds 5] [--trials 20]``
+Run: ``.venv/bin/python benchmarks/bench_ui.py [--scene table] [--seconds 5] [--trials 20] [--publish-hz HZ]``
 
 Starts a :class:`dlovr.ui.DemoServer` in-process and opens it in headless Debian chromium
 (``/usr/bin/chromium``, software WebGL) through Playwright. Every websocket frame the page receives is
@@ -12,7 +12,9 @@ decoded (viser's wire format: zstd-compressed msgpack) and timestamped as it arr
   from sending it until the first frame carrying both the cable and a moved gripper (they are
   published together). Median and 90th percentile over ``--trials``.
 
-Targets (issue 6): at least 30 updates/s, at most 50 ms median latency.
+Targets (issue 21): at least 60 updates/s, at most 50 ms median latency. The server's own publish rate
+is printed beside the count that reaches the page: on a loaded machine the two differ when the
+server's send loop runs late and sends two publishes in one frame.
 """
 
 from __future__ import annotations
@@ -205,7 +207,7 @@ def main() -> None:
             f"latency, {label}: median {statistics.median(v):.1f} ms, p90 {p90:.1f} ms "
             f"({len(v)}/{args.trials} trials)"
         )
-    print("targets: >= 30 cable updates/s, <= 50 ms median gizmo-to-cable latency (the 'browser' line)")
+    print("targets: >= 60 cable updates/s, <= 50 ms median gizmo-to-cable latency (the 'browser' line)")
 
 
 if __name__ == "__main__":
