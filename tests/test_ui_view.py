@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from test_ui import drag, line_down, open_page, wait_for
 
+from dlovr.recording import Recording
 from dlovr.ui import DemoServer
 from dlovr.ui.framing import box_corners, projected_extent
 
@@ -108,7 +109,18 @@ def test_plot_arrays_mark_each_transition_with_a_vertical_line():
         i = int(np.nonzero((x == m) & (mark == MARK_HIGH))[0][0])
         assert mark[i - 1] == MARK_LOW and mark[i + 1] == MARK_LOW and x[i - 1] == x[i + 1] == m
     empty = plot_arrays(ForceTrace(), [], t_end=1.0)
-    assert len(empty[0]) == 1
+    assert len(empty[0]) == 1 and np.all(np.isfinite(np.concatenate(empty)))
+
+
+def test_plot_arrays_cut_a_sparse_trace_at_the_window_and_hold_nothing():
+    from dlovr.ui.forces import ForceTrace, plot_arrays
+
+    tr = ForceTrace(every=1)
+    for t, fz in ((1.0, -1.0), (3.0, -3.0), (4.0, -4.0)):
+        tr.append(t, [0.0, 0.0, fz])
+    x, _, _, fz, _, _ = plot_arrays(tr, [], t_end=7.0, window=5.0)
+    assert np.allclose(x, [2.0, 3.0, 4.0])  # the line cut at the window's left edge, nothing after 4 s
+    assert np.allclose(fz, [-2.0, -3.0, -4.0])
 
 
 def test_situation_faces_take_the_least_stable_class_per_face():
@@ -306,6 +318,15 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
         return len(x) >= 2 and x[0] >= t - 5.5 and x[-1] <= t + 1e-6
 
     wait_for(at_moment, timeout=10, what="the browser's plot data at the moment")
+    # then the force at every step, re-simulated from the recording in the background
+    wait_for(lambda: "re-simulated" in server.force_panel.plot.title, timeout=60, what="the re-simulation")
+    wait_for(lambda: len(plot_data(page)[0]) > 100, timeout=10, what="the dense plot in the browser")
+    x, mag = plot_data(page)[0], plot_data(page)[4]
+    assert x[-1] <= t + 1e-6 and x[-1] > t - 0.05
+    sparse = Recording(path).states()
+    assert abs(mag[0] - np.linalg.norm(sparse[0]["gripper_force"])) < 0.05  # it hangs: its weight
+    page.locator(".uplot").first.scroll_into_view_if_needed()
+    shot(page, "force-plot-recording-scrubbed")
     page.close()
 
 

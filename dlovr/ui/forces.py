@@ -86,29 +86,33 @@ def plot_arrays(
     """The force plot's data: x (s), Fx, Fy, Fz, |F| (N) over ``[t_end - window, t_end]``, and the
     transition series with a vertical line at each time of ``marks`` in the window.
 
-    Each mark adds three x samples at its time (the forces interpolated there) on which the
-    transition series goes up and down; elsewhere it stays off the plot.
+    A sample before the window is moved to the window's edge with the value the drawn line has there
+    (interpolated). Each mark adds three x samples at its time, with the forces interpolated there,
+    on which the transition series goes up and down; elsewhere it stays off the plot. (uPlot draws
+    nothing sensible through NaN values, so every x sample carries a force.)
     """
     t0 = t_end - window
     t, f = trace.window(t0, t_end)
-    ms = np.array(sorted(m for m in marks if t0 <= m <= t_end), dtype=float)
-    if len(t) == 0 and len(ms) == 0:
-        z = np.zeros(1)
-        return (np.array([t_end]), z, z, z, z, np.full(1, MARK_LOW))
-    if len(ms):
-        if len(t):
-            fm = np.stack([np.interp(ms, t, f[:, k]) for k in range(3)], axis=1)
+    if len(t) and t[0] < t0:
+        if len(t) >= 2:  # cut the line from the sample before the window at the window's edge
+            w = (t0 - t[0]) / (t[1] - t[0]) if t[1] > t[0] else 1.0
+            f[0] = f[0] + w * (f[1] - f[0])
+            t[0] = t0
         else:
-            fm = np.zeros((len(ms), 3))
-        tm = np.repeat(ms, 3)
-        fm = np.repeat(fm, 3, axis=0)
-        mk = np.tile([MARK_LOW, MARK_HIGH, MARK_LOW], len(ms))
-        x = np.concatenate([t, tm])
-        ff = np.concatenate([f, fm])
-        mark = np.concatenate([np.full(len(t), MARK_LOW), mk])
+            t, f = t[1:], f[1:]
+    ms = np.array(sorted(m for m in marks if t0 <= m <= t_end), dtype=float)
+    if not len(t):
+        if not len(ms):
+            z = np.zeros(1)
+            return (np.array([t_end]), z, z, z, z, np.full(1, MARK_LOW))
+        t, f = ms[:1].copy(), np.zeros((1, 3))  # no force known: a flat zero line under the marks
+    mark = np.full(len(t), MARK_LOW)
+    if len(ms):
+        fm = np.stack([np.interp(ms, t, f[:, k]) for k in range(3)], axis=1)
+        x = np.concatenate([t, np.repeat(ms, 3)])
+        f = np.concatenate([f, np.repeat(fm, 3, axis=0)])
+        mark = np.concatenate([mark, np.tile([MARK_LOW, MARK_HIGH, MARK_LOW], len(ms))])
         order = np.argsort(x, kind="stable")  # a mark's three samples stay in their order
-        x, ff, mark = x[order], ff[order], mark[order]
-    else:
-        x, ff, mark = t, f, np.full(len(t), MARK_LOW)
-    mag = np.linalg.norm(ff, axis=1)
-    return (x, ff[:, 0].copy(), ff[:, 1].copy(), ff[:, 2].copy(), mag, mark)
+        t, f, mark = x[order], f[order], mark[order]
+    mag = np.linalg.norm(f, axis=1)
+    return (t, f[:, 0].copy(), f[:, 1].copy(), f[:, 2].copy(), mag, mark)

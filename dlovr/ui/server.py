@@ -155,6 +155,7 @@ class DemoServer:
     def stop(self) -> Path | None:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self._stop.set()
+        self.timeline_panel.cancel_resim()
         if self._thread is not None:
             self._thread.join(timeout=10)
             self._thread = None

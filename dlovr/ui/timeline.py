@@ -4,6 +4,7 @@ through, either live (filled by :class:`dlovr.ui.session.Session`) or read from 
 from __future__ import annotations
 
 import html
+import threading
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +54,7 @@ class Timeline:
     snapshots: deque = field(default_factory=lambda: deque(maxlen=20000))
     source: str = "live"
     forces: ForceTrace = field(default_factory=ForceTrace)
+    forces_note: str = ""  # where the forces come from, when not from the live simulation
 
     def transition_times(self) -> list[float]:
         """Start times (s) of the kept situations entered by a classified transition."""
@@ -163,6 +165,7 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])
     tl.forces = ForceTrace(every=1)  # the gripper force where the contact state changed
+    tl.forces_note = "samples at contact-state changes"
     for p, t in zip(states, st_t, strict=True):
         gf = p.get("gripper_force")
         if gf is not None and len(gf) == 3 and (not len(tl.forces) or t >= tl.forces.t[-1]):
@@ -184,3 +187,28 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
                         classes[i] = cls
         tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text, faces))
     return tl, scene, rec
+
+
+def resimulated_forces(rec: Any, scene: Scene, stop: threading.Event | None = None) -> ForceTrace | None:
+    """The gripper force of a recording at every step (mean of 5 steps, as live), by re-simulating it
+    from its first checkpoint and its command stream, as ``dlovr replay`` does (bit for bit the
+    recorded run with the same MuJoCo version); None when ``stop`` was set meanwhile.
+
+    ``rec`` is the :class:`dlovr.recording.Recording`, ``scene`` its embedded scene.
+    """
+    from dlovr.sim import SimState, Simulator
+
+    steps, pos, quat = rec.commands()
+    first = rec.checkpoints()[0]
+    sim = Simulator(scene, pieces=rec.pieces, track=False)  # the contacts are not needed here
+    sim.set_state(SimState(first.state, first.step, first.target_pos, first.target_quat))
+    trace = ForceTrace()
+    r = sim.record()
+    trace.append(r.time, r.gripper_force)
+    for i in range(len(steps)):
+        if stop is not None and i % 100 == 0 and stop.is_set():
+            return None
+        sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
+        r = sim.step()
+        trace.add(r.time, r.gripper_force)
+    return trace

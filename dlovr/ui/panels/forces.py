@@ -73,9 +73,10 @@ class ForcePanel:
         bands = [b for b in tl.bands if b.classes and b.start <= t]
         live = tl is self.app.session.timeline
         title = f"force on the gripper [N] up to {t:.2f} s"
-        if not live:
-            title += " (samples: contact-state changes)"
-        self._show(data, bands, "live" if live else "recording", title)
+        if tl.forces_note:
+            title += f" ({tl.forces_note})"
+        dense = live or tl.forces.every > 1  # a step-rate trace, not samples at state changes
+        self._show(data, bands, "live" if dense else "recording", title)
 
     def _show(self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str) -> None:
         if not hasattr(self, "plot"):

@@ -3,6 +3,7 @@ through them (live or a recording file), and opening a recording."""
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,7 +13,7 @@ from dlovr.geometry import SceneGeometry
 from dlovr.model.transitions import format_classes
 from dlovr.recording import RecordingError
 from dlovr.scene import SceneError
-from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline
+from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline, resimulated_forces
 
 if TYPE_CHECKING:
     import viser
@@ -28,6 +29,8 @@ class TimelinePanel:
     def __init__(self, app: DemoServer) -> None:
         self.app = app
         self._key: Any = None
+        self._resim_stop: threading.Event | None = None
+        self.resim_thread: threading.Thread | None = None
 
     def build(self, gui: viser.GuiApi) -> None:
         app = self.app
@@ -69,9 +72,17 @@ class TimelinePanel:
     def open_recording(self, path: str | Path) -> Timeline:
         app = self.app
         tl, scene, rec = recording_timeline(path)
+        self.cancel_resim()
         with app.lock:
             app._view = tl
             app._view_scene = scene
+        # the recording stores the force only where the contact state changed: re-simulate it for
+        # the force at every step, in the background (the plot shows the samples meanwhile)
+        stop = self._resim_stop = threading.Event()
+        self.resim_thread = threading.Thread(
+            target=self._resim, args=(tl, rec, scene, stop), name="dlovr-resim", daemon=True
+        )
+        self.resim_thread.start()
         if app.server is not None:
             app.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
             if scene.name != app.session.scene.name:
@@ -80,6 +91,27 @@ class TimelinePanel:
             self.update(force=True)
             app.scrub(tl.start)
         return tl
+
+    def _resim(self, tl: Timeline, rec: Any, scene: Any, stop: threading.Event) -> None:
+        try:
+            trace = resimulated_forces(rec, scene, stop)
+        except Exception as e:  # keep the recorded samples; a worker thread must not raise
+            tl.forces_note = f"samples at contact-state changes (re-simulation failed: {e})"
+            return
+        if trace is None:
+            return
+        tl.forces, tl.forces_note = trace, "re-simulated"
+        app = self.app
+        if app._view is tl and app.server is not None:
+            app.force_panel.show_at(tl, float(self.slider.value))
+
+    def cancel_resim(self) -> None:
+        """Stop a re-simulation of a recording's forces in progress (another view, or the server stops)."""
+        if self._resim_stop is not None:
+            self._resim_stop.set()
+        if self.resim_thread is not None:
+            self.resim_thread.join(timeout=5)
+            self.resim_thread = None
 
     def scrub(self, t: float) -> Snapshot | None:
         app = self.app
@@ -113,6 +145,7 @@ class TimelinePanel:
 
     def live(self) -> None:
         app = self.app
+        self.cancel_resim()
         with app.lock:
             was_other = app._view_scene is not None
             scene_name = app._view_scene.name if was_other else ""
