@@ -320,10 +320,15 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     wait_for(at_moment, timeout=10, what="the browser's plot data at the moment")
     # then the force at every step, re-simulated from the recording in the background
     wait_for(lambda: "re-simulated" in server.force_panel.plot.title, timeout=60, what="the re-simulation")
-    wait_for(lambda: len(plot_data(page)[0]) > 100, timeout=10, what="the dense plot in the browser")
+
+    def dense() -> bool:  # a sample every 20 ms, not one per contact-state change
+        x = plot_data(page)[0]
+        return len(x) > 20 and float(np.median(np.diff(x))) <= 0.021
+
+    wait_for(dense, timeout=10, what="the dense plot in the browser")
     x, mag = plot_data(page)[0], plot_data(page)[4]
     assert x[-1] <= t + 1e-6 and x[-1] > t - 0.05
-    sparse = Recording(path).states()
+    sparse = Recording(path).states()  # the recorded samples
     assert abs(mag[0] - np.linalg.norm(sparse[0]["gripper_force"])) < 0.05  # it hangs: its weight
     page.locator(".uplot").first.scroll_into_view_if_needed()
     shot(page, "force-plot-recording-scrubbed")

@@ -3,8 +3,10 @@
 The simulator records the force (N, world frame) that the holding constraints exert on the gripper,
 as a wrist force sensor reads it (``StepRecord.gripper_force``); it records no torque, so the plot
 shows the force only: its x, y, z components and its magnitude. Live, :class:`ForceTrace` keeps the
-mean of every few steps; a recording stores the force in its contact-state messages, so there the
-samples are the moments the contact state changed.
+mean of every 10 steps (20 ms at the 2 ms step: 250 points over the 5 s the plot shows, about its
+width in pixels, which keeps each update small). A recording stores the force in its contact-state
+messages only, the moments the contact state changed; the UI re-simulates it for the rest
+(:func:`dlovr.ui.timeline.resimulated_forces`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ class ForceTrace:
     stores a sample as it is. At ``capacity`` samples the older half is dropped.
     """
 
-    def __init__(self, every: int = 5, capacity: int = 100_000) -> None:
+    def __init__(self, every: int = 10, capacity: int = 100_000) -> None:
         self.every = max(1, int(every))
         self.capacity = max(16, int(capacity))
         self._t = np.empty(self.capacity)

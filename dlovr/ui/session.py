@@ -35,7 +35,7 @@ class Session:
         self.recorder: DemoRecorder | None = None
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
-        self.forces = ForceTrace()  # the gripper force, mean of every 5 steps (10 ms)
+        self.forces = ForceTrace()  # the gripper force, mean of every 10 steps
         self.forces.append(self.record.time, self.record.gripper_force)
         self.timeline = Timeline(forces=self.forces)
         self._kept_seen = 0

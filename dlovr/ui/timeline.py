@@ -190,7 +190,7 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
 
 
 def resimulated_forces(rec: Any, scene: Scene, stop: threading.Event | None = None) -> ForceTrace | None:
-    """The gripper force of a recording at every step (mean of 5 steps, as live), by re-simulating it
+    """The gripper force of a recording at every step (mean of 10 steps, as live), by re-simulating it
     from its first checkpoint and its command stream, as ``dlovr replay`` does (bit for bit the
     recorded run with the same MuJoCo version); None when ``stop`` was set meanwhile.
 
