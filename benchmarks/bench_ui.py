@@ -1,6 +1,6 @@
 """`dlovr serve` as a browser sees it: cable updates per second and gizmo-to-cable latency.
 
-Run: ``.venv/bin/python benchmarks/bench_ui.py [--scene table] [--seconds 5] [--trials 20]``
+Run: ``.venv/bin/python benchmarks/bench_ui.py [--scene table] [--seconds 5] [--trials 20] [--publish-hz HZ]``
 
 Starts a :class:`dlovr.ui.DemoServer` in-process and opens it in headless Debian chromium
 (``/usr/bin/chromium``, software WebGL) through Playwright. Every websocket frame the page receives is
@@ -12,7 +12,9 @@ decoded (viser's wire format: zstd-compressed msgpack) and timestamped as it arr
   from sending it until the first frame carrying both the cable and a moved gripper (they are
   published together). Median and 90th percentile over ``--trials``.
 
-Targets (issue 6): at least 30 updates/s, at most 50 ms median latency.
+Targets (issue 21): at least 60 updates/s, at most 50 ms median latency. The server's own publish rate
+is printed beside the count that reaches the page: on a loaded machine the two differ when the
+server's send loop runs late and sends two publishes in one frame.
 """
 
 from __future__ import annotations
@@ -93,13 +95,15 @@ def main() -> None:
     ap.add_argument("--scene", default="table")
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--publish-hz", type=float, default=None, help="override the server's publish rate")
     args = ap.parse_args()
     exe = shutil.which("chromium") or "/usr/bin/chromium"
     if not Path(exe).exists():
         sys.exit("chromium not found: apt-get install -y chromium")
     from playwright.sync_api import sync_playwright
 
-    srv = DemoServer(args.scene, port=None, recordings_dir="/tmp/dlovr-bench-recordings").start()
+    kw = {} if args.publish_hz is None else {"publish_hz": args.publish_hz}
+    srv = DemoServer(args.scene, port=None, recordings_dir="/tmp/dlovr-bench-recordings", **kw).start()
     log = FrameLog()
     # server-side marks: when the gizmo target arrives, and each publish with the gripper position
     srv_marks: list[tuple[str, float, np.ndarray]] = []
@@ -132,6 +136,7 @@ def main() -> None:
 
             # -- updates per second while dragging in a circle (20 gizmo updates/s) --
             send(page, "TransformControlsDragStartMessage")
+            pubs0 = srv.publish_count
             t_start = time.perf_counter()
             k = 0
             while time.perf_counter() - t_start < args.seconds:
@@ -144,6 +149,7 @@ def main() -> None:
             send(page, "TransformControlsDragEndMessage")
             cable_frames = [f for f in log.since(t_start) if f[1] and f[0] <= t_end]
             rate = len(cable_frames) / (t_end - t_start)
+            server_rate = (srv.publish_count - pubs0) / (t_end - t_start)
             rtf = srv.status()["rtf"]
 
             # -- latency: one 2 cm step of the gizmo, from rest --
@@ -182,7 +188,10 @@ def main() -> None:
     finally:
         srv.stop()
     print(f"scene {args.scene}: headless chromium (software WebGL), publish rate {srv.publish_hz:.0f} Hz")
-    print(f"cable updates reaching the browser while dragging: {rate:.1f} /s, sim at {rtf:.2f}x real time")
+    print(
+        f"cable updates reaching the browser while dragging: {rate:.1f} /s "
+        f"(published by the server: {server_rate:.1f} /s), sim at {rtf:.2f}x real time"
+    )
     labels = {
         "browser": "gizmo frame sent by the page -> cable frame received by the page",
         "server": "gizmo message handled by the server -> cable flushed",
@@ -198,7 +207,7 @@ def main() -> None:
             f"latency, {label}: median {statistics.median(v):.1f} ms, p90 {p90:.1f} ms "
             f"({len(v)}/{args.trials} trials)"
         )
-    print("targets: >= 30 cable updates/s, <= 50 ms median gizmo-to-cable latency (the 'browser' line)")
+    print("targets: >= 60 cable updates/s, <= 50 ms median gizmo-to-cable latency (the 'browser' line)")
 
 
 if __name__ == "__main__":

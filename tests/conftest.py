@@ -1,6 +1,11 @@
-"""Shared test setup: a private decomposition cache, so tests never touch the user's cache."""
+"""Shared test setup: a private decomposition cache, so tests never touch the user's cache; the headless
+chromium of the browser tests (tests/test_ui.py, tests/test_ui_view.py)."""
 
 from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterator
 
 import pytest
 
@@ -11,3 +16,32 @@ def _private_cache(tmp_path_factory):
     mp.setenv("DLOVR_CACHE_DIR", str(tmp_path_factory.mktemp("dlovr-cache")))
     yield
     mp.undo()
+
+
+def _chromium() -> str:
+    path = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
+    if path is None:
+        msg = (
+            "chromium not found: install it with `sudo apt-get install -y chromium` (Debian/Ubuntu) "
+            "to run the browser tests (never `playwright install`)"
+        )
+        if os.environ.get("CI"):
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return path
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[object]:
+    """Headless chromium (Playwright) with software WebGL; skips without chromium (fails under CI)."""
+    exe = _chromium()
+    from playwright.sync_api import sync_playwright
+
+    from dlovr.ui import HEADLESS_CHROMIUM_ARGS
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=exe, args=HEADLESS_CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()

@@ -1,7 +1,10 @@
 """Pure helpers (no viser) for drawing the cable: a unit cylinder on each segment, each point's colour
-by the stability class of the contact it belongs to, and the contact vectors as arrows."""
+by the stability class of the contact it belongs to, the contact vectors as arrows, and the faces
+the contacts touch."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -52,6 +55,26 @@ def point_classes(state: ContactState | None, npoints: int) -> list[Stability | 
             if prev is None or _rank(cls) > _rank(prev):
                 out[i] = cls
     return out
+
+
+def situation_faces(situation: Any) -> dict[str, Stability]:
+    """The obstacle faces a discrete situation's contacts touch, each with the stability class of its
+    least stable contact (free and gripper contacts touch none)."""
+    out: dict[str, Stability] = {}
+    if situation is None:
+        return out
+    for c in situation.contacts:
+        cls = c.state.stability_class
+        if cls is None:
+            continue
+        for f in c.faces:
+            prev = out.get(f)
+            if prev is None or _rank(cls) > _rank(prev):
+                out[f] = cls
+    return out
+
+
+STABILITY_WORDS = {Stability.STABLE: "stable", Stability.SEMI: "semi-stable", Stability.INSTABLE: "instable"}
 
 
 def _rank(c: Stability) -> int:

@@ -4,7 +4,7 @@
 its :class:`dlovr.sim.tracker.ContactTracker` and, while recording, a
 :class:`dlovr.recording.DemoRecorder`. A background thread (:mod:`dlovr.ui.loop`) steps the simulation
 at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the cable, the gripper
-and the contact feedback at ~40 Hz, each update in one ``server.atomic()`` block followed by
+and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block followed by
 ``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
 server-wide): the 3D scene is drawn by :class:`dlovr.ui.viewport.Viewport`, the GUI is built by the
 panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation).
@@ -16,8 +16,10 @@ recording in progress is independent of the tabs and is finished by :meth:`DemoS
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import socket
+import sys
 import threading
 import time
 from pathlib import Path
@@ -28,14 +30,26 @@ import viser
 
 from dlovr.scene import Scene, load_scene
 from dlovr.transforms import quat_mul
-from dlovr.ui.drawing import contact_arrows, point_classes, point_colors
+from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
 from dlovr.ui.loop import realtime_loop
-from dlovr.ui.panels import RecordingPanel, SimulationPanel, StatePanel, TimelinePanel, status_markdown
+from dlovr.ui.panels import (
+    ForcePanel,
+    RecordingPanel,
+    SimulationPanel,
+    StatePanel,
+    TimelinePanel,
+    status_markdown,
+)
 from dlovr.ui.session import Session
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
 
-PUBLISH_HZ = 40.0
+PUBLISH_HZ = 62.5
+"""Cable frames per second sent to the browsers (the loop of :mod:`dlovr.ui.loop`): a little above the
+browsers' 60 frames/s, so that timer jitter does not bring the count under it."""
+
+PANEL_HZ = 10.0
+"""Updates per second of the panels that change with time (situation text, timeline, force plot)."""
 
 
 HEADLESS_CHROMIUM_ARGS = [
@@ -97,11 +111,14 @@ class DemoServer:
         self._view: Timeline | None = None  # a timeline being scrubbed (None: live view)
         self._view_scene: Scene | None = None
         self.program_text = ""
+        self.last_program: Any = None  # the last recording's compiled program
         self.last_recording: Path | None = None
         self.publish_count = 0
+        self._panels_at = 0.0
         self._rtf = 1.0
         self.viewport = Viewport(self)
         self.state_panel = StatePanel()
+        self.force_panel = ForcePanel(self)
         self.recording_panel = RecordingPanel(self)
         self.timeline_panel = TimelinePanel(self)
         self.simulation_panel = SimulationPanel(self)
@@ -121,6 +138,7 @@ class DemoServer:
         srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
         self.server = srv
         srv.gui.configure_theme(show_share_button=False, control_width="large")
+        srv.gui.main_panel.dock_right()  # the panel beside the 3D view, not over it (framing)
         srv.scene.configure_environment_map(None)
         srv.scene.add_light_ambient("/ambient", intensity=1.2)
         srv.scene.add_light_directional("/sun", intensity=1.5, position=(1.0, -1.0, 2.0))
@@ -137,6 +155,7 @@ class DemoServer:
     def stop(self) -> Path | None:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self._stop.set()
+        self.timeline_panel.cancel_resim()
         if self._thread is not None:
             self._thread.join(timeout=10)
             self._thread = None
@@ -256,31 +275,45 @@ class DemoServer:
             }
 
     def _publish(self) -> None:
+        """One frame of the live view: the cable and the gripper body every time (the real-time loop
+        calls this at ``publish_hz``); the situation text, the timeline and the force plot at most
+        ``PANEL_HZ`` times a second (they cost the browser a re-render each)."""
         srv = self.server
         if srv is None:
             return
+        now = time.perf_counter()
+        slow = now - self._panels_at >= 1.0 / PANEL_HZ
         with self.lock:
             s = self.session
             rec, st = s.record, s.state
-            text = status_markdown(
-                st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
-            )
+            text = None
+            if slow:
+                text = status_markdown(
+                    st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
+                )
             viewing = self._view is not None
         if not viewing:
             pts = np.asarray(rec.points, dtype=float)
             colors = point_colors(point_classes(st, len(pts)))
             arrows = contact_arrows(st, pts)
+            faces = situation_faces(st.discrete if st is not None else None)
             view = self.viewport
             with self._draw_lock, srv.atomic():
                 if self._view is not None:
                     return
                 view.draw_cable(pts, colors, arrows)
+                view.faces.show(faces)
                 view.body.position = tuple(map(float, rec.gripper_pos))
                 view.body.wxyz = tuple(map(float, rec.gripper_quat))
-                self.state_panel.show_live(text)
+                if text is not None:
+                    self.state_panel.show_live(text)
             srv.flush()
             self.publish_count += 1
-        self.timeline_panel.update()
+        if slow:
+            self._panels_at = now
+            self.timeline_panel.update()
+            if not viewing:
+                self.force_panel.show_live()
 
     # -- the GUI ----------------------------------------------------------------------------------
 
@@ -288,6 +321,7 @@ class DemoServer:
         gui = self.server.gui
         self.viewport.build_gizmo()
         self.state_panel.build(gui)
+        self.force_panel.build(gui)
         self.recording_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
@@ -300,9 +334,17 @@ class DemoServer:
     # -- clients ------------------------------------------------------------------------------------
 
     def _on_connect(self, client: Any) -> None:
-        pass
+        """Frame the workspace for the new tab once its camera has reported (its aspect is known)."""
+
+        @client.camera.on_update
+        def _(cam: Any) -> None:
+            self.viewport.camera_update(client)
 
     def _on_disconnect(self, client: Any) -> None:
+        self.viewport.camera_ready.pop(client.client_id, None)
+        if self.viewport.faces.pinned is not None and not self._stop.is_set():
+            with self._draw_lock:  # it may have gone away while hovering a situation
+                self.viewport.faces.pin(None)
         ended = self._dragging.pop(client.client_id, -1.0)
         if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
             return
@@ -310,9 +352,31 @@ class DemoServer:
             self.hold()  # it went away mid-drag: the gripper stays where it is now
 
 
+def exposure_warning(host: str, port: int) -> str | None:
+    """The warning printed when ``host`` is not a loopback address (None for a loopback one)."""
+    h = host.strip().strip("[]")
+    if h.lower() == "localhost":
+        return None
+    try:
+        if ipaddress.ip_address(h).is_loopback:
+            return None
+    except ValueError:
+        pass  # a host name, or "" (every interface): treat as reachable from outside
+    where = h or "every interface"
+    return (
+        f"dlovr serve: WARNING: listening on {where}, not on loopback: anyone who can reach port {port} "
+        "can drive the simulation and write recordings on this machine (there is no authentication); "
+        "use --host 127.0.0.1 unless that is what you want"
+    )
+
+
 def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
-    """Run the server until Ctrl-C (used by ``dlovr serve``)."""
+    """Run the server until Ctrl-C (used by ``dlovr serve``); warns on stderr when ``host`` is not
+    loopback."""
     srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
+    warning = exposure_warning(host, srv.port)
+    if warning is not None:
+        print(warning, file=sys.stderr, flush=True)
     print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
     try:
         while True:

@@ -4,6 +4,7 @@ live timeline, shared by the real-time thread and the GUI callbacks under one lo
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,8 @@ from dlovr.recording import DemoRecorder
 from dlovr.scene import Scene
 from dlovr.sim import SimulationDiverged, Simulator
 from dlovr.sim.tracker import ContactTracker
-from dlovr.ui.drawing import point_classes, point_colors
+from dlovr.ui.drawing import point_classes, point_colors, situation_faces
+from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
 
@@ -33,12 +35,15 @@ class Session:
         self.recorder: DemoRecorder | None = None
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
-        self.timeline = Timeline()
+        self.forces = ForceTrace()  # the gripper force, mean of every 10 steps
+        self.forces.append(self.record.time, self.record.gripper_force)
+        self.timeline = Timeline(forces=self.forces)
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self.note = ""
         self._class_cache: dict[Any, tuple[str, ...]] = {}
         self._format_cache: dict[Any, str] = {}
+        self._faces_cache: dict[Any, dict[str, Any]] = {}
         self._snapshot()
 
     @property
@@ -51,13 +56,20 @@ class Session:
                 return format_classes(b.classes)
         return ""
 
-    def advance(self, n: int, target: tuple[np.ndarray, np.ndarray] | None) -> bool:
-        """Step ``n`` times toward ``target``; False (and the state restored) if the sim diverged."""
+    def advance(
+        self, n: int, target: tuple[np.ndarray, np.ndarray] | None, deadline: float | None = None
+    ) -> int | None:
+        """Step up to ``n`` times toward ``target``, stopping early (after at least one step) once
+        ``time.perf_counter()`` reaches ``deadline``; the number of steps taken, or None (and the
+        state restored) if the sim diverged."""
+        done = 0
         with self.lock:
             sim = self.sim
             if target is not None:
                 sim.set_target(target[0], target[1])
             for _ in range(n):
+                if done and deadline is not None and time.perf_counter() >= deadline:
+                    break
                 good = sim.get_state()
                 try:
                     rec = sim.step()
@@ -68,13 +80,15 @@ class Session:
                     )
                     self.record = sim.record()
                     self.note = f"simulation diverged ({e.reason}); gripper stopped, state restored"
-                    return False
+                    return None
                 st = rec.state  # the simulator tracks the contacts (track=True)
                 if self.recorder is not None:
                     self.recorder.step(rec)
                 self.record, self.state = rec, st
+                self.forces.add(rec.time, rec.gripper_force)
+                done += 1
             self._timeline_update()
-            return True
+            return done
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept
@@ -85,7 +99,7 @@ class Session:
         for i in range(start, len(kept)):
             k = kept[i]
             classes = self._classes(kept[i - 1].situation, k.situation) if i else ()
-            bands.append(Band(k.start, k.end, self._format(k.situation), classes))
+            bands.append(Band(k.start, k.end, self._format(k.situation), classes, self._faces(k.situation)))
         self._kept_seen = len(kept)
         if grew or self.record.time - self._last_snap_t >= 0.1:
             self._snapshot()
@@ -95,6 +109,11 @@ class Session:
         if key not in self._class_cache:
             self._class_cache[key] = tuple(classify_step(a, b))
         return self._class_cache[key]
+
+    def _faces(self, sit: Any) -> dict[str, Any]:
+        if sit not in self._faces_cache:
+            self._faces_cache[sit] = situation_faces(sit)
+        return self._faces_cache[sit]
 
     def _format(self, sit: Any) -> str:
         if sit not in self._format_cache:
@@ -112,12 +131,13 @@ class Session:
                 r.gripper_pos.copy(),
                 r.gripper_quat.copy(),
                 st.discrete.format(),
+                situation_faces(st.discrete),
             )
         )
         self._last_snap_t = r.time
 
     def restart_timeline(self) -> None:
-        self.timeline = Timeline()
+        self.timeline = Timeline(forces=self.forces)
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self._snapshot()

@@ -4,6 +4,7 @@ through, either live (filled by :class:`dlovr.ui.session.Session`) or read from 
 from __future__ import annotations
 
 import html
+import threading
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +16,8 @@ from dlovr.model.discrete import Stability
 from dlovr.model.transitions import classify_step, format_classes
 from dlovr.recording import Recording, kept_states
 from dlovr.scene import Scene
-from dlovr.ui.drawing import point_colors
+from dlovr.ui.drawing import point_colors, situation_faces
+from dlovr.ui.forces import ForceTrace
 
 BAND_COLORS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#9c755f")
 
@@ -30,6 +32,7 @@ class Snapshot:
     gripper_pos: np.ndarray
     gripper_quat: np.ndarray
     text: str
+    faces: dict[str, Stability] = field(default_factory=dict)  # faces touched, by stability class
 
 
 @dataclass
@@ -40,6 +43,7 @@ class Band:
     end: float
     situation: str
     classes: tuple[str, ...]
+    faces: dict[str, Stability] = field(default_factory=dict)  # faces touched, by stability class
 
 
 @dataclass
@@ -49,6 +53,12 @@ class Timeline:
     bands: list[Band] = field(default_factory=list)
     snapshots: deque = field(default_factory=lambda: deque(maxlen=20000))
     source: str = "live"
+    forces: ForceTrace = field(default_factory=ForceTrace)
+    forces_note: str = ""  # where the forces come from, when not from the live simulation
+
+    def transition_times(self) -> list[float]:
+        """Start times (s) of the kept situations entered by a classified transition."""
+        return [b.start for b in self.bands if b.classes]
 
     @property
     def end(self) -> float:
@@ -77,33 +87,62 @@ class Timeline:
                 return b
         return self.bands[-1] if self.bands and t >= self.bands[-1].start else None
 
-    def html(self) -> str:
-        """Coloured bands, one per kept situation, transitions marked with their classes."""
+    def html(self, pick_uuid: str | None = None) -> str:
+        """Coloured bands, one per kept situation, transitions marked with their classes, and a list
+        of the last situations.
+
+        With ``pick_uuid`` (a text input of the page), hovering a band or a row sends ``h<i>`` to that
+        input, leaving it sends an empty value, and clicking sends ``c<i>:<ms>`` (``i``: the index of
+        the situation in :attr:`bands`); the server highlights its faces or scrubs to it.
+        """
         t0, t1 = self.start, self.end
         span = max(t1 - t0, 1e-9)
         colors: dict[str, str] = {}
         cells = []
-        for b in self.bands:
+        for i, b in enumerate(self.bands):
             c = colors.setdefault(b.situation, BAND_COLORS[len(colors) % len(BAND_COLORS)])
             w = max(0.5, 100.0 * (b.end - b.start) / span)
             label = format_classes(b.classes) if b.classes else ""
             tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
             border = "border-left:2px solid #000;" if b.classes else ""
-            cells.append(f'<div title="{tip}" style="width:{w:.2f}%;background:{c};{border}"></div>')
+            cells.append(
+                f'<div title="{tip}" data-situation="{i}"{_pick_handlers(pick_uuid, i)} '
+                f'style="width:{w:.2f}%;background:{c};{border}cursor:pointer"></div>'
+            )
         bar = (
             '<div class="dlovr-timeline" style="display:flex;height:14px;width:100%;'
             f'background:#ddd;overflow:hidden;border-radius:3px">{"".join(cells)}</div>'
         )
+        first = max(0, len(self.bands) - 8)
         rows = "".join(
-            f"<li>{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
+            f'<li data-situation="{first + k}"{_pick_handlers(pick_uuid, first + k)} style="cursor:pointer">'
+            f"{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
             f"<code>{html.escape(b.situation)}</code></li>"
-            for b in self.bands[-8:]
+            for k, b in enumerate(self.bands[first:])
         )
         src = html.escape(self.source)
         return (
             f'<div style="font-size:11px">{bar}<div>{src}: {len(self.bands)} situations, '
             f"{t0:.2f}-{t1:.2f} s</div><ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
         )
+
+
+def _pick_handlers(uuid: str | None, index: int) -> str:
+    """Inline mouse handlers of a timeline element: send its situation's index to the text input
+    ``uuid`` through the page's viser connection (``GuiUpdateMessage``, as an input edit does)."""
+    if uuid is None or not all(ch.isalnum() or ch in "-_" for ch in uuid):
+        return ""
+
+    def send(value: str) -> str:
+        return (
+            "window.__viserMutable&&window.__viserMutable.sendMessage("
+            f"{{type:'GuiUpdateMessage',uuid:'{uuid}',updates:{{value:{value}}}}})"
+        )
+
+    return (
+        f' onmouseenter="{send(repr(f"h{index}"))}" onmouseleave="{send(repr(""))}"'
+        f" onclick=\"{send(repr(f'c{index}:') + '+Date.now()')}\""
+    )
 
 
 def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
@@ -120,21 +159,56 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     tl = Timeline(source=Path(path).name)
     for i, k in enumerate(kept):
         classes = classify_step(kept[i - 1].situation, k.situation) if i else ()
-        tl.bands.append(Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes)))
+        tl.bands.append(
+            Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes), situation_faces(k.situation))
+        )
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])
+    tl.forces = ForceTrace(every=1)  # the gripper force where the contact state changed
+    tl.forces_note = "samples at contact-state changes"
+    for p, t in zip(states, st_t, strict=True):
+        gf = p.get("gripper_force")
+        if gf is not None and len(gf) == 3 and (not len(tl.forces) or t >= tl.forces.t[-1]):
+            tl.forces.append(float(t), np.asarray(gf, dtype=float))
     for t, pts, gp, gq in rec.frames():
         j = max(0, int(np.searchsorted(st_t, t + 1e-9, side="right")) - 1)
         payload = states[j] if states else None
         classes: list[Stability | None] = [None] * len(pts)
         text = ""
+        faces: dict[str, Stability] = {}
         if payload is not None:
             sit = situation_from_payload(payload)
             text = payload.get("discrete", "")
+            faces = situation_faces(sit)
             for c, m_c in zip(sit.contacts, payload.get("contacts", []), strict=False):
                 span, cls = m_c.get("span"), c.state.stability_class
                 if span and cls is not None:
                     for i in range(max(0, span[0]), min(len(pts) - 1, span[1]) + 1):
                         classes[i] = cls
-        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text))
+        tl.snapshots.append(Snapshot(t, pts, point_colors(classes), gp, gq, text, faces))
     return tl, scene, rec
+
+
+def resimulated_forces(rec: Any, scene: Scene, stop: threading.Event | None = None) -> ForceTrace | None:
+    """The gripper force of a recording at every step (mean of 10 steps, as live), by re-simulating it
+    from its first checkpoint and its command stream, as ``dlovr replay`` does (bit for bit the
+    recorded run with the same MuJoCo version); None when ``stop`` was set meanwhile.
+
+    ``rec`` is the :class:`dlovr.recording.Recording`, ``scene`` its embedded scene.
+    """
+    from dlovr.sim import SimState, Simulator
+
+    steps, pos, quat = rec.commands()
+    first = rec.checkpoints()[0]
+    sim = Simulator(scene, pieces=rec.pieces, track=False)  # the contacts are not needed here
+    sim.set_state(SimState(first.state, first.step, first.target_pos, first.target_quat))
+    trace = ForceTrace()
+    r = sim.record()
+    trace.append(r.time, r.gripper_force)
+    for i in range(len(steps)):
+        if stop is not None and i % 100 == 0 and stop.is_set():
+            return None
+        sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
+        r = sim.step()
+        trace.add(r.time, r.gripper_force)
+    return trace

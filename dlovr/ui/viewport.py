@@ -1,6 +1,7 @@
-"""The 3D viewport: the obstacles (with optional face labels), the cable as batched cylinders and
-balls coloured by stability class, the contact vectors, the gripper body and the gizmo that commands
-the gripper target."""
+"""The 3D viewport: the obstacles (with the faces in contact highlighted and optional face labels,
+:mod:`dlovr.ui.highlight`), the cable as batched cylinders and balls coloured by stability class, the
+contact vectors, the gripper body, the gizmo that commands the gripper target, and the camera framing
+(:mod:`dlovr.ui.framing`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import trimesh
 from dlovr.geometry import SceneGeometry
 from dlovr.scene import Scene
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
+from dlovr.ui.framing import FOV, frame_box
+from dlovr.ui.highlight import FaceHighlighter
 
 if TYPE_CHECKING:
     from dlovr.ui.server import DemoServer
@@ -29,6 +32,9 @@ class Viewport:
         self.joints: Any = None
         self.cable_n = -1
         self.arrows: Any = None
+        # clients whose camera has reported its state -> (aspect, position) of the last framing
+        self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
+        self.faces = FaceHighlighter(app)
 
     def build_gizmo(self) -> None:
         """The transform gizmo: a drag sets the gripper target (:meth:`DemoServer.set_target`)."""
@@ -76,14 +82,17 @@ class Viewport:
         joints.batched_positions = np.asarray(pts, dtype=np.float32)
         joints.batched_colors = colors
         if len(arrows):
-            self.arrows = self.app.server.scene.add_arrows(
-                "/contacts/vectors",
-                points=arrows,
-                colors=(30, 60, 220),
-                shaft_radius=0.002,
-                head_radius=0.006,
-                head_length=0.012,
-            )
+            if self.arrows is not None:
+                self.arrows.points = arrows.astype(np.float32)  # moved in place, not re-created
+            else:
+                self.arrows = self.app.server.scene.add_arrows(
+                    "/contacts/vectors",
+                    points=arrows,
+                    colors=(30, 60, 220),
+                    shaft_radius=0.002,
+                    head_radius=0.006,
+                    head_length=0.012,
+                )
         elif self.arrows is not None:
             self.arrows.remove()
             self.arrows = None
@@ -138,31 +147,13 @@ class Viewport:
                     flat_shading=True,
                 )
             )
-            if self.app.simulation_panel.face_labels:
-                for name, tris, normal in zip(obj.face_names, obj.face_tris, obj.face_normals, strict=True):
-                    tris = np.asarray(tris, dtype=float)
-                    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-                    c3 = (tris.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-12)
-                    self.obstacle_handles.append(
-                        srv.scene.add_label(
-                            f"/obstacles/{obj.name}_labels/{name}",
-                            name,
-                            position=tuple(c3 + 0.01 * np.asarray(normal)),
-                        )
-                    )
+        self.faces.reset(geometry, labels=self.app.simulation_panel.face_labels)
         self.shown_geometry = geometry
 
     def build(self) -> None:
         """(Re)build the scene of the server's session: camera, obstacles, gripper body, cable; called
         under the server's ``_draw_lock``."""
         s = self.app.session
-        lo = np.min([o.mesh.bounds[0] for o in s.geometry.objects] + [s.record.points.min(axis=0)], axis=0)
-        hi = np.max([o.mesh.bounds[1] for o in s.geometry.objects] + [s.record.points.max(axis=0)], axis=0)
-        center = (lo + hi) / 2.0
-        size = float(max(np.linalg.norm(hi - lo), 0.3))
-        cam = self.app.server.initial_camera
-        cam.look_at = tuple(center)
-        cam.position = tuple(center + size * np.array([0.55, -0.8, 0.45]))
         self.cable = None
         self.cable_n = -1
         self.arrows = None
@@ -178,3 +169,55 @@ class Viewport:
             point_colors(point_classes(s.state, len(s.record.points))),
             np.zeros((0, 2, 3)),
         )
+        self.frame()
+
+    # -- the camera ---------------------------------------------------------------------------------
+
+    def scene_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The workspace's bounding box (lo, hi; m, world): the obstacles shown, the cable, the gripper."""
+        app = self.app
+        geo = self.shown_geometry or app.session.geometry
+        with app.lock:
+            pts = [np.asarray(app.session.record.points, dtype=float)]
+            pts.append(np.asarray(app.session.record.gripper_pos, dtype=float)[None] + [[0.0, 0.0, 0.045]])
+        boxes = [np.asarray(o.mesh.bounds, dtype=float) for o in geo.objects]
+        lo = np.min([b[0] for b in boxes] + [p.min(axis=0) for p in pts], axis=0)
+        hi = np.max([b[1] for b in boxes] + [p.max(axis=0) for p in pts], axis=0)
+        return lo, hi
+
+    def frame(self, client: Any = None) -> None:
+        """Point the camera of ``client`` (every connected client if None, and the initial camera that
+        new tabs and *Reset view* use) at the workspace so that it fills most of the view."""
+        srv = self.app.server
+        if srv is None:
+            return
+        lo, hi = self.scene_box()
+        if client is None:
+            pos, look = frame_box(lo, hi, aspect=1.0)
+            cam = srv.initial_camera
+            cam.fov = FOV
+            cam.look_at = tuple(map(float, look))
+            cam.position = tuple(map(float, pos))
+        clients = [client] if client is not None else list(srv.get_clients().values())
+        for c in clients:
+            if c.client_id not in self.camera_ready:
+                continue  # framed when its camera first reports (DemoServer._on_connect)
+            cam = c.camera
+            aspect = cam.aspect
+            pos, look = frame_box(lo, hi, aspect=aspect)
+            with c.atomic():
+                cam.fov = FOV
+                cam.position = tuple(map(float, pos))  # moves look_at along; set it after
+                cam.look_at = tuple(map(float, look))
+            self.camera_ready[c.client_id] = (aspect, pos)
+
+    def camera_update(self, client: Any) -> None:
+        """A client's camera reported: frame it the first time, and again when its view changed shape
+        (the panel docked, the window resized) while the camera is still where the framing put it."""
+        cam = client.camera
+        last = self.camera_ready.get(client.client_id)
+        if last is None:
+            self.camera_ready[client.client_id] = (0.0, np.zeros(3))
+            self.frame(client)
+        elif abs(cam.aspect - last[0]) > 0.01 * last[0] and np.allclose(cam.position, last[1], atol=1e-3):
+            self.frame(client)

@@ -7,8 +7,6 @@ path (``window.__viserMutable.sendMessage``), the way a drag in the browser reac
 
 from __future__ import annotations
 
-import os
-import shutil
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -18,7 +16,6 @@ import numpy as np
 import pytest
 
 from dlovr.recording import Recording, replay
-from dlovr.ui import HEADLESS_CHROMIUM_ARGS as CHROMIUM_ARGS
 from dlovr.ui import DemoServer, Stability, point_classes, segment_transforms
 
 
@@ -73,7 +70,8 @@ def test_server_runs_in_real_time_and_reports_the_table_contact(server: DemoServ
     with server.lock:
         classes = point_classes(server.session.state, len(server.session.record.points))
     assert Stability.STABLE in classes  # points on the table are coloured as stable
-    assert st["force"] > 0
+    # the contact normal forces flicker with the stiff contacts (NOTES.md): some steps carry none
+    wait_for(lambda: server.status()["force"] > 0, what="a contact normal force")
     assert len(st["gripper_force"]) == 3
     # bounded speed: the gripper never jumped to the target
     assert server.session.sim.max_speed <= 0.25
@@ -103,6 +101,30 @@ def test_record_stop_compiles_and_replays(server: DemoServer):
     snap = server.scrub((tl.start + tl.end) / 2)
     assert snap is not None and snap.points.shape[1] == 3
     server.live()
+
+
+def test_time_box_stays_inside_the_slider_range(server: DemoServer):
+    """The *Time [s]* box shows the slider's value: live, the present; scrubbing, clamped to the range."""
+    wait_for(lambda: server.status()["t"] > 1.2, what="the simulation to run")
+    panel = server.timeline_panel
+    panel.update(force=True)
+    sl = panel.slider
+    assert sl.min <= sl.value <= sl.max and sl.value == sl.max > 1.0
+    server.scrub(sl.max + 5.0)  # past the end: the box shows the end, not the request
+    assert sl.value == sl.max
+    server.scrub(0.5)
+    assert sl.value == 0.5
+    server.live()
+
+
+def test_exposure_warning_only_off_loopback():
+    from dlovr.ui.server import exposure_warning
+
+    for host in ("127.0.0.1", "localhost", "::1", "127.0.0.5", "[::1]"):
+        assert exposure_warning(host, 8080) is None, host
+    for host in ("0.0.0.0", "::", "", "192.168.1.4", "example.org"):
+        w = exposure_warning(host, 8080)
+        assert w is not None and "anyone who can reach port 8080" in w and "write recordings" in w
 
 
 def test_reset_pause_and_scene_switch(server: DemoServer):
@@ -162,32 +184,6 @@ def test_a_client_leaving_as_the_server_stops_moves_nothing(tmp_path: Path):
 # --------------------------------------------------------------------------------------------------
 
 
-def _chromium() -> str:
-    path = shutil.which("chromium") or ("/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None)
-    if path is None:
-        msg = (
-            "chromium not found: install it with `sudo apt-get install -y chromium` (Debian/Ubuntu) "
-            "to run the browser tests (never `playwright install`)"
-        )
-        if os.environ.get("CI"):
-            pytest.fail(msg)
-        pytest.skip(msg)
-    return path
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[object]:
-    exe = _chromium()
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
-
-
 def open_page(browser, url: str):
     page = browser.new_page(viewport={"width": 960, "height": 600})
     page.goto(url)
@@ -224,7 +220,7 @@ def test_page_loads_with_scene_record_button_and_situation(server: DemoServer, b
     page = open_page(browser, server.url)
     page.get_by_text("Discrete:").first.wait_for(timeout=10_000)
     page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
-    page.get_by_text("Gripper force:").first.wait_for(timeout=10_000)
+    page.get_by_text("Gripper wrench:").first.wait_for(timeout=10_000)
     time.sleep(0.5)
     img = iio.imread(page.locator("canvas").first.screenshot(), extension=".png")
     assert img[..., :3].astype(float).std() > 5.0, "the 3D canvas looks blank"
@@ -255,7 +251,7 @@ def test_record_move_stop_in_the_browser(server: DemoServer, browser):
     drag(page, line_down(p0, 0.45, n=8))
     time.sleep(0.5)
     page.get_by_role("button", name="Stop recording").click()
-    page.get_by_text("Program:").first.wait_for(timeout=30_000)
+    page.locator(".dlovr-program").first.wait_for(timeout=30_000)
     assert "macros" in page.locator("body").inner_text()
     assert path.is_file()
     res = replay(path, verify=True)

@@ -1,5 +1,6 @@
 """The recording panel: start and stop a recording of the live simulation, then compile it (in a
-thread) and show its program."""
+thread), write the program beside the recording and show it as a list of macros
+(:mod:`dlovr.ui.program_view`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import TYPE_CHECKING
 import viser
 
 from dlovr.recording import compile_recording
+from dlovr.ui.program_view import program_html
 
 if TYPE_CHECKING:
     from dlovr.ui.server import DemoServer
@@ -30,7 +32,7 @@ class RecordingPanel:
             self.rec_btn = gui.add_button("Start recording", icon=viser.Icon.PLAYER_RECORD)
             self.stop_btn = gui.add_button("Stop recording", icon=viser.Icon.PLAYER_STOP, disabled=True)
             self.rec_md = gui.add_markdown(f"Recordings go to `{app.recordings_dir}/`")
-            self.program_md = gui.add_markdown("")
+            self.program_html = gui.add_html("")
         self.rec_btn.on_click(lambda _e: app.start_recording())
         self.stop_btn.on_click(lambda _e: app.stop_recording(wait=False))
 
@@ -73,15 +75,30 @@ class RecordingPanel:
         return path
 
     def _compile(self, path: Path) -> None:
+        """Compile the recording, write ``<stem>.program.json`` and ``.program.txt`` beside it (as
+        ``dlovr compile`` names them) and show the program as a list of macros."""
         app = self.app
+        view = ""
         try:
             prog = compile_recording(path)
             text = prog.listing()
             app.program_text = text
-            md = f"Saved `{path}`\n\n**Program:**\n\n```\n{text}\n```"
+            app.last_program = prog
+            files: list[tuple[str, Path]] = [("recording", path)]
+            try:
+                jpath = path.with_name(f"{path.stem}.program.json")
+                tpath = path.with_name(f"{path.stem}.program.txt")
+                jpath.write_text(prog.dumps())
+                tpath.write_text(text)
+                files += [("program", jpath), ("listing", tpath)]
+                md = f"Saved `{path}` and its program"
+            except OSError as e:
+                md = f"Saved `{path}`; cannot write its program: {e.strerror or e}"
+            view = program_html(prog, files)
         except Exception as e:  # shown to the user, not raised in a worker thread
             app.program_text = ""
+            app.last_program = None
             md = f"Saved `{path}`; compiling failed: {e}"
         if app.server is not None:
             self.rec_md.content = md
-            self.program_md.content = md.split("\n\n", 1)[-1] if app.program_text else ""
+            self.program_html.content = view

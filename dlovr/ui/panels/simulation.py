@@ -33,6 +33,7 @@ class SimulationPanel:
         app = self.app
         s = app.session
         with gui.add_folder("Simulation"):
+            self.frame_btn = gui.add_button("Frame scene", hint="Point the camera at the whole workspace")
             self.pause_btn = gui.add_button("Pause")
             reset_btn = gui.add_button("Reset")
             names = [n for n, _ in builtin_scenes()]
@@ -45,6 +46,7 @@ class SimulationPanel:
                 "Drag the gizmo to move the gripper. Keys: J/L x, I/K y, U/O z, "
                 "N/M yaw, P pause (5 mm / 5° a press)."
             )
+        self.frame_btn.on_click(lambda e: app.viewport.frame(e.client))
         self.pause_btn.on_click(lambda _e: app.pause(not app._paused))
         reset_btn.on_click(lambda _e: app.reset())
 

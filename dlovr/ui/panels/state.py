@@ -22,6 +22,11 @@ def status_markdown(
     paused: bool,
     note: str = "",
 ) -> str:
+    """The situation panel's markdown. *Gripper wrench* is the force (N, world frame) the holding
+    constraints exert on the gripper, as a wrist force sensor reads it (the simulator records no
+    torque); *Contact normal force (sum)* is the sum over the cable's contacts of their normal
+    forces (N), a different quantity (a cable lying still on a table carries its weight there while
+    the gripper feels only the hanging part)."""
     if state is None:
         return "Situation: (starting)"
     fx, fy, fz = state.gripper_force
@@ -30,8 +35,8 @@ def status_markdown(
         f"**Discrete:** `{state.discrete.format()}`",
         f"**Topological:** `{state.topological.format()}`",
         f"**Last transition:** `{last_class or '-'}`",
-        f"**Gripper force:** {math.hypot(fx, fy, fz):.2f} N ({fx:+.2f}, {fy:+.2f}, {fz:+.2f})",
-        f"**Contact force on the cable:** {sum(state.forces):.2f} N",
+        f"**Gripper wrench:** |F| {math.hypot(fx, fy, fz):.2f} N ({fx:+.2f}, {fy:+.2f}, {fz:+.2f})",
+        f"**Contact normal force (sum):** {sum(state.forces):.2f} N",
         f"t = {t:.2f} s, {run}",
     ]
     if note:

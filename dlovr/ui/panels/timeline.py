@@ -3,6 +3,7 @@ through them (live or a recording file), and opening a recording."""
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,7 +13,7 @@ from dlovr.geometry import SceneGeometry
 from dlovr.model.transitions import format_classes
 from dlovr.recording import RecordingError
 from dlovr.scene import SceneError
-from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline
+from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline, resimulated_forces
 
 if TYPE_CHECKING:
     import viser
@@ -28,6 +29,8 @@ class TimelinePanel:
     def __init__(self, app: DemoServer) -> None:
         self.app = app
         self._key: Any = None
+        self._resim_stop: threading.Event | None = None
+        self.resim_thread: threading.Thread | None = None
 
     def build(self, gui: viser.GuiApi) -> None:
         app = self.app
@@ -38,6 +41,14 @@ class TimelinePanel:
             self.open_dd = gui.add_dropdown("Recording file", options=self.recording_files())
             self.open_btn = gui.add_button("Open recording")
             self.open_md = gui.add_markdown("")
+            # hovering / clicking a situation in the timeline's HTML lands here (Timeline.html)
+            self.pick = gui.add_text("Situation picked", initial_value="", visible=False)
+        self.pick_uuid: str | None = getattr(getattr(self.pick, "_impl", None), "uuid", None)
+
+        @self.pick.on_update
+        def _(event: Any) -> None:
+            if event.client is not None:
+                self.picked(str(self.pick.value))
 
         @self.slider.on_update
         def _(event: Any) -> None:
@@ -61,15 +72,46 @@ class TimelinePanel:
     def open_recording(self, path: str | Path) -> Timeline:
         app = self.app
         tl, scene, rec = recording_timeline(path)
+        self.cancel_resim()
         with app.lock:
             app._view = tl
             app._view_scene = scene
+        # the recording stores the force only where the contact state changed: re-simulate it for
+        # the force at every step, in the background (the plot shows the samples meanwhile)
+        stop = self._resim_stop = threading.Event()
+        self.resim_thread = threading.Thread(
+            target=self._resim, args=(tl, rec, scene, stop), name="dlovr-resim", daemon=True
+        )
+        self.resim_thread.start()
         if app.server is not None:
             app.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
+            if scene.name != app.session.scene.name:
+                app.viewport.frame()  # another scene: frame its workspace
             self.live_btn.visible = True
             self.update(force=True)
             app.scrub(tl.start)
         return tl
+
+    def _resim(self, tl: Timeline, rec: Any, scene: Any, stop: threading.Event) -> None:
+        try:
+            trace = resimulated_forces(rec, scene, stop)
+        except Exception as e:  # keep the recorded samples; a worker thread must not raise
+            tl.forces_note = f"samples at contact-state changes (re-simulation failed: {e})"
+            return
+        if trace is None:
+            return
+        tl.forces, tl.forces_note = trace, "re-simulated"
+        app = self.app
+        if app._view is tl and app.server is not None:
+            app.force_panel.show_at(tl, float(self.slider.value))
+
+    def cancel_resim(self) -> None:
+        """Stop a re-simulation of a recording's forces in progress (another view, or the server stops)."""
+        if self._resim_stop is not None:
+            self._resim_stop.set()
+        if self.resim_thread is not None:
+            self.resim_thread.join(timeout=5)
+            self.resim_thread = None
 
     def scrub(self, t: float) -> Snapshot | None:
         app = self.app
@@ -86,26 +128,56 @@ class TimelinePanel:
         view = app.viewport
         with app._draw_lock, srv.atomic():
             view.draw_cable(snap.points, snap.colors, np.zeros((0, 2, 3)))
+            view.faces.show(snap.faces)
             view.body.position, view.body.wxyz = tuple(snap.gripper_pos), tuple(snap.gripper_quat)
             cls = format_classes(band.classes) if band and band.classes else "-"
             app.state_panel.show(
                 f"**Timeline ({tl.source}) at {t:.2f} s**\n\n**Discrete:** `{snap.text}`\n\n"
                 f"**Transition into it:** `{cls}`"
             )
+            app.force_panel.show_at(tl, t)
         srv.flush()
         self.live_btn.visible = True
+        v = min(max(round(float(t), 2), float(self.slider.min)), float(self.slider.max))
+        if v != self.slider.value:  # the Time [s] box follows (a server-side set calls back without client)
+            self.slider.value = v
         return snap
 
     def live(self) -> None:
         app = self.app
+        self.cancel_resim()
         with app.lock:
             was_other = app._view_scene is not None
+            scene_name = app._view_scene.name if was_other else ""
             app._view = None
             app._view_scene = None
         if app.server is not None:
+            with app._draw_lock:
+                app.viewport.faces.pin(None)
             if was_other:
                 app.viewport.show_obstacles(app.session.geometry, app.session.scene)
+                if scene_name != app.session.scene.name:
+                    app.viewport.frame()
             self.live_btn.visible = False
+
+    def picked(self, value: str) -> None:
+        """A situation of the timeline hovered (``h<i>``: highlight its faces), left (``""``) or
+        clicked (``c<i>:<ms>``: show the middle of it, as the slider would)."""
+        app = self.app
+        tl = app._view or app.session.timeline
+        kind = value.partition(":")[0]
+        try:
+            i = int(kind[1:]) if kind[:1] in ("h", "c") else -1
+        except ValueError:
+            return
+        band = tl.bands[i] if 0 <= i < len(tl.bands) else None
+        if app.server is None:
+            return
+        if band is not None and kind == f"c{i}":
+            app.scrub((band.start + band.end) / 2.0)
+        with app._draw_lock, app.server.atomic():
+            app.viewport.faces.pin(band.faces if band is not None else None)
+        app.server.flush()
 
     def recording_files(self) -> list[str]:
         d = self.app.recordings_dir
@@ -120,9 +192,13 @@ class TimelinePanel:
         if not force and key == self._key:
             return
         self._key = key
-        self.timeline_html.content = tl.html()
-        self.slider.min = round(tl.start, 2)
-        self.slider.max = round(max(tl.end, tl.start + 0.01), 2)
+        self.timeline_html.content = tl.html(self.pick_uuid)
+        lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
+        self.slider.min, self.slider.max = lo, hi
+        # the number box shows the slider's value: keep it inside the range (live: the present)
+        v = hi if app._view is None else min(max(float(self.slider.value), lo), hi)
+        if v != self.slider.value:
+            self.slider.value = v
         files = self.recording_files()
         if tuple(files) != tuple(self.open_dd.options):
             self.open_dd.options = files

@@ -1,0 +1,97 @@
+"""The force panel: a uPlot chart of the gripper wrench over the last seconds (what the detection
+algorithms of a program's macros watch), transitions marked, live or at a timeline moment."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from dlovr.model.transitions import format_classes
+from dlovr.ui.forces import SERIES_COLORS, SERIES_LABELS, WINDOW_S, plot_arrays
+from dlovr.ui.timeline import Timeline
+
+if TYPE_CHECKING:
+    import viser
+
+    from dlovr.ui.server import DemoServer
+
+
+def _series(points: bool) -> tuple[dict[str, Any], ...]:
+    out: list[dict[str, Any]] = [{"label": SERIES_LABELS[0]}]
+    for label, color in zip(SERIES_LABELS[1:], SERIES_COLORS[1:], strict=True):
+        s: dict[str, Any] = {"label": label, "stroke": color, "width": 2.0 if label == "|F|" else 1.25}
+        if label == "transition":
+            s.update(scale="mark", width=1.0, dash=(4.0, 3.0), points={"show": False})
+        elif points:  # a recording: samples only where the contact state changed
+            s["points"] = {"show": True, "size": 4.0}
+        else:
+            s["points"] = {"show": False}
+        out.append(s)
+    return tuple(out)
+
+
+class ForcePanel:
+    """The "Gripper wrench" folder: the plot and a line naming the transitions it marks."""
+
+    def __init__(self, app: DemoServer) -> None:
+        self.app = app
+        self._mode = "live"
+        self._caption = ""
+        self.updates = 0
+
+    def build(self, gui: viser.GuiApi) -> None:
+        with gui.add_folder("Gripper wrench"):
+            self.plot = gui.add_uplot(
+                data=plot_arrays(self.app.session.forces, [], self.app.session.record.time),
+                series=_series(points=False),
+                title=f"force on the gripper [N], last {WINDOW_S:g} s",
+                scales={
+                    "x": {"time": False},
+                    "y": {"auto": True},
+                    "mark": {"auto": False, "range": (0.0, 1.0)},
+                },
+                axes=({"label": "t [s]"}, {"scale": "y"}),
+                legend={"show": True, "live": True},
+                height=190,
+            )
+            self.caption = gui.add_markdown("")
+
+    def show_live(self) -> None:
+        """The last seconds of the live simulation (the server calls this at ``PANEL_HZ``)."""
+        app = self.app
+        with app.lock:
+            s = app.session
+            tl = s.timeline
+            data = plot_arrays(s.forces, tl.transition_times(), s.record.time)
+            bands = [b for b in tl.bands[-12:] if b.classes]
+        self._show(data, bands, "live", f"force on the gripper [N], last {WINDOW_S:g} s")
+
+    def show_at(self, tl: Timeline, t: float) -> None:
+        """The seconds before moment ``t`` of a timeline being scrubbed (a recording, or the live one)."""
+        data = plot_arrays(tl.forces, tl.transition_times(), t)
+        bands = [b for b in tl.bands if b.classes and b.start <= t]
+        live = tl is self.app.session.timeline
+        title = f"force on the gripper [N] up to {t:.2f} s"
+        if tl.forces_note:
+            title += f" ({tl.forces_note})"
+        dense = live or tl.forces.every > 1  # a step-rate trace, not samples at state changes
+        self._show(data, bands, "live" if dense else "recording", title)
+
+    def _show(self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str) -> None:
+        if not hasattr(self, "plot"):
+            return
+        t0 = float(data[0][-1]) - WINDOW_S
+        marks = [f"{b.start:.2f} s **{format_classes(b.classes)}**" for b in bands if b.start >= t0]
+        caption = "transitions (dashed): " + ", ".join(marks[-6:]) if marks else "no transition in the window"
+        with self.app.server.atomic():
+            if mode != self._mode:
+                self.plot.series = _series(points=mode == "recording")
+                self._mode = mode
+            if self.plot.title != title:
+                self.plot.title = title
+            self.plot.data = data
+            if caption != self._caption:
+                self.caption.content = caption
+                self._caption = caption
+        self.updates += 1

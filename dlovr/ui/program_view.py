@@ -1,0 +1,161 @@
+"""A compiled program as the recording panel shows it (no viser): one row per macro with its class,
+the principal contact that changes (from -> to), a risk colour, and, for a risky program, why.
+
+The macros are read tolerantly (``getattr`` with fallbacks), so the view works with the program
+format of :mod:`dlovr.model.program` as it stands and as it grows: a ``risk`` field (none / caution /
+risky) where present, else the classes (``I``, ``S`` risky, ``T`` caution, paper §IV.B and §VI); the
+principal change where the macro names it, else the whole situations; a final macro without a class.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from dlovr.model.transitions import CLASS_NAMES, format_classes
+
+RISK_COLORS = {"none": "#2e9e44", "caution": "#d9a400", "risky": "#d62728"}
+RISKY_CLASSES = ("I", "S")
+CAUTION_CLASSES = ("T",)
+WHY = {
+    "I": "the cable enters an instable contact (I), which the next motion may lose",
+    "S": "a spontaneous transition (S): the cable snaps or flies, only a high-rate force sensor sees it",
+    "T": "a transient transition (T) through a semi-stable contact",
+}
+
+# names the principal change may carry in the program format, most specific first
+_FROM_NAMES = ("change_from", "principal_from", "from_principal", "changed_from")
+_TO_NAMES = ("change_to", "principal_to", "to_principal", "changed_to")
+
+
+def macro_classes(m: Any) -> tuple[str, ...]:
+    return tuple(str(c) for c in (getattr(m, "classes", None) or ()))
+
+
+def macro_risk(m: Any) -> str:
+    """``none``, ``caution`` or ``risky``: the macro's own ``risk`` where it has one, else from its
+    classes (and the older ``risky`` flag)."""
+    r = getattr(m, "risk", None)
+    r = getattr(r, "value", r)  # an enum
+    if isinstance(r, str) and r.lower() in RISK_COLORS:
+        return r.lower()
+    classes = macro_classes(m)
+    if getattr(m, "risky", False) is True or any(c in RISKY_CLASSES for c in classes):
+        return "risky"
+    if any(c in CAUTION_CLASSES for c in classes):
+        return "caution"
+    return "none"
+
+
+def _text(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, str):
+        return v
+    fmt = getattr(v, "format", None)
+    if callable(fmt):
+        try:
+            return str(fmt())
+        except TypeError:
+            pass
+    state = getattr(v, "state", None)  # a ContactSpec
+    if isinstance(state, str):
+        return state
+    if isinstance(v, Sequence):
+        return ", ".join(_text(x) for x in v)
+    return str(v)
+
+
+def macro_change(m: Any) -> tuple[str, str]:
+    """(from, to): the principal contact that changes where the macro names it, else the situations."""
+    for a, b in zip(_FROM_NAMES, _TO_NAMES, strict=True):
+        f, t = getattr(m, a, None), getattr(m, b, None)
+        if f is not None or t is not None:
+            return _text(f) or "-", _text(t) or "-"
+    change = getattr(m, "change", None)
+    if change is not None and (hasattr(change, "from_") or hasattr(change, "to")):
+        return _text(getattr(change, "from_", None)) or "-", _text(getattr(change, "to", None)) or "-"
+    a, b = _text(getattr(m, "from_situation", "")), _text(getattr(m, "to_situation", ""))
+    return _changed_part(a, b) if a and b else (a or "-", b or "-")
+
+
+def _changed_part(a: str, b: str) -> tuple[str, str]:
+    """The contacts of two situations (``c1 & c2 & ...``) that differ, the common ones at either end
+    left out (shown as ``…``)."""
+    ca, cb = a.split(" & "), b.split(" & ")
+    i = 0
+    while i < min(len(ca), len(cb)) - 1 and ca[i] == cb[i]:
+        i += 1
+    j = 0
+    while j < min(len(ca), len(cb)) - 1 - i and ca[-1 - j] == cb[-1 - j]:
+        j += 1
+    if i == 0 and j == 0:
+        return a, b
+
+    def part(c: list[str]) -> str:
+        mid = c[i : len(c) - j] or ["(none)"]
+        return " & ".join((["…"] if i else []) + mid + (["…"] if j else []))
+
+    return part(ca), part(cb)
+
+
+def macro_label(m: Any) -> str:
+    classes = macro_classes(m)
+    if classes:
+        return format_classes(classes)
+    return "final" if getattr(m, "final", True) else "-"
+
+
+def risk_reasons(program: Any) -> list[str]:
+    """One sentence per risky macro: which macro, which class, what that means."""
+    out = []
+    for k, m in enumerate(getattr(program, "macros", ()) or (), start=1):
+        if macro_risk(m) != "risky":
+            continue
+        idx = getattr(m, "index", k)
+        why = [WHY[c] for c in macro_classes(m) if c in RISKY_CLASSES] or ["marked risky by the compiler"]
+        out.append(f"macro {idx} ({macro_label(m)}, t = {getattr(m, 't', 0.0):.2f} s): " + "; ".join(why))
+    return out
+
+
+def program_html(program: Any, files: Sequence[tuple[str, str | Path]] = ()) -> str:
+    """The program as an HTML table (class, from -> to, risk), the files (label, path) and, when it has
+    risky macros, why; ``data-risk`` on each row names its risk for tests and styling."""
+    macros = list(getattr(program, "macros", ()) or ())
+    rows = []
+    for k, m in enumerate(macros, start=1):
+        risk = macro_risk(m)
+        a, b = macro_change(m)
+        classes = macro_classes(m)
+        tip = html.escape("; ".join(CLASS_NAMES.get(c, c) for c in classes) or "motion to the end pose")
+        rows.append(
+            f'<tr data-risk="{risk}" title="{tip}">'
+            f'<td style="padding:1px 4px">{getattr(m, "index", k)}</td>'
+            f'<td style="padding:1px 4px"><b>{html.escape(macro_label(m))}</b></td>'
+            f'<td style="padding:1px 4px"><code>{html.escape(a)}</code> &rarr; '
+            f"<code>{html.escape(b)}</code></td>"
+            f'<td style="padding:1px 4px;white-space:nowrap"><span style="display:inline-block;width:9px;'
+            f'height:9px;border-radius:50%;background:{RISK_COLORS[risk]}"></span> {risk}</td></tr>'
+        )
+    name = html.escape(str(getattr(program, "name", "program")))
+    n_risky = sum(macro_risk(m) == "risky" for m in macros)
+    head = f"<b>Program {name}</b>: {len(macros)} macros, {n_risky} risky"
+    table = (
+        '<table class="dlovr-program" style="border-collapse:collapse;font-size:11px;width:100%">'
+        '<tr style="text-align:left"><th>#</th><th>class</th><th>principal change (from &rarr; to)</th>'
+        f"<th>risk</th></tr>{''.join(rows)}</table>"
+    )
+    why = risk_reasons(program)
+    risky = ""
+    if why:
+        items = "".join(f"<li>{html.escape(w)}</li>" for w in why)
+        risky = (
+            f'<div class="dlovr-risky" style="color:{RISK_COLORS["risky"]};margin-top:3px">'
+            f"<b>Risky program:</b><ul style='margin:0;padding-left:14px'>{items}</ul></div>"
+        )
+    paths = "".join(
+        f"<div>{html.escape(label)}: <code>{html.escape(str(p))}</code></div>" for label, p in files
+    )
+    return f'<div style="font-size:11px">{head}{table}{risky}<div style="margin-top:3px">{paths}</div></div>'
