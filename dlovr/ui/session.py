@@ -98,16 +98,17 @@ class Session:
         del bands[start:]
         for i in range(start, len(kept)):
             k = kept[i]
-            classes = self._classes(kept[i - 1].situation, k.situation) if i else ()
+            classes = self._classes(kept[i - 1].situation, k.situation, k.through_free) if i else ()
             bands.append(Band(k.start, k.end, self._format(k.situation), classes, self._faces(k.situation)))
         self._kept_seen = len(kept)
         if grew or self.record.time - self._last_snap_t >= 0.1:
             self._snapshot()
 
-    def _classes(self, a: Any, b: Any) -> tuple[str, ...]:
-        key = (a, b)
+    def _classes(self, a: Any, b: Any, through_free: bool = False) -> tuple[str, ...]:
+        """Classes of the step ``a -> b`` (a flight when ``b`` was reached through free space)."""
+        key = (a, b, through_free)
         if key not in self._class_cache:
-            self._class_cache[key] = tuple(classify_step(a, b))
+            self._class_cache[key] = tuple(classify_step(a, b, through_free))
         return self._class_cache[key]
 
     def _faces(self, sit: Any) -> dict[str, Any]:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.model.discrete import Stability
-from dlovr.model.transitions import classify_step, format_classes
+from dlovr.model.transitions import format_classes, kept_classes
 from dlovr.recording import Recording, kept_states
 from dlovr.scene import Scene
 from dlovr.ui.drawing import point_colors, situation_faces
@@ -157,8 +157,7 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     scene = load_embedded_scene(rec, tmp)
     kept = kept_states(rec)
     tl = Timeline(source=Path(path).name)
-    for i, k in enumerate(kept):
-        classes = classify_step(kept[i - 1].situation, k.situation) if i else ()
+    for k, classes in zip(kept, kept_classes(kept), strict=True):  # flights included
         tl.bands.append(
             Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes), situation_faces(k.situation))
         )
