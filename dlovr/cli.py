@@ -522,3 +522,12 @@ def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None
         raise UserError(f"{scene.path}: {e}") from None
     except OSError as e:
         raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# dlovr run (dlovr.execution)
+# --------------------------------------------------------------------------------------------------
+
+from dlovr.execution.cli import run_cmd  # noqa: E402
+
+main.add_command(run_cmd)
