@@ -8,8 +8,8 @@ reads the contact model. The macro ends when the detector fires; it fails when t
 its allowance (``allowance`` times the demonstrated motion, 1.5 by default) and the transition is
 still not detected ``settle`` seconds later. The program stops at the first failure.
 
-``detect="oracle"`` ends each macro instead when the contact tracker sees the expected principal
-contacts (to tell program errors from detection errors). Either way the tracker's debounced
+``detect="oracle"`` ends each macro instead when the contact tracker sees the expected change of
+principal contacts (to tell program errors from detection errors). Either way the tracker's debounced
 situations are logged beside the run to judge it afterwards (:mod:`dlovr.execution.scoring`).
 """
 
@@ -138,6 +138,13 @@ def principal_states(situation: Any) -> tuple[str, ...]:
     return tuple(sorted(c.format() for run in successional_contacts(situation) for c in principal(run)))
 
 
+def transition_seen(principals: tuple[str, ...], m: MacroSpec) -> bool:
+    """Whether a situation with these principal contacts shows the macro's transition: the principal
+    contacts it begins are there and those it ends are gone (states and faces)."""
+    have = set(principals)
+    return all(c.state in have for c in m.established) and not any(c.state in have for c in m.released)
+
+
 def expectation(m: MacroSpec) -> Expectation:
     return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established))
 
@@ -156,7 +163,6 @@ class _Guard:
     def __init__(self, m: MacroSpec, opts: ExecOptions, rate_hz: float):
         self.macro = m
         self.oracle = opts.detect == "oracle"
-        self.want = tuple(sorted(c.state for c in m.to_contacts))
         self.detectors: list[Detector] = []
         if not self.oracle:
             exp = expectation(m)
@@ -173,7 +179,7 @@ class _Guard:
     def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any) -> bool:
         if self.oracle:
             st = getattr(record, "state", None)
-            if st is None or principal_states(st.discrete) != self.want:
+            if st is None or not transition_seen(principal_states(st.discrete), self.macro):
                 self._since = None
                 return False
             if self._since is None:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dlovr.transforms import quat_mul, quat_normalize, quat_rotate
+from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, slerp
 
 Vec = tuple[float, float, float]
 
@@ -140,9 +140,19 @@ class TrackPath:
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
 
     def _at_time(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        i = int(np.searchsorted(self.times, t, side="right")) - 1
-        i = min(max(i, 0), len(self.times) - 1)
-        return self.pos[i], self.quat[i]
+        """The recorded pose at time ``t`` (s), interpolated between the samples around it (linear,
+        slerp), held at the first and the last."""
+        times = self.times
+        i = int(np.searchsorted(times, t, side="right"))
+        if i <= 0:
+            return self.pos[0], self.quat[0]
+        if i >= len(times):
+            return self.pos[-1], self.quat[-1]
+        a, b = float(times[i - 1]), float(times[i])
+        w = 0.0 if b <= a else (t - a) / (b - a)
+        p0, p1 = self.pos[i - 1], self.pos[i]
+        pos = np.array([float(p0[k]) + w * (float(p1[k]) - float(p0[k])) for k in range(3)])
+        return pos, slerp(self.quat[i - 1], self.quat[i], w)
 
     def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""

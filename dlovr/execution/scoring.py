@@ -3,11 +3,11 @@
 The tracker's debounced situations are not used to steer a force-detected run, only to judge it:
 
 - a macro's **true transition** is the start of the first debounced situation, overlapping the
-  macro's time window, whose principal contacts are the macro's expected ones (same states, same
-  faces); a detection is **ok** when that situation began no later than ``TRUTH_TOL`` after the
-  detection, a **false** detection otherwise; a macro that ended at its allowance **missed** the
-  transition when it happened anyway, else saw **no transition**; **latency** is detection minus
-  true transition (s);
+  macro's time window, that shows the macro's change of principal contacts (those it begins are
+  there, those it ends are gone; same states, same faces); a detection is **ok** when that
+  situation began no later than ``TRUTH_TOL`` after the detection, a **false** detection otherwise;
+  a macro that ended at its allowance **missed** the transition when it happened anyway, else saw
+  **no transition**; **latency** is detection minus true transition (s);
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
   being no principal contacts).
@@ -19,7 +19,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from dlovr.execution.executor import Execution, MacroRun, principal_states
+from dlovr.execution.executor import Execution, MacroRun, principal_states, transition_seen
 
 #: How long after a detection the tracker may take to see the transition it detected (s): force
 #: detection may lead the geometric contact label by a fraction of a millimetre of motion.
@@ -79,19 +79,19 @@ class RunResult:
         return [m.latency for m in self.macros if m.outcome == "ok" and m.latency is not None]
 
 
-def _truth(run: MacroRun, kept: list[Any], want: tuple[str, ...]) -> float | None:
+def _truth(run: MacroRun, kept: list[Any]) -> float | None:
     end = (run.detected_at if run.detected_at is not None else run.ended_at) + TRUTH_TOL
     for k in kept:
-        if k.end >= run.started_at and k.start <= end and principal_states(k.situation) == want:
-            return float(k.start)
+        if k.end >= run.started_at and k.start <= end:
+            if transition_seen(principal_states(k.situation), run.macro):
+                return float(k.start)
     return None
 
 
 def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
     """Judge one macro run against the tracker's debounced situations ``kept``."""
     m = run.macro
-    want = tuple(sorted(c.state for c in m.to_contacts))
-    true_at = _truth(run, kept, want)
+    true_at = _truth(run, kept)
     latency = None
     if run.ended == "detected":
         outcome = "ok" if true_at is not None else "false"
