@@ -116,7 +116,8 @@ def test_track_path_repeats_the_recorded_stretch_from_where_the_gripper_is():
     pos = np.stack([t * 0.1, np.zeros_like(t), 0.5 - 0.2 * t * t], axis=1)  # a curve, not a line
     quat = np.tile([1.0, 0.0, 0.0, 0.0], (11, 1))
     here = (1.0, 1.0, 1.0)
-    path = TrackPath(t, pos, quat, 0.2, 0.6, here, (1.0, 0.0, 0.0, 0.0), "world", ((0, 0, 0), (0.0, 0.0, -0.1)))
+    beyond = ((0.0, 0.0, 0.0), (0.0, 0.0, -0.1))
+    path = TrackPath(t, pos, quat, 0.2, 0.6, here, (1.0, 0.0, 0.0, 0.0), "world", beyond)
     np.testing.assert_allclose(path.at(0.0)[0], here)
     np.testing.assert_allclose(path.at(0.5)[0], np.array(here) + pos[4] - pos[2], atol=1e-12)
     np.testing.assert_allclose(path.at(1.0)[0], np.array(here) + pos[6] - pos[2], atol=1e-12)

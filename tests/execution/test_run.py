@@ -61,7 +61,8 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     """Trial 2 of seed 1 lowers the table by 7.5 mm: the replayed demonstration stops short of it,
     the guarded macro goes on until it feels the contact. (Found by running trials 0-11; pinned.)"""
     program, scene, track, pieces = touch
-    setup = TrialSetup(program, scene, pieces, track, (parse_vary("objects.pos=0.02"),), 1, ExecOptions(), True)
+    vary = (parse_vary("objects.pos=0.02"),)
+    setup = TrialSetup(program, scene, pieces, track, vary, 1, ExecOptions(), baseline=True)
     trials = run_trials(setup, 3)
     t2 = trials[2]
     assert t2["values"]["objects.pos"][2] < -0.007
@@ -83,7 +84,8 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
 def test_a_transition_that_never_comes_fails_with_its_allowance(touch):
     """The table 20 cm lower: the tip never reaches it within 1.5x the demonstrated 9 cm."""
     program, scene, track, pieces = touch
-    low = replace(scene, objects=tuple(replace(o, pos=(o.pos[0], o.pos[1], o.pos[2] - 0.2)) for o in scene.objects))
+    down = tuple(replace(o, pos=(o.pos[0], o.pos[1], o.pos[2] - 0.2)) for o in scene.objects)
+    low = replace(scene, objects=down)
     res = run_program(program, low, ExecOptions(), track=track, pieces=pieces)
     assert not res.success and res.failed_macro == 1
     (m,) = res.macros
@@ -118,7 +120,8 @@ def test_table_program_runs_to_its_goal_with_the_oracle():
     demonstration comes again, and the cable ends in the air as demonstrated."""
     program = load_program(ROOT / "recordings/programs/table.program.json")
     scene = resolve_scene(program, None)
-    res = run_program(program, scene, ExecOptions(detect="oracle"), track=load_track(ROOT / "recordings/table.mcap"))
+    track = load_track(ROOT / "recordings/table.mcap")
+    res = run_program(program, scene, ExecOptions(detect="oracle"), track=track)
     assert res.success, format_result(res)
     assert [m.outcome for m in res.macros] == ["ok"] * 8
 
