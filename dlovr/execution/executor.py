@@ -48,7 +48,10 @@ class ExecOptions:
     demonstrated one; ``settle`` (s): how long to wait at the end of the allowance; ``min_duration``
     (s): the shortest time a macro's demonstrated motion is repeated in; ``final_settle`` (s): time
     simulated after the last macro before the goal is judged; ``frame``: ``world`` or ``relative``
-    (see :mod:`dlovr.execution.motion`), unless a macro names its own.
+    (see :mod:`dlovr.execution.motion`), unless a macro names its own; ``oracle_hold`` (s): how long
+    the oracle wants the expected contacts before it ends a macro; ``start_settle`` (s): the gripper
+    holds its start pose this long before the first macro (default none: the demonstrations start
+    moving at once, and a settled cable repeats some of their dynamic transitions differently).
     """
 
     detect: str = "force"
@@ -63,11 +66,13 @@ class ExecOptions:
     final_settle: float = 0.3
     frame: str = "world"
     oracle_hold: float = 0.02
+    start_settle: float = 0.0
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
-        for name in ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold"):
+        names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold")
+        for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a number >= 0, got {v!r}")
@@ -258,6 +263,10 @@ def execute(
     ses = _Session(sim, opts, out, on_step, on_event)
     ses.emit("start", 0, f"program {program.name}: {len(program.macros)} macros, detection {opts.detect}")
     try:
+        mid = sim.built.mocap_id
+        here = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
+        for _ in range(round(opts.start_settle / ses.dt)):
+            ses.step(*here)
         for m in program.macros:
             run = _run_macro(m, ses, track)
             out.runs.append(run)
@@ -272,14 +281,13 @@ def execute(
             if final is not None:
                 _run_final(final, ses, track)
                 out.final_done = True
-            mid = sim.built.mocap_id
             pos, quat = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
             for _ in range(round(opts.final_settle / ses.dt)):
                 ses.step(pos, quat)
             ses.emit("end", 0, "program done")
     except SimulationDiverged as e:
         out.diverged = str(e)
-        ses.emit("failed", 0, f"simulation diverged after the last macro: {e.reason}")
+        ses.emit("failed", 0, f"simulation diverged outside the macros: {e.reason}")
     out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
     out.sim_time = float(sim.time)
     out.wall_time = time.perf_counter() - wall0

@@ -11,9 +11,9 @@ Sign convention: the sensed force is the force the cable exerts on the gripper. 
 situation it is the cable's weight plus the forces the environment exerts on the cable, so a contact
 that begins adds about ``-v * F`` to it and one that ends removes that (adds ``+v * F``).
 
-- ``E`` (``force_along_contact_vector``): the force changes, from its value when the macro started,
-  by at least ``force_threshold_n`` along ``-v`` of a contact that begins (or ``+v`` of one that
-  ends), within ``max_angle_deg`` of that direction;
+- ``E`` (``force_along_contact_vector``): the force rises, from the lowest it has been since the
+  macro started, by at least ``force_threshold_n`` along ``-v`` of a contact that begins (or ``+v``
+  of one that ends), the rise within ``max_angle_deg`` of that direction;
 - ``C`` (``force_direction_turn``): the contact force turns from the old contact vector to the new
   one: the change points along ``v_old - v_new`` (within ``max_angle_deg``) and reaches
   ``min_turn_fraction`` of the turn of a force of the size sensed at the start;
@@ -187,7 +187,12 @@ class Detector:
 
 
 class EDetector(Detector):
-    """``E``: the force changes along ``-v`` of a contact that begins or ``+v`` of one that ends."""
+    """``E``: the force changes along ``-v`` of a contact that begins or ``+v`` of one that ends.
+
+    The change is measured from the lowest the force has been along that direction since the macro
+    started (not from its first sample), so a force still settling from the previous transition
+    when the macro begins neither hides the step nor fakes one.
+    """
 
     cls = "E"
 
@@ -196,15 +201,23 @@ class EDetector(Detector):
         dirs = [-np.asarray(v) for v in expect.established if v is not None]
         dirs += [np.asarray(v, float) for v in expect.released if v is not None]
         self.dirs = [u for d in dirs if (u := _unit(d)) is not None]
+        self._low: list[np.ndarray] = []
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        super().start(t, force, torque)
+        self._low = [np.zeros(3) for _ in self.dirs]  # per direction: the change where it was lowest
 
     def _signal(self, t: float, df: np.ndarray) -> float:
         thr, cone = self.params["force_threshold_n"], self.params["max_angle_deg"]
         if not self.dirs:  # no vector known: any change of that size
             return float(np.sqrt((df * df).sum())) / thr
         best = 0.0
-        for u in self.dirs:
-            along = float((df * u).sum())
-            if along > 0 and _angle_deg(df, u) <= cone:
+        for k, u in enumerate(self.dirs):
+            if float((df * u).sum()) < float((self._low[k] * u).sum()):
+                self._low[k] = df.copy()
+            rise = df - self._low[k]
+            along = float((rise * u).sum())
+            if along > 0 and _angle_deg(rise, u) <= cone:
                 best = max(best, along / thr)
         return best
 
