@@ -56,6 +56,7 @@ _VARY_HELP = (
     "--frame", type=click.Choice(["world", "relative"]), default="world", show_default=True,
     help="Frame the demonstrated motion is repeated in.",
 )  # fmt: skip
+@click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
 @click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
 @click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
 @click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
@@ -66,7 +67,8 @@ _VARY_HELP = (
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(
     program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
-    recording: str | None, frame: str, allowance_raw: str | None, trials_raw: str | None, seed_raw: str,
+    recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
+    trials_raw: str | None, seed_raw: str,
     varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, as_json: bool,
 ) -> None:  # fmt: skip
     """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
@@ -93,6 +95,7 @@ def run_cmd(
 
     noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
     allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
+    settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
     trials = _number("--trials", trials_raw, integer=True, minimum=1)
     seed = _number("--seed", seed_raw, integer=True, minimum=0)
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
@@ -116,7 +119,9 @@ def run_cmd(
                     raise _BadInput(f"{program_path}: {why}")
             else:
                 track = load_track(rec_path)
-        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance, frame=frame)
+        opts = ExecOptions(
+            detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle
+        )
     except (ProgramError, SceneError, RecordingError, ValueError) as e:
         raise _BadInput(str(e)) from None
     use_track = path_mode != "program" and track is not None

@@ -4,10 +4,11 @@ The tracker's debounced situations are not used to steer a force-detected run, o
 
 - a macro's **true transition** is the start of the first debounced situation, overlapping the
   macro's time window, that shows the macro's change of principal contacts (those it begins are
-  there, those it ends are gone; same states, same faces); a detection is **ok** when that
-  situation began no later than ``TRUTH_TOL`` after the detection, a **false** detection otherwise;
-  a macro that ended at its allowance **missed** the transition when it happened anyway, else saw
-  **no transition**; **latency** is detection minus true transition (s);
+  there, those it ends are gone; same states, same faces) when the situation before it did not;
+  a detection is **ok** when that situation began no later than ``TRUTH_TOL`` after the detection,
+  a **false** detection otherwise; a macro that ended at its allowance **missed** the transition
+  when it happened anyway, else saw **no transition**; **latency** is detection minus true
+  transition (s);
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
   being no principal contacts).
@@ -81,10 +82,11 @@ class RunResult:
 
 def _truth(run: MacroRun, kept: list[Any]) -> float | None:
     end = (run.detected_at if run.detected_at is not None else run.ended_at) + TRUTH_TOL
-    for k in kept:
-        if k.end >= run.started_at and k.start <= end:
-            if transition_seen(principal_states(k.situation), run.macro):
-                return float(k.start)
+    seen = [transition_seen(principal_states(k.situation), run.macro) for k in kept]
+    for i in range(1, len(kept)):
+        k = kept[i]
+        if seen[i] and not seen[i - 1] and k.end >= run.started_at and k.start <= end:
+            return float(k.start)
     return None
 
 
