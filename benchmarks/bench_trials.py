@@ -7,9 +7,8 @@ Runs ``--trials`` perturbed trials (the issue's variation: cable length +-10 %, 
 friction +-30 %, obstacles +-5 mm) one after the other in this process, with force detection and
 the demonstration's recorded path, and prints wall time per trial, simulated seconds per trial,
 trials per minute on one core (with ``--baseline`` a trial includes the open-loop replay) and the
-share of a step the executor adds on top of the tracking simulator (path, sensing chain, detectors),
-measured on the first trial (all its steps) against a bare ``Simulator(track=True).step`` loop over
-as many steps.
+time per step the executor adds on top of the tracking simulator (path, sensing chain, detectors),
+from one more run of trial 0's program with ``Simulator.step`` timed apart.
 """
 
 from __future__ import annotations
@@ -18,11 +17,11 @@ import argparse
 import time
 from pathlib import Path
 
-from dlovr.execution.executor import ExecOptions
+from dlovr.execution.executor import ExecOptions, execute
 from dlovr.execution.programs import find_recording, load_program
 from dlovr.execution.run import load_track, resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trial
-from dlovr.execution.variation import parse_vary
+from dlovr.execution.variation import parse_vary, perturb
 from dlovr.geometry import scene_pieces
 from dlovr.sim import Simulator
 
@@ -46,32 +45,40 @@ def main() -> None:
     variations = tuple(parse_vary(v, scene) for v in VARY)
     setup = TrialSetup(program, scene, pieces, track, variations, args.seed, ExecOptions(), args.baseline)
 
-    walls, sims, steps = [], [], []
+    walls, sims = [], []
     for k in range(args.trials):
         t0 = time.perf_counter()
         res = run_trial(setup, k)
         walls.append(time.perf_counter() - t0)
         sims.append(res["program"]["sim_time"] + (res.get("openloop") or {}).get("sim_time", 0.0))
-        steps.append(round(sims[-1] / 0.002))
         print(f"trial {k}: {walls[-1]:.2f} s wall, {sims[-1]:.2f} s simulated, "
               f"goal {'reached' if res['program']['success'] else 'missed'}")  # fmt: skip
 
-    # the executor's own cost: the same number of steps of a bare tracking simulator
-    sim = Simulator(scene, track=True, pieces=pieces)
-    n = max(steps[0], 1)
+    # the executor's own cost per step: a run of the program with the simulator's step timed apart
+    scene0, _ = perturb(scene, variations, args.seed, 0)
+    sim = Simulator(scene0, track=True, pieces=pieces)
+    real_step, spent = sim.step, [0.0, 0]
+
+    def timed_step(n: int = 1):
+        t = time.perf_counter()
+        r = real_step(n)
+        spent[0] += time.perf_counter() - t
+        spent[1] += n
+        return r
+
+    sim.step = timed_step  # type: ignore[method-assign]
     t0 = time.perf_counter()
-    for _ in range(n):
-        sim.step()
-    bare = (time.perf_counter() - t0) / n
-    per_step = walls[0] / n
+    execute(program, sim, ExecOptions(), track=track)
+    total = time.perf_counter() - t0
+    step_us = spent[0] / spent[1] * 1e6
+    own_us = (total - spent[0]) / spent[1] * 1e6
 
     mean_wall = sum(walls) / len(walls)
     simulated = sum(sims) / len(sims)
     print(f"\n{program.name}: {args.trials} trials, {mean_wall:.2f} s wall per trial ({simulated:.2f} s "
           f"simulated), {60.0 / mean_wall:.1f} trials per minute per core")  # fmt: skip
-    extra = per_step / bare - 1.0
-    print(f"per step: {per_step * 1e6:.0f} us in a trial vs {bare * 1e6:.0f} us for a bare "
-          f"Simulator(track=True).step (executor, open loop and setup add {extra:+.0%})")  # fmt: skip
+    print(f"per step of a program run: {step_us:.0f} us in Simulator(track=True).step, {own_us:.0f} us in "
+          f"the executor (path, sensing chain, detectors): {own_us / step_us:.1%} on top")  # fmt: skip
 
 
 if __name__ == "__main__":

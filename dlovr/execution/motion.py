@@ -139,6 +139,15 @@ class TrackPath:
     frame: str = "world"
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
 
+    def __post_init__(self) -> None:
+        if self.frame not in ("world", "relative"):
+            raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+        p0, q0 = self._at_time(self.t0)  # per path, not per step: this runs every simulation step
+        object.__setattr__(self, "_p0", p0)
+        object.__setattr__(self, "_inv0", np.array([q0[0], -q0[1], -q0[2], -q0[3]]))
+        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)))
+        object.__setattr__(self, "_end", None)
+
     def _at_time(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The recorded pose at time ``t`` (s), interpolated between the samples around it (linear,
         slerp), held at the first and the last."""
@@ -152,25 +161,23 @@ class TrackPath:
         w = 0.0 if b <= a else (t - a) / (b - a)
         p0, p1 = self.pos[i - 1], self.pos[i]
         pos = np.array([float(p0[k]) + w * (float(p1[k]) - float(p0[k])) for k in range(3)])
-        return pos, slerp(self.quat[i - 1], self.quat[i], w)
+        qa, qb = self.quat[i - 1], self.quat[i]
+        if w == 0.0 or qa.tolist() == qb.tolist():
+            return pos, qa
+        return pos, slerp(qa, qb, w)
 
     def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""
         if s > 1.0 and self.beyond is not None:
-            pos, quat = self.at(1.0)
-            on = ScrewPath(
-                tuple(float(x) for x in pos),  # type: ignore[arg-type]
-                tuple(float(x) for x in quat),  # type: ignore[arg-type]
-                self.beyond[0],
-                self.beyond[1],
-                tuple(float(x) for x in quat),  # type: ignore[arg-type]
-                "relative",
-            )
+            on = self._end  # type: ignore[has-type]
+            if on is None:
+                pos, quat = self.at(1.0)
+                here = tuple(float(x) for x in quat)
+                on = ScrewPath(tuple(float(x) for x in pos), here, *self.beyond, here, "relative")  # type: ignore[arg-type]
+                object.__setattr__(self, "_end", on)
             return on.at(s - 1.0)
-        p0, q0 = self._at_time(self.t0)
+        p0, inv0, cur_q = self._p0, self._inv0, self._cur_q  # type: ignore[attr-defined]
         p, q = self._at_time(self.t0 + s * (self.t1 - self.t0))
-        inv0 = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
-        cur_q = quat_normalize(np.asarray(self.start_quat, dtype=float))
         d = np.array([float(p[i]) - float(p0[i]) for i in range(3)])
         if self.frame == "relative":
             local = quat_rotate(inv0, d)
