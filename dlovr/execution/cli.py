@@ -43,17 +43,16 @@ _VARY_HELP = (
 @click.argument("program_path", metavar="PROGRAM.json")
 @click.option("--scene", "scene_ref", metavar="NAME|PATH", help="Scene (default: the program's).")
 @click.option(
-    "--detect", type=click.Choice(["force", "oracle"]), default="force", show_default=True,
+    "--detect", metavar="force|oracle", default="force", show_default=True,
     help="End macros by force detection, or by the contact tracker (oracle).",
 )  # fmt: skip
 @click.option("--noise", "noise_raw", metavar="N", help="Force sensor noise, std. dev. in N (default 0).")
 @click.option(
-    "--path", "path_mode", type=click.Choice(["auto", "demo", "program"]), default="auto",
-    show_default=True, help=_PATH_HELP,
+    "--path", "path_mode", metavar="auto|demo|program", default="auto", show_default=True, help=_PATH_HELP,
 )  # fmt: skip
 @click.option("--recording", metavar="FILE", help="The demonstration (default: the program's source).")
 @click.option(
-    "--frame", type=click.Choice(["world", "relative"]), default="world", show_default=True,
+    "--frame", metavar="world|relative", default="world", show_default=True,
     help="Frame the demonstrated motion is repeated in.",
 )  # fmt: skip
 @click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
@@ -61,7 +60,7 @@ _VARY_HELP = (
 @click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
 @click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
 @click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
-@click.option("--baseline", type=click.Choice(["replay"]), help="Also replay the demonstration open loop.")
+@click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
 @click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
 @click.option("-o", "--output", "out", metavar="DIR", help="Directory for the trials' results.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
@@ -93,6 +92,14 @@ def run_cmd(
     from dlovr.recording import RecordingError
     from dlovr.scene import SceneError
 
+    for name, value, allowed in (
+        ("--detect", detect, ("force", "oracle")),
+        ("--path", path_mode, ("auto", "demo", "program")),
+        ("--frame", frame, ("world", "relative")),
+        ("--baseline", baseline or "replay", ("replay",)),
+    ):
+        if value not in allowed:
+            raise _BadInput(f"{name}: {value!r} is not one of {', '.join(allowed)}")
     noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
     allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
     settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
