@@ -321,6 +321,7 @@ def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None
 # Commands kept in modules of their own, so that this one stays small
 from dlovr.cli_network import network_cmd  # noqa: E402
 from dlovr.cli_record import demo_cmd, record_cmd, recover_cmd, replay_cmd, states_cmd  # noqa: E402
+from dlovr.execution.cli import run_cmd  # noqa: E402
 
-for _cmd in (demo_cmd, record_cmd, replay_cmd, states_cmd, recover_cmd, network_cmd):
+for _cmd in (demo_cmd, record_cmd, replay_cmd, states_cmd, recover_cmd, network_cmd, run_cmd):
     main.add_command(_cmd)

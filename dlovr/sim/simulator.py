@@ -43,7 +43,9 @@ class StepRecord:
     ``P_{i+1} - P_i``; gripper pose (``gripper_quat`` wxyz, ``gripper_z`` = ``G_z``) and the commanded
     target; ``contact_arrays``: raw rod-obstacle contacts as arrays (``contacts``: the same as
     :class:`RodContact` objects); ``self_contacts``: pairs of touching segments; ``gripper_force``:
-    the force (N, world frame) the cable exerts on the gripper, as a wrist force sensor would read it.
+    the force (N, world frame) the cable exerts on the gripper, as a wrist force sensor would read it;
+    ``gripper_torque``: the moment of that load about the gripper's origin (N m, world frame), together
+    the wrench a wrist force/torque sensor at the gripper would read.
     """
 
     step: int
@@ -55,6 +57,7 @@ class StepRecord:
     target_quat: np.ndarray
     contact_arrays: ContactArrays
     gripper_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gripper_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     state: Any = None  # the step's dlovr.sim.tracker.ContactState when the simulator tracks contacts
 
     @cached_property
@@ -342,19 +345,40 @@ class Simulator:
             target_pos=self.target_pos.copy(),
             target_quat=self.target_quat.copy(),
             contact_arrays=self.contact_arrays(),
-            gripper_force=self.gripper_force(),
+            **dict(zip(("gripper_force", "gripper_torque"), self.gripper_wrench(), strict=True)),
         )
 
-    def gripper_force(self) -> np.ndarray:
-        """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
-        (a hanging cable pulls with its weight, -m g along z)."""
+    def _hold_forces(self) -> np.ndarray:
+        """(2, 3) forces (N, world) of the holding constraints ``hold_0`` (at the gripper's origin) and
+        ``hold_1`` (one segment down ``-G_z``) on the gripper."""
         d = self.data
         ne = int(d.ne)  # equality constraint rows come first, in a fixed layout while ne is unchanged
         if self._hold_rows is None or self._hold_rows[0] != ne:
             ids = d.efc_id[:ne]
             rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
             self._hold_rows = (ne, rows)
-        return d.efc_force[self._hold_rows[1]].reshape(-1, 3).sum(axis=0)
+        return d.efc_force[self._hold_rows[1]].reshape(-1, 3)
+
+    def gripper_force(self) -> np.ndarray:
+        """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
+        (a hanging cable pulls with its weight, -m g along z)."""
+        return self._hold_forces().sum(axis=0)
+
+    def gripper_wrench(self) -> tuple[np.ndarray, np.ndarray]:
+        """Force (N) and torque (N m, about the gripper's origin), world frame, that the cable exerts on
+        the gripper through its two holding constraints: ``hold_0`` acts at the origin, ``hold_1`` one
+        segment down ``-G_z``, so the torque is ``(-seg G_z) x F_1``. The torsion taken by the twist
+        lock (``hold_twist``) is not included."""
+        f = self._hold_forces()
+        if len(f) < 2:
+            return f.sum(axis=0), np.zeros(3)
+        q = self.data.mocap_quat[self.built.mocap_id]
+        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+        s = -float(self.built.seg_length)  # lever = s * G_z, G_z the third column of R(q)
+        rx, ry, rz = s * 2.0 * (x * z + w * y), s * 2.0 * (y * z - w * x), s * (1.0 - 2.0 * (x * x + y * y))
+        fx, fy, fz = float(f[1, 0]), float(f[1, 1]), float(f[1, 2])
+        torque = np.array([ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx])
+        return f[0] + f[1], torque
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
         """Play ``script`` from the current gripper pose; yield one record per step.

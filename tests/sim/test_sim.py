@@ -378,3 +378,19 @@ def test_a_finer_rod_does_not_stretch_more_under_its_weight() -> None:
     )
     hold = [mujoco.mj_name2id(fine.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"hold_{i}") for i in range(2)]
     np.testing.assert_allclose(fine.model.eq_solimp[hold], [edge_solimp(80)] * 2)
+
+
+def test_gripper_torque_is_the_moment_of_the_held_cables_weight():
+    """A cable held out sideways and settled: the wrench at the gripper balances its weight, the
+    torque being the weight's moment about the gripper (N m, world), from the cable's own points."""
+    from dataclasses import replace
+
+    sim = Simulator.from_parts([], replace(DLO, damping=0.1), GripperPose((0.0, 0.0, 1.0), Q_X))
+    rec = sim.step(3000)
+    m = sim.model
+    mass = np.array([m.body_mass[m.flex_vertbodyid[sim.built.vert_adr + i]] for i in range(len(rec.points))])
+    weight = mass[:, None] * np.array([0.0, 0.0, -9.81])
+    np.testing.assert_allclose(rec.gripper_force, weight.sum(axis=0), atol=1e-6)
+    moment = np.cross(rec.points - rec.gripper_pos, weight).sum(axis=0)
+    assert moment[1] > 0.05  # the cable sticks out along +x: a real moment about y
+    np.testing.assert_allclose(rec.gripper_torque, moment, atol=1e-6)

@@ -24,7 +24,7 @@ from dlovr.script import load_script
 from dlovr.sim import Simulator
 from dlovr.sim.tracker import _locate
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 SCRIPTS = sorted(SCENES.glob("*.script.toml"))
 FORCE_N = 0.02
 """Contacts with a normal force above this (N) must appear in the situation."""

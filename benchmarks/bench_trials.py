@@ -1,0 +1,85 @@
+"""Throughput of robustness trials: trials per minute per core, and the executor's own cost per step.
+
+Run: ``.venv/bin/python benchmarks/bench_trials.py [--program recordings/programs/peg_in_hole.program.json]
+[--trials 3] [--baseline]``
+
+Runs ``--trials`` perturbed trials (the issue's variation: cable length +-10 %, stiffness x0.5-2,
+friction +-30 %, obstacles +-5 mm) one after the other in this process, with force detection and
+the demonstration's recorded path, and prints wall time per trial, simulated seconds per trial,
+trials per minute on one core (with ``--baseline`` a trial includes the open-loop replay) and the
+time per step the executor adds on top of the tracking simulator (path, sensing chain, detectors),
+from one more run of trial 0's program with ``Simulator.step`` timed apart.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from dlovr.execution.executor import ExecOptions, execute
+from dlovr.execution.programs import find_recording, load_program
+from dlovr.execution.run import load_track, resolve_scene
+from dlovr.execution.trials import TrialSetup, run_trial
+from dlovr.execution.variation import parse_vary, perturb
+from dlovr.geometry import scene_pieces
+from dlovr.sim import Simulator
+
+ROOT = Path(__file__).resolve().parents[1]
+VARY = ("dlo.length=10%", "dlo.young=0.5..2", "dlo.friction=30%", "objects.pos=0.005")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--program", default=str(ROOT / "recordings/programs/peg_in_hole.program.json"))
+    ap.add_argument("--trials", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--baseline", action="store_true", help="include the open-loop replay in each trial")
+    args = ap.parse_args()
+
+    program = load_program(args.program)
+    rec = find_recording(program)
+    scene = resolve_scene(program, None, rec)
+    track = load_track(rec) if rec is not None else None
+    pieces = scene_pieces(scene)
+    variations = tuple(parse_vary(v, scene) for v in VARY)
+    setup = TrialSetup(program, scene, pieces, track, variations, args.seed, ExecOptions(), args.baseline)
+
+    walls, sims = [], []
+    for k in range(args.trials):
+        t0 = time.perf_counter()
+        res = run_trial(setup, k)
+        walls.append(time.perf_counter() - t0)
+        sims.append(res["program"]["sim_time"] + (res.get("openloop") or {}).get("sim_time", 0.0))
+        print(f"trial {k}: {walls[-1]:.2f} s wall, {sims[-1]:.2f} s simulated, "
+              f"goal {'reached' if res['program']['success'] else 'missed'}")  # fmt: skip
+
+    # the executor's own cost per step: a run of the program with the simulator's step timed apart
+    scene0, _ = perturb(scene, variations, args.seed, 0)
+    sim = Simulator(scene0, track=True, pieces=pieces)
+    real_step, spent = sim.step, [0.0, 0]
+
+    def timed_step(n: int = 1):
+        t = time.perf_counter()
+        r = real_step(n)
+        spent[0] += time.perf_counter() - t
+        spent[1] += n
+        return r
+
+    sim.step = timed_step  # type: ignore[method-assign]
+    t0 = time.perf_counter()
+    execute(program, sim, ExecOptions(), track=track)
+    total = time.perf_counter() - t0
+    step_us = spent[0] / spent[1] * 1e6
+    own_us = (total - spent[0]) / spent[1] * 1e6
+
+    mean_wall = sum(walls) / len(walls)
+    simulated = sum(sims) / len(sims)
+    print(f"\n{program.name}: {args.trials} trials, {mean_wall:.2f} s wall per trial ({simulated:.2f} s "
+          f"simulated), {60.0 / mean_wall:.1f} trials per minute per core")  # fmt: skip
+    print(f"per step of a program run: {step_us:.0f} us in Simulator(track=True).step, {own_us:.0f} us in "
+          f"the executor (path, sensing chain, detectors): {own_us / step_us:.1%} on top")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Running compiled programs in simulation: force-guarded macros, scene variation and trials."""

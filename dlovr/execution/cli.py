@@ -1,0 +1,190 @@
+"""``dlovr run``: execute a compiled program in simulation, once or in perturbed trials."""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+import click
+
+
+class _BadInput(click.ClickException):
+    """A problem with the user's input: one line, exit code 2."""
+
+    exit_code = 2
+
+
+def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
+    if raw is None:
+        return None
+    try:
+        x = int(raw) if integer else float(raw)
+    except ValueError:
+        kind = "an integer" if integer else "a number"
+        raise _BadInput(f"{name}: {raw!r} is not {kind}") from None
+    if not math.isfinite(x) or (minimum is not None and x < minimum):
+        bound = f">= {minimum:g}" if minimum is not None else "finite"
+        raise _BadInput(f"{name}: must be {bound}, got {raw}")
+    return x
+
+
+_PATH_HELP = (
+    "Motion of a macro: the demonstration's recorded stretch (demo) or the screw between the program's "
+    "poses (program); auto: demo when the recording is found."
+)
+_VARY_HELP = (
+    "Perturb the scene per trial: dlo.length=10%, dlo.young=0.5..2, dlo.friction=30%, "
+    "objects.pos=0.005 (metres), gripper.pos=0.005 (repeatable; see dlovr.execution.variation)."
+)
+
+
+@click.command("run", short_help="Execute a program in simulation, or run robustness trials.")
+@click.argument("program_path", metavar="PROGRAM.json")
+@click.option("--scene", "scene_ref", metavar="NAME|PATH", help="Scene (default: the program's).")
+@click.option(
+    "--detect", metavar="force|oracle", default="force", show_default=True,
+    help="End macros by force detection, or by the contact tracker (oracle).",
+)  # fmt: skip
+@click.option("--noise", "noise_raw", metavar="N", help="Force sensor noise, std. dev. in N (default 0).")
+@click.option(
+    "--path", "path_mode", metavar="auto|demo|program", default="auto", show_default=True, help=_PATH_HELP,
+)  # fmt: skip
+@click.option("--recording", metavar="FILE", help="The demonstration (default: the program's source).")
+@click.option(
+    "--frame", metavar="world|relative", default="world", show_default=True,
+    help="Frame the demonstrated motion is repeated in.",
+)  # fmt: skip
+@click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
+@click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
+@click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
+@click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
+@click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
+@click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
+@click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
+@click.option("-o", "--output", "out", metavar="DIR", help="Directory for the trials' results.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+def run_cmd(
+    program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
+    recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
+    trials_raw: str | None, seed_raw: str,
+    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, as_json: bool,
+) -> None:  # fmt: skip
+    """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
+    its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
+
+    Prints a table per macro (class, detected at, true transition at, latency, outcome) and the result.
+    Exit code: 0 the goal was reached, 1 the run failed (a macro's transition never came, the goal
+    was not reached, the simulation diverged), 2 bad input.
+
+    With --trials N -o DIR: N runs in scenes perturbed by --vary (deterministic from --seed), with
+    --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
+    summary.json and plot.png. Exit code 0 when the trials ran (their failures are results), 2 bad input.
+
+    Recording a run as MCAP (-o run.mcap without --trials) is not available yet.
+    """
+    import json
+
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.programs import ProgramError, find_recording, load_program
+    from dlovr.execution.run import load_track, resolve_scene
+    from dlovr.execution.scoring import format_result
+    from dlovr.recording import RecordingError
+    from dlovr.scene import SceneError
+
+    for name, value, allowed in (
+        ("--detect", detect, ("force", "oracle")),
+        ("--path", path_mode, ("auto", "demo", "program")),
+        ("--frame", frame, ("world", "relative")),
+        ("--baseline", baseline or "replay", ("replay",)),
+    ):
+        if value not in allowed:
+            raise _BadInput(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+    noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
+    allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
+    settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
+    trials = _number("--trials", trials_raw, integer=True, minimum=1)
+    seed = _number("--seed", seed_raw, integer=True, minimum=0)
+    workers = _number("--workers", workers_raw, integer=True, minimum=1)
+    if trials is None and (varies or baseline):
+        raise _BadInput("--vary and --baseline need --trials N")
+    if trials is None and out:
+        raise _BadInput("-o DIR is for --trials; recording a single run as MCAP is not available yet")
+    if trials is not None and not out:
+        raise _BadInput("--trials needs -o DIR for its results")
+    try:
+        program = load_program(program_path)
+        rec_path = find_recording(program, recording)
+        if recording is not None and (rec_path is None or not rec_path.is_file()):
+            raise _BadInput(f"{recording}: no such recording")
+        scene = resolve_scene(program, scene_ref, rec_path)
+        track = None
+        if path_mode in ("auto", "demo") or baseline:
+            if rec_path is None:
+                if path_mode == "demo" or baseline:
+                    why = f"its demonstration {program.source!r} was not found: give --recording"
+                    raise _BadInput(f"{program_path}: {why}")
+            else:
+                track = load_track(rec_path)
+        opts = ExecOptions(
+            detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle
+        )
+    except (ProgramError, SceneError, RecordingError, ValueError) as e:
+        raise _BadInput(str(e)) from None
+    use_track = path_mode != "program" and track is not None
+    if trials is not None:
+        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out)
+        return
+    from dlovr.execution.run import run_program
+
+    res = run_program(program, scene, opts, track=track if use_track else None)
+    if as_json:
+        click.echo(json.dumps(res.to_json(), indent=1))
+    else:
+        click.echo(format_result(res))
+    sys.exit(0 if res.success else 1)
+
+
+def _trials(
+    program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
+    varies: tuple[str, ...], baseline: bool, workers: int, out: str,
+) -> None:  # fmt: skip
+    from pathlib import Path
+
+    from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
+    from dlovr.execution.variation import VaryError, parse_vary
+    from dlovr.geometry import scene_pieces
+
+    try:
+        variations = tuple(parse_vary(v, scene) for v in varies)
+    except VaryError as e:
+        raise _BadInput(str(e)) from None
+    keys = [v.key for v in variations]
+    if len(set(keys)) != len(keys):
+        raise _BadInput(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
+    if Path(out).exists() and not Path(out).is_dir():
+        raise _BadInput(f"{out}: exists and is not a directory")
+    pieces = scene_pieces(scene)
+    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track)
+    with click.progressbar(length=n, label=f"{n} trials", file=sys.stderr, show_eta=True) as bar:
+        done = [0]
+
+        def progress(k: int, total: int) -> None:
+            bar.update(k - done[0])
+            done[0] = k
+
+        results = run_trials(setup, n, workers=workers, progress=progress)
+    summary = summarize(results, setup)
+    write_outputs(out, results, summary)
+    rate = summary["program_success_rate"]
+    line = f"program reached the goal in {rate:.0%} of {n} trials"
+    if summary["openloop_success_rate"] is not None:
+        line += f", open-loop replay in {summary['openloop_success_rate']:.0%}"
+    lat = summary["median_latency_s"]
+    line += f"; median detection latency {lat * 1000:.0f} ms" if lat is not None else "; no detection latency"
+    fr = summary["false_detection_rate"]
+    if fr is not None:
+        line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
+        line += f" ({fr:.1%})"
+    click.echo(line)
+    click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")

@@ -1,0 +1,370 @@
+"""Executing a program in simulation: each macro a force-guarded motion (docs/model.md, paper §VI).
+
+Per macro, the gripper repeats the demonstrated motion (:class:`dlovr.execution.motion.ScrewPath`)
+from where the previous macro ended, at the demonstrated pace but no faster than ``max_speed``
+(m/s) and ``max_angular_speed`` (rad/s), while the detector of the macro's class
+(:mod:`dlovr.model.detection`) watches the gripper's wrench -- the only sensor: the executor never
+reads the contact model. The macro ends when the detector fires; it fails when the motion reaches
+its allowance (``allowance`` times the demonstrated motion, 1.5 by default) and the transition is
+still not detected ``settle`` seconds later. The program stops at the first failure.
+
+``detect="oracle"`` ends each macro instead when the contact tracker sees the expected change of
+principal contacts (to tell program errors from detection errors). Either way the tracker's debounced
+situations are logged beside the run to judge it afterwards (:mod:`dlovr.execution.scoring`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dlovr.execution.motion import ScrewPath, TrackPath
+from dlovr.execution.programs import MacroSpec, ProgramSpec
+from dlovr.model.detection import (
+    DEFAULT_FILTER_TAU_S,
+    Detector,
+    Expectation,
+    NoiseModel,
+    WrenchConditioner,
+    make_detector,
+)
+from dlovr.model.transitions import principal, successional_contacts
+
+DETECT_MODES = ("force", "oracle")
+
+
+@dataclass(frozen=True)
+class ExecOptions:
+    """How a program is executed.
+
+    ``noise``: standard deviation (N) of the Gaussian force noise (torque: see
+    :class:`dlovr.model.detection.NoiseModel`), drawn from ``seed``; ``filter_tau`` (s) the
+    detectors' low-pass filter; ``allowance``: how far the motion may go, as a multiple of the
+    demonstrated one; ``settle`` (s): how long to wait at the end of the allowance; ``min_duration``
+    (s): the shortest time a macro's demonstrated motion is repeated in; ``final_settle`` (s): time
+    simulated after the last macro before the goal is judged; ``frame``: ``world`` or ``relative``
+    (see :mod:`dlovr.execution.motion`), unless a macro names its own; ``oracle_hold`` (s): how long
+    the oracle wants the expected contacts before it ends a macro; ``start_settle`` (s): the gripper
+    holds its start pose this long before the first macro (default none: the demonstrations start
+    moving at once, and a settled cable repeats some of their dynamic transitions differently).
+    """
+
+    detect: str = "force"
+    noise: float = 0.0
+    seed: int = 0
+    filter_tau: float = DEFAULT_FILTER_TAU_S
+    allowance: float = 1.5
+    max_speed: float = 0.25
+    max_angular_speed: float = 2.0
+    min_duration: float = 0.1
+    settle: float = 0.3
+    final_settle: float = 0.3
+    frame: str = "world"
+    oracle_hold: float = 0.02
+    start_settle: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.detect not in DETECT_MODES:
+            raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
+        names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold")
+        for name in (*names, "start_settle"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+        for name in ("allowance", "max_speed", "max_angular_speed"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if self.allowance < 1.0:
+            raise ValueError(f"allowance must be >= 1 (times the demonstrated motion), got {self.allowance}")
+        if self.frame not in ("world", "relative"):
+            raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+
+
+@dataclass(frozen=True)
+class Event:
+    """An executor event: ``kind`` one of ``start``, ``macro``, ``detected``, ``failed``, ``final``,
+    ``end``; ``t`` simulated time (s); ``macro`` its index (0 for none); ``text`` what happened."""
+
+    t: float
+    step: int
+    kind: str
+    macro: int
+    text: str
+
+    def payload(self) -> dict[str, Any]:
+        return {"t": self.t, "step": self.step, "kind": self.kind, "macro": self.macro, "text": self.text}
+
+
+@dataclass(frozen=True)
+class MacroRun:
+    """What happened while one macro ran (times in s of simulated time, distances in m).
+
+    ``ended``: ``detected``, ``allowance`` (the motion reached its allowance and nothing was
+    detected), or ``diverged``; ``moved``/``allowed``: how far the gripper went and could go along
+    the demonstrated motion (path parameter times the demonstrated distance; for a pure rotation,
+    radians).
+    """
+
+    macro: MacroSpec
+    started_at: float
+    ended_at: float
+    ended: str
+    detected_at: float | None
+    moved: float
+    allowed: float
+    peak_signal: float
+    reason: str = ""
+
+
+@dataclass
+class Execution:
+    """The raw outcome of :func:`execute`: per-macro runs, the tracker's debounced situations
+    (``kept``: list of ``dlovr.model.transitions.Kept``), the events and where it stopped."""
+
+    program: ProgramSpec
+    options: ExecOptions
+    runs: list[MacroRun] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
+    kept: list[Any] = field(default_factory=list)
+    diverged: str | None = None
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+    final_done: bool = False
+
+
+def principal_states(situation: Any) -> tuple[str, ...]:
+    """Principal contacts of a discrete situation as the program writes them (with faces), sorted."""
+    return tuple(sorted(c.format() for run in successional_contacts(situation) for c in principal(run)))
+
+
+def transition_seen(principals: tuple[str, ...], m: MacroSpec) -> bool:
+    """Whether a situation with these principal contacts shows the macro's transition: the principal
+    contacts it begins are there and those it ends are gone (states and faces)."""
+    have = set(principals)
+    return all(c.state in have for c in m.established) and not any(c.state in have for c in m.released)
+
+
+def expectation(m: MacroSpec) -> Expectation:
+    return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established))
+
+
+def pace(m: MacroSpec, opts: ExecOptions) -> float:
+    """Seconds for the demonstrated motion (s from 0 to 1): the demonstrated duration, but no
+    faster than the speed bounds and no shorter than ``min_duration``."""
+    mo = m.motion
+    fastest = max(mo.distance / opts.max_speed, mo.angle / opts.max_angular_speed)
+    return max(mo.duration, fastest, opts.min_duration)
+
+
+class _Guard:
+    """The sensing side of one macro: the force detectors of its classes, or the oracle."""
+
+    def __init__(self, m: MacroSpec, opts: ExecOptions, rate_hz: float):
+        self.macro = m
+        self.oracle = opts.detect == "oracle"
+        self.detectors: list[Detector] = []
+        if not self.oracle:
+            exp = expectation(m)
+            self.detectors = [make_detector(d.cls, d.params, exp, rate_hz) for d in m.detection]
+        self.peak = 0.0
+        self.hold = opts.oracle_hold
+        self._since: float | None = None
+
+    def start(self, t: float, f: np.ndarray, tq: np.ndarray) -> None:
+        self._since = None
+        for d in self.detectors:
+            d.start(t, f, tq)
+
+    def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any) -> bool:
+        if self.oracle:
+            st = getattr(record, "state", None)
+            if st is None or not transition_seen(principal_states(st.discrete), self.macro):
+                self._since = None
+                return False
+            if self._since is None:
+                self._since = t
+            self.peak = max(self.peak, min(1.0, (t - self._since) / self.hold) if self.hold > 0 else 1.0)
+            return t - self._since >= self.hold - 1e-9
+        fired = False
+        for d in self.detectors:
+            fired = d.update(t, f, tq) or fired
+            self.peak = max(self.peak, d.signal)
+        return fired
+
+
+@dataclass(frozen=True)
+class DemoTrack:
+    """The demonstration's commanded gripper trajectory: times (k,) s, positions (k, 3) m and
+    quaternions (k, 4) wxyz, world frame (``dlovr.recording.Recording.commands`` scaled to time)."""
+
+    t: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+
+
+class _Session:
+    """One execution in progress: the simulator, the sensor chain and the event log."""
+
+    def __init__(self, sim: Any, opts: ExecOptions, out: Execution, on_step: Any, on_event: Any):
+        self.sim, self.opts, self.out = sim, opts, out
+        self.on_step, self.on_event = on_step, on_event
+        self.dt = float(sim.model.opt.timestep)
+        self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
+        rec = sim.record()
+        if sim.tracker is not None and sim.tracker.current is None:
+            sim.tracker.restart(rec)
+        self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", np.zeros(3)), self.dt)
+
+    def emit(self, kind: str, macro: int, text: str) -> None:
+        ev = Event(float(self.sim.time), int(self.sim.step_index), kind, macro, text)
+        self.out.events.append(ev)
+        if self.on_event is not None:
+            self.on_event(ev)
+
+    def step(self, pos: np.ndarray, quat: np.ndarray) -> Any:
+        """Command the gripper pose and advance one step; the sensed (noisy, filtered) wrench is
+        then in ``self.f`` (N) and ``self.tq`` (N m), world frame."""
+        self.sim.set_target(pos, quat)
+        r = self.sim.step()
+        self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", np.zeros(3)), self.dt)
+        if self.on_step is not None:
+            self.on_step(r)
+        return r
+
+
+def execute(
+    program: ProgramSpec,
+    sim: Any,
+    opts: ExecOptions = ExecOptions(),
+    *,
+    track: DemoTrack | None = None,
+    on_step: Callable[[Any], None] | None = None,
+    on_event: Callable[[Event], None] | None = None,
+) -> Execution:
+    """Run ``program`` in ``sim`` (a :class:`dlovr.sim.Simulator` with ``track=True``, at its start
+    pose) and return the raw :class:`Execution` (judge it with :func:`dlovr.execution.scoring.score`).
+
+    ``track``: the demonstration's gripper trajectory; when given, each macro follows its recorded
+    stretch of it (:class:`dlovr.execution.motion.TrackPath`) instead of the screw between the
+    demonstrated poses, and a program without a final macro ends with the rest of the recording.
+    A diverged simulation ends the run with its reason (never raises). ``on_step(record)`` sees
+    every step, ``on_event(event)`` every :class:`Event`.
+    """
+    from dlovr.sim import SimulationDiverged
+
+    out = Execution(program, opts)
+    wall0 = time.perf_counter()
+    ses = _Session(sim, opts, out, on_step, on_event)
+    ses.emit("start", 0, f"program {program.name}: {len(program.macros)} macros, detection {opts.detect}")
+    try:
+        mid = sim.built.mocap_id
+        here = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
+        for _ in range(round(opts.start_settle / ses.dt)):
+            ses.step(*here)
+        for m in program.macros:
+            run = _run_macro(m, ses, track)
+            out.runs.append(run)
+            if run.ended == "diverged":
+                out.diverged = run.reason
+            if run.ended != "detected":
+                break
+        else:
+            final = program.final
+            if final is None and track is not None and program.macros:
+                final = _track_final(program.macros[-1], track)
+            if final is not None:
+                _run_final(final, ses, track)
+                out.final_done = True
+            pos, quat = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
+            for _ in range(round(opts.final_settle / ses.dt)):
+                ses.step(pos, quat)
+            ses.emit("end", 0, "program done")
+    except SimulationDiverged as e:
+        out.diverged = str(e)
+        ses.emit("failed", 0, f"simulation diverged outside the macros: {e.reason}")
+    out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
+    out.sim_time = float(sim.time)
+    out.wall_time = time.perf_counter() - wall0
+    return out
+
+
+def _path(m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None) -> Any:
+    mid = sim.built.mocap_id
+    mo = m.motion
+    here = tuple(float(x) for x in sim.data.mocap_pos[mid]), tuple(float(x) for x in sim.data.mocap_quat[mid])
+    frame = m.frame or opts.frame
+    if track is not None:
+        return TrackPath(
+            track.t, track.pos, track.quat, m.t - mo.duration, m.t, *here, frame,  # type: ignore[arg-type]
+            (mo.rotation, mo.relative),
+        )  # fmt: skip
+    return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame)  # type: ignore[arg-type]
+
+
+def _period(m: MacroSpec, opts: ExecOptions, track: DemoTrack | None) -> float:
+    return pace(m, opts) if track is None else max(m.motion.duration, opts.min_duration)
+
+
+def _run_macro(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> MacroRun:
+    """One guarded motion: until the detector fires, or the allowance and then ``settle`` pass."""
+    from dlovr.sim import SimulationDiverged
+
+    sim, opts = ses.sim, ses.opts
+    path = _path(m, sim, opts, track)
+    period = _period(m, opts, track)
+    scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
+    unit = "mm" if m.motion.distance > 1e-9 else "mrad"
+    allowed = opts.allowance * scale
+    guard = _Guard(m, opts, 1.0 / ses.dt)
+    t0 = float(sim.time)
+    guard.start(t0, ses.f, ses.tq)
+    ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
+    limit = opts.allowance * period + opts.settle
+    s = 0.0
+    try:
+        while True:
+            s = min(opts.allowance, (float(sim.time) + 1e-12 - t0) / period)
+            r = ses.step(*path.at(s))
+            t = float(r.time)
+            if guard.update(t, ses.f, ses.tq, r):
+                sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
+                ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
+                return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak)
+            if t - t0 >= limit - 1e-12:
+                why = (
+                    f"no {m.label} transition detected within the allowance ({opts.allowance:g}x the "
+                    f"demonstrated motion: {allowed * 1000:.1f} {unit}) and {opts.settle:g} s after it"
+                )
+                ses.emit("failed", m.index, f"macro {m.index} {m.label}: {why}")
+                return MacroRun(m, t0, t, "allowance", None, s * scale, allowed, guard.peak, why)
+    except SimulationDiverged as e:
+        ses.emit("failed", m.index, f"macro {m.index} {m.label}: simulation diverged: {e.reason}")
+        return MacroRun(m, t0, float(e.time), "diverged", None, s * scale, allowed, guard.peak, str(e))
+
+
+def _run_final(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> None:
+    """The motion after the last classed transition, to the demonstrated end pose (no detection)."""
+    path = _path(m, ses.sim, ses.opts, track)
+    period = _period(m, ses.opts, track)
+    t0 = float(ses.sim.time)
+    ses.emit("final", m.index, "final motion to the demonstrated end pose")
+    while True:
+        s = min(1.0, (float(ses.sim.time) + 1e-12 - t0) / period)
+        ses.step(*path.at(s))
+        if s >= 1.0:
+            return
+
+
+def _track_final(last: MacroSpec, track: DemoTrack) -> MacroSpec:
+    """The final motion of a program without one: the recorded trajectory after its last macro."""
+    from dataclasses import replace
+
+    t_end = float(track.t[-1])
+    mo = replace(last.motion, duration=max(t_end - last.t, 0.0))
+    return replace(last, index=last.index + 1, classes=(), t=t_end, motion=mo, detection=(), final=True)

@@ -1,0 +1,190 @@
+"""The guarded motion of a macro: the demonstrated gripper displacement as a screw, repeated from
+wherever the gripper is.
+
+A macro's motion is the demonstrated change of gripper pose: a displacement and a rotation (the
+program's ``relative`` displacement and ``rotation`` vector, gripper frame at the macro's start).
+It is followed as the screw motion between the two poses (constant twist in the gripper frame), so a
+demonstrated turn about the cable's tip or about an edge is repeated as that turn, not as a straight
+line; a pure displacement is a straight line. Parameter ``s`` runs from 0 (start) to 1 (the
+demonstrated end) and beyond (the allowance, 1.5 by default).
+
+Frames: ``"world"`` repeats the demonstrated displacement and rotation in the world frame
+(the turn's axis keeps its world direction); ``"relative"`` repeats them in the gripper frame at the
+start (they turn with the gripper). Both start from the gripper's current pose.
+
+Everything here feeds the simulator, so it is computed in Python floats without BLAS (as
+:mod:`dlovr.transforms`), and the same on every processor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, slerp
+
+Vec = tuple[float, float, float]
+
+
+def _cross(a: Vec, b: Vec) -> Vec:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _rotvec_quat(w: Vec) -> np.ndarray:
+    """Unit quaternion (wxyz) of a rotation vector (rad)."""
+    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if th < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    s = math.sin(0.5 * th) / th
+    return np.array([math.cos(0.5 * th), w[0] * s, w[1] * s, w[2] * s])
+
+
+def _screw_coeffs(th: float) -> tuple[float, float]:
+    """``a = (1 - cos th) / th^2`` and ``b = (th - sin th) / th^3`` (series near 0)."""
+    if th < 1e-4:
+        t2 = th * th
+        return 0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0
+    return (1.0 - math.cos(th)) / (th * th), (th - math.sin(th)) / (th * th * th)
+
+
+def _apply_v(phi: Vec, u: Vec) -> Vec:
+    """``V(phi) u``: the displacement of a screw with rotation vector ``phi`` and linear twist ``u``."""
+    th = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    a, b = _screw_coeffs(th)
+    c1 = _cross(phi, u)
+    c2 = _cross(phi, c1)
+    return (u[0] + a * c1[0] + b * c2[0], u[1] + a * c1[1] + b * c2[1], u[2] + a * c1[2] + b * c2[2])
+
+
+def _apply_v_inv(phi: Vec, d: Vec) -> Vec:
+    """``V(phi)^-1 d``: the linear twist of the screw that rotates by ``phi`` and moves by ``d``."""
+    th = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    if th < 1e-4:
+        c = 1.0 / 12.0 + th * th / 720.0
+    else:
+        c = (1.0 - th * math.sin(th) / (2.0 * (1.0 - math.cos(th)))) / (th * th)
+    c1 = _cross(phi, d)
+    c2 = _cross(phi, c1)
+    return (d[0] - 0.5 * c1[0] + c * c2[0], d[1] - 0.5 * c1[1] + c * c2[1], d[2] - 0.5 * c1[2] + c * c2[2])
+
+
+@dataclass(frozen=True)
+class ScrewPath:
+    """Gripper poses along a demonstrated motion, from the pose ``start_pos``/``start_quat`` (world,
+    wxyz) where it begins now.
+
+    ``rotation``: rotation vector (rad) and ``displacement`` (m) of the demonstrated motion, both in
+    the gripper frame at the demonstrated start; ``demo_quat``: the demonstrated start orientation
+    (used by ``frame="world"``).
+    """
+
+    start_pos: Vec
+    start_quat: tuple[float, float, float, float]
+    rotation: Vec
+    displacement: Vec
+    demo_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    frame: str = "world"
+
+    def __post_init__(self) -> None:
+        if self.frame not in ("world", "relative"):
+            raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+
+    @property
+    def twist(self) -> Vec:
+        """Linear part of the constant gripper-frame twist (m per unit of ``s``)."""
+        return _apply_v_inv(self.rotation, self.displacement)
+
+    def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (world position m, quaternion wxyz) at path parameter ``s`` (0 start, 1 demonstrated end)."""
+        phi = (s * self.rotation[0], s * self.rotation[1], s * self.rotation[2])
+        v = self.twist
+        local = _apply_v(phi, (s * v[0], s * v[1], s * v[2]))  # gripper frame at the start
+        dq = _rotvec_quat(phi)
+        frame_q = np.asarray(self.start_quat if self.frame == "relative" else self.demo_quat, dtype=float)
+        frame_q = quat_normalize(frame_q)
+        offset = quat_rotate(frame_q, np.array(local))
+        pos = np.array([self.start_pos[i] + float(offset[i]) for i in range(3)])
+        q0 = quat_normalize(np.asarray(self.start_quat, dtype=float))
+        if self.frame == "relative":
+            quat = quat_mul(q0, dq)
+        else:  # the rotation with its world axis: frame dq frame^-1, applied before q0
+            inv = np.array([frame_q[0], -frame_q[1], -frame_q[2], -frame_q[3]])
+            quat = quat_mul(quat_mul(quat_mul(frame_q, dq), inv), q0)
+        return pos, quat_normalize(quat)
+
+
+@dataclass(frozen=True)
+class TrackPath:
+    """Gripper poses along the demonstration's own recorded trajectory between two of its times, from
+    the pose where the macro begins now.
+
+    ``times`` (k,) s, ``pos`` (k, 3) m, ``quat`` (k, 4) wxyz: the demonstration's commanded gripper
+    poses (world). The macro's stretch runs from demonstration time ``t0`` (``s = 0``) to ``t1``
+    (``s = 1``). Beyond it (the allowance), the motion goes on as the screw ``beyond`` -- the macro's
+    demonstrated displacement and rotation (gripper frame), scaled by ``s - 1`` -- from the pose
+    reached at ``s = 1``: a guarded approach keeps approaching. ``frame`` as :class:`ScrewPath`:
+    ``world`` repeats the recorded displacement and rotation in the world frame, ``relative`` in the
+    gripper frame at the start.
+    """
+
+    times: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    t0: float
+    t1: float
+    start_pos: Vec
+    start_quat: tuple[float, float, float, float]
+    frame: str = "world"
+    beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
+
+    def __post_init__(self) -> None:
+        if self.frame not in ("world", "relative"):
+            raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+        p0, q0 = self._at_time(self.t0)  # per path, not per step: this runs every simulation step
+        object.__setattr__(self, "_p0", p0)
+        object.__setattr__(self, "_inv0", np.array([q0[0], -q0[1], -q0[2], -q0[3]]))
+        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)))
+        object.__setattr__(self, "_end", None)
+
+    def _at_time(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The recorded pose at time ``t`` (s), interpolated between the samples around it (linear,
+        slerp), held at the first and the last."""
+        times = self.times
+        i = int(np.searchsorted(times, t, side="right"))
+        if i <= 0:
+            return self.pos[0], self.quat[0]
+        if i >= len(times):
+            return self.pos[-1], self.quat[-1]
+        a, b = float(times[i - 1]), float(times[i])
+        w = 0.0 if b <= a else (t - a) / (b - a)
+        p0, p1 = self.pos[i - 1], self.pos[i]
+        pos = np.array([float(p0[k]) + w * (float(p1[k]) - float(p0[k])) for k in range(3)])
+        qa, qb = self.quat[i - 1], self.quat[i]
+        if w == 0.0 or qa.tolist() == qb.tolist():
+            return pos, qa
+        return pos, slerp(qa, qb, w)
+
+    def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""
+        if s > 1.0 and self.beyond is not None:
+            on = self._end  # type: ignore[has-type]
+            if on is None:
+                pos, quat = self.at(1.0)
+                here = tuple(float(x) for x in quat)
+                on = ScrewPath(tuple(float(x) for x in pos), here, *self.beyond, here, "relative")  # type: ignore[arg-type]
+                object.__setattr__(self, "_end", on)
+            return on.at(s - 1.0)
+        p0, inv0, cur_q = self._p0, self._inv0, self._cur_q  # type: ignore[attr-defined]
+        p, q = self._at_time(self.t0 + s * (self.t1 - self.t0))
+        d = np.array([float(p[i]) - float(p0[i]) for i in range(3)])
+        if self.frame == "relative":
+            local = quat_rotate(inv0, d)
+            offset = quat_rotate(cur_q, local)
+            quat = quat_mul(cur_q, quat_mul(inv0, q))
+        else:
+            offset = d
+            quat = quat_mul(quat_mul(q, inv0), cur_q)
+        pos = np.array([self.start_pos[i] + float(offset[i]) for i in range(3)])
+        return pos, quat_normalize(quat)

@@ -1,0 +1,171 @@
+"""One run of a program in one scene, and the open-loop replay it is compared with.
+
+- :func:`resolve_scene`: the scene a program runs in (given, named by the program, or the one its
+  demonstration was recorded in), checked against the program (:func:`check_program_scene`);
+- :func:`load_track`: the demonstration's gripper trajectory (for ``--path demo`` and the baseline);
+- :func:`run_program`: simulate, execute, judge -> :class:`dlovr.execution.scoring.RunResult`;
+- :func:`run_openloop`: replay the demonstration's recorded gripper commands open loop in a scene
+  and judge the end situation against the program's goal -> :class:`OpenLoopResult`.
+
+A run that cannot start (the cable's start pose inside an obstacle of a perturbed scene) or whose
+simulation diverges is a failed result with its reason, never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dlovr.execution.executor import DemoTrack, ExecOptions, execute, principal_states
+from dlovr.execution.programs import ProgramError, ProgramSpec, find_recording
+from dlovr.execution.scoring import RunResult, score
+
+#: How far (m) the program's start may lie from the scene's gripper pose, and by what angle (deg).
+START_TOL_M = 0.02
+START_TOL_DEG = 10.0
+
+
+def check_program_scene(program: ProgramSpec, scene: Any) -> None:
+    """Raise :class:`ProgramError` when ``program`` was not made for ``scene``: it names objects the
+    scene lacks, or it starts away from the scene's gripper pose."""
+    where = str(program.path) if program.path else program.name
+    names = {o.name for o in scene.objects}
+    missing = sorted(program.objects - names)
+    if missing:
+        raise ProgramError(
+            f"{where}: program touches object {missing[0]!r}, which scene {scene.name} does not have "
+            f"(a program for another scene?)"
+        )
+    start = program.start
+    d = math.dist(start.start_pos, scene.gripper.pos)
+    q0, q1 = np.asarray(start.start_quat, float), np.asarray(scene.gripper.quat, float)
+    c = abs(float((q0 * q1).sum())) / float(np.sqrt((q0 * q0).sum() * (q1 * q1).sum()))
+    ang = math.degrees(2.0 * math.acos(min(1.0, c)))
+    if d > START_TOL_M or ang > START_TOL_DEG:
+        raise ProgramError(
+            f"{where}: program starts at {[round(x, 4) for x in start.start_pos]}, {d * 1000:.0f} mm and "
+            f"{ang:.0f} deg from scene {scene.name}'s gripper pose (a program for another scene?)"
+        )
+
+
+def resolve_scene(program: ProgramSpec, scene_ref: str | None, recording: Path | None = None) -> Any:
+    """The scene to run ``program`` in: ``scene_ref`` (name or path), else the program's ``scene``,
+    else the scene its demonstration was recorded in, else the built-in scene named like the program.
+    Raises :class:`ProgramError` or ``dlovr.scene.SceneError`` (one line)."""
+    from dlovr.scene import builtin_scenes, load_scene
+
+    ref = scene_ref or program.scene
+    if ref is None and recording is not None and recording.is_file():
+        from dlovr.recording import Recording, RecordingError
+
+        try:
+            ref = Recording(recording).metadata.get("scene_name") or None
+        except RecordingError:
+            ref = None
+        if ref is not None and ref not in {n for n, _ in builtin_scenes()}:
+            ref = None
+    if ref is None and program.name in {n for n, _ in builtin_scenes()}:
+        ref = program.name
+    if ref is None:
+        raise ProgramError(f"{program.path or program.name}: cannot tell which scene it is for: give --scene")
+    scene = load_scene(ref)
+    check_program_scene(program, scene)
+    return scene
+
+
+def load_track(path: str | Path) -> DemoTrack:
+    """The gripper trajectory a recording commanded (raises ``dlovr.recording.RecordingError``)."""
+    from dlovr.recording import Recording
+
+    rec = Recording(path)
+    steps, pos, quat = rec.commands()
+    return DemoTrack(steps * rec.dt, pos, quat)
+
+
+def demo_track(program: ProgramSpec, recording: str | Path | None = None) -> DemoTrack | None:
+    """The program's demonstration trajectory when its recording can be found, else None."""
+    path = find_recording(program, recording)
+    return None if path is None else load_track(path)
+
+
+def _simulator(scene: Any, pieces: Any) -> tuple[Any, str | None]:
+    from dlovr.sim import SimulationDiverged, Simulator
+
+    try:
+        return Simulator(scene, track=True, pieces=pieces), None
+    except (ValueError, SimulationDiverged) as e:
+        return None, f"cannot start: {e}"
+
+
+def run_program(
+    program: ProgramSpec,
+    scene: Any,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    pieces: Any = None,
+    on_step: Any = None,
+    on_event: Any = None,
+) -> RunResult:
+    """Execute ``program`` in a fresh simulation of ``scene`` and judge it."""
+    opts = opts if opts is not None else ExecOptions()
+    sim, why = _simulator(scene, pieces)
+    if sim is None:
+        return RunResult(program.name, scene.name, opts.detect, False, False, program.goal, "", (), 0,
+                         str(why), (), 0.0, 0.0)  # fmt: skip
+    ex = execute(program, sim, opts, track=track, on_step=on_step, on_event=on_event)
+    return score(ex, scene.name)
+
+
+@dataclass(frozen=True)
+class OpenLoopResult:
+    """The demonstration's gripper commands replayed open loop: whether its end situation has the
+    program's goal principal contacts, and why not."""
+
+    goal_reached: bool
+    final_situation: str
+    final_principals: tuple[str, ...]
+    reason: str
+    sim_time: float
+    wall_time: float
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["final_principals"] = list(self.final_principals)
+        return d
+
+
+def run_openloop(
+    program: ProgramSpec, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = 0.3
+) -> OpenLoopResult:
+    """Replay ``track`` (every step's commanded gripper pose) in a fresh simulation of ``scene``, then
+    ``settle`` s more, and judge the last debounced situation against ``program``'s goal."""
+    from dlovr.sim import SimulationDiverged
+
+    wall0 = time.perf_counter()
+    sim, why = _simulator(scene, pieces)
+    if sim is None:
+        return OpenLoopResult(False, "", (), str(why), 0.0, 0.0)
+    sim.tracker.restart(sim.record())
+    reason = ""
+    try:
+        for i in range(len(track.t)):
+            sim.set_target(track.pos[i], track.quat[i])
+            sim.step()
+        for _ in range(round(settle / float(sim.model.opt.timestep))):
+            sim.step()
+    except SimulationDiverged as e:
+        reason = f"simulation diverged: {e}"
+    kept = sim.tracker.kept
+    final = kept[-1].situation if kept else None
+    fp = principal_states(final) if final is not None else ()
+    reached = not reason and final is not None and fp == program.goal
+    if not reached and not reason:
+        reason = f"final situation {fp or ('N',)} is not the goal {program.goal or ('N',)}"
+    text = final.format() if final is not None else ""
+    return OpenLoopResult(reached, text, fp, reason, float(sim.time), time.perf_counter() - wall0)

@@ -1,0 +1,180 @@
+"""Judging an execution against the ground truth the contact tracker logged beside it (docs/model.md).
+
+The tracker's debounced situations are not used to steer a force-detected run, only to judge it:
+
+- a macro's **true transition** is the start of the first debounced situation, overlapping the
+  macro's time window, that shows the macro's change of principal contacts (those it begins are
+  there, those it ends are gone; same states, same faces) when the situation before it did not;
+  a detection is **ok** when that situation began no later than ``TRUTH_TOL`` after the detection,
+  a **false** detection otherwise; a macro that ended at its allowance **missed** the transition
+  when it happened anyway, else saw **no transition**; **latency** is detection minus true
+  transition (s);
+- the run reaches its **goal** when the last debounced situation has the principal contacts of the
+  program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
+  being no principal contacts).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from dlovr.execution.executor import Execution, MacroRun, principal_states, transition_seen
+
+#: How long after a detection the tracker may take to see the transition it detected (s): force
+#: detection may lead the geometric contact label by a fraction of a millimetre of motion.
+TRUTH_TOL = 0.05
+
+OUTCOMES = ("ok", "false", "missed", "no transition", "diverged", "not run")
+
+
+@dataclass(frozen=True)
+class MacroScore:
+    """One macro of a run, judged. Times in s of simulated time; ``moved``/``allowed`` in m (or rad
+    for a pure rotation) along the demonstrated motion."""
+
+    index: int
+    classes: str
+    expected: str
+    started_at: float
+    detected_at: float | None
+    true_at: float | None
+    latency: float | None
+    outcome: str
+    moved: float
+    allowed: float
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """A judged run: ``success`` when every macro ended by a detection and the goal was reached."""
+
+    program: str
+    scene: str
+    detect: str
+    success: bool
+    goal_reached: bool
+    goal: tuple[str, ...]
+    final_situation: str
+    final_principals: tuple[str, ...]
+    failed_macro: int | None
+    reason: str
+    macros: tuple[MacroScore, ...]
+    sim_time: float
+    wall_time: float
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["goal"] = list(self.goal)
+        d["final_principals"] = list(self.final_principals)
+        return d
+
+    @property
+    def false_detections(self) -> int:
+        return sum(m.outcome == "false" for m in self.macros)
+
+    @property
+    def latencies(self) -> list[float]:
+        return [m.latency for m in self.macros if m.outcome == "ok" and m.latency is not None]
+
+
+def _truth(run: MacroRun, kept: list[Any]) -> float | None:
+    end = (run.detected_at if run.detected_at is not None else run.ended_at) + TRUTH_TOL
+    seen = [transition_seen(principal_states(k.situation), run.macro) for k in kept]
+    for i in range(1, len(kept)):
+        k = kept[i]
+        if seen[i] and not seen[i - 1] and k.end >= run.started_at and k.start <= end:
+            return float(k.start)
+    return None
+
+
+def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
+    """Judge one macro run against the tracker's debounced situations ``kept``."""
+    m = run.macro
+    true_at = _truth(run, kept)
+    latency = None
+    if run.ended == "detected":
+        outcome = "ok" if true_at is not None else "false"
+        if true_at is not None and run.detected_at is not None:
+            latency = run.detected_at - true_at
+    elif run.ended == "diverged":
+        outcome = "diverged"
+    else:
+        outcome = "missed" if true_at is not None else "no transition"
+    return MacroScore(
+        m.index, m.label, m.expected, run.started_at, run.detected_at, true_at, latency, outcome,
+        run.moved, run.allowed, run.reason,
+    )  # fmt: skip
+
+
+def score(ex: Execution, scene_name: str = "") -> RunResult:
+    """Judge an :class:`Execution` (see the module docstring)."""
+    macros = [score_macro(r, ex.kept) for r in ex.runs]
+    failed = next((r for r in ex.runs if r.ended != "detected"), None)
+    reason = ""
+    failed_index = None
+    if ex.diverged is not None:
+        failed_index = ex.runs[-1].macro.index if ex.runs else 0
+        reason = f"simulation diverged: {ex.diverged}"
+        if ex.runs and ex.runs[-1].ended == "detected" and ex.final_done:
+            failed_index = None  # diverged after the last macro (final motion or settling)
+    elif failed is not None:
+        failed_index = failed.macro.index
+        fm = failed.macro
+        reason = f"macro {fm.index} ({fm.label}, {fm.expected}): {failed.reason}"
+    ran = {m.index for m in macros}
+    for m in ex.program.macros:
+        if m.index not in ran:
+            macros.append(
+                MacroScore(m.index, m.label, m.expected, math.nan, None, None, None, "not run", 0.0, 0.0)
+            )
+    final = ex.kept[-1].situation if ex.kept else None
+    final_p = principal_states(final) if final is not None else ()
+    goal = ex.program.goal
+    reached = final is not None and final_p == goal
+    if not reason and not reached:
+        reason = f"final situation {final_p or ('N',)} is not the goal {goal or ('N',)}"
+    if reason and ex.diverged is not None and failed_index is None:
+        reached = False
+    success = reached and failed_index is None and ex.diverged is None
+    return RunResult(
+        program=ex.program.name,
+        scene=scene_name,
+        detect=ex.options.detect,
+        success=success,
+        goal_reached=reached,
+        goal=goal,
+        final_situation=final.format() if final is not None else "",
+        final_principals=final_p,
+        failed_macro=failed_index,
+        reason=reason,
+        macros=tuple(macros),
+        sim_time=ex.sim_time,
+        wall_time=ex.wall_time,
+    )
+
+
+def _t(x: float | None, ms: bool = False) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return f"{x * 1000:+.0f} ms" if ms else f"{x:.3f}"
+
+
+def format_result(res: RunResult) -> str:
+    """The per-macro table and the result line, as ``dlovr run`` prints them."""
+    head = f"{'#':>3}  {'class':<5} {'detected':>9} {'true':>9} {'latency':>9}  {'outcome':<13} expected"
+    lines = [f"program {res.program} in scene {res.scene}, detection {res.detect}", head]
+    for m in res.macros:
+        lines.append(
+            f"{m.index:>3}  {m.classes:<5} {_t(m.detected_at):>9} {_t(m.true_at):>9} "
+            f"{_t(m.latency, True):>9}  {m.outcome:<13} {m.expected}"
+        )
+    goal = " & ".join(res.goal) or "N"
+    if res.success:
+        lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s")
+    else:
+        lines.append(f"result: FAILED: {res.reason}")
+        lines.append(f"        goal {goal}: {'reached' if res.goal_reached else 'not reached'}")
+    return "\n".join(lines)

@@ -1,0 +1,255 @@
+"""Robustness trials: a program (and optionally the open-loop replay of its demonstration) on many
+perturbed copies of its scene, on local processes.
+
+Trial ``k`` of seed ``s`` perturbs the scene with :func:`dlovr.execution.variation.perturb`, runs the
+program (:func:`dlovr.execution.run.run_program`) and, with the baseline, replays the demonstration's
+gripper commands open loop in the same perturbed scene (:func:`dlovr.execution.run.run_openloop`).
+Outputs in the output directory (:func:`write_outputs`): ``trial_KKK.json`` per trial,
+``trials.csv`` (one row per trial), ``summary.json`` and ``plot.png`` (success rate of program and
+open loop per variation parameter and level).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dlovr.execution.executor import DemoTrack, ExecOptions
+from dlovr.execution.programs import ProgramSpec
+from dlovr.execution.run import run_openloop, run_program
+from dlovr.execution.variation import Variation, perturb
+
+#: Levels per variation parameter in the summary and the plot.
+LEVELS = 3
+
+
+@dataclass(frozen=True)
+class TrialSetup:
+    """Everything a trial needs (picklable, sent to the worker processes).
+
+    ``pieces``: the scene objects' convex decomposition (their own frames, so valid for every
+    perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
+    ``use_track`` and by the open-loop baseline when ``baseline``.
+    """
+
+    program: ProgramSpec
+    scene: Any
+    pieces: Any
+    track: DemoTrack | None
+    variations: tuple[Variation, ...]
+    seed: int
+    opts: ExecOptions
+    baseline: bool = False
+    use_track: bool = True
+
+
+def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
+    """One trial (see the module docstring) as a JSON-able dict."""
+    t0 = time.perf_counter()
+    scene, values = perturb(setup.scene, setup.variations, setup.seed, trial)
+    from dataclasses import replace
+
+    opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
+    res = run_program(
+        setup.program, scene, opts, track=setup.track if setup.use_track else None, pieces=setup.pieces
+    )
+    out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": res.to_json()}
+    if setup.baseline and setup.track is not None:
+        out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
+    out["wall_time"] = time.perf_counter() - t0
+    return out
+
+
+def run_trials(
+    setup: TrialSetup,
+    n: int,
+    *,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Trials ``0..n-1``, on ``workers`` processes (1: in this process); results in trial order."""
+    results: dict[int, dict[str, Any]] = {}
+    if workers <= 1 or n <= 1:
+        for k in range(n):
+            results[k] = run_trial(setup, k)
+            if progress is not None:
+                progress(k + 1, n)
+    else:
+        import multiprocessing
+
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(workers, n), mp_context=ctx) as pool:
+            futures = {pool.submit(run_trial, setup, k): k for k in range(n)}
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                if progress is not None:
+                    progress(len(results), n)
+    return [results[k] for k in range(n)]
+
+
+# --------------------------------------------------------------------------------------------------
+# Summary, CSV and plot
+
+
+def _bins(v: Variation) -> list[tuple[float, float]]:
+    if v.kind == "offset":
+        lo, hi = 0.0, v.hi * math.sqrt(3.0)
+        edges = [lo + (hi - lo) * i / LEVELS for i in range(LEVELS + 1)]
+    elif v.kind == "range":
+        a, b = math.log(v.lo), math.log(v.hi)
+        edges = [math.exp(a + (b - a) * i / LEVELS) for i in range(LEVELS + 1)]
+    else:
+        edges = [v.lo + (v.hi - v.lo) * i / LEVELS for i in range(LEVELS + 1)]
+    return list(itertools.pairwise(edges))
+
+
+def _rate(xs: Sequence[bool]) -> float | None:
+    return sum(xs) / len(xs) if xs else None
+
+
+def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, Any]:
+    """Success rates, detection figures and per-level rates of a set of trials."""
+    prog = [bool(t["program"]["success"]) for t in trials]
+    has_ol = all("openloop" in t for t in trials) and bool(trials)
+    ol = [bool(t["openloop"]["goal_reached"]) for t in trials] if has_ol else []
+    macros = [m for t in trials for m in t["program"]["macros"] if m["outcome"] != "not run"]
+    lat = [m["latency"] for m in macros if m["outcome"] == "ok" and m["latency"] is not None]
+    false = sum(m["outcome"] == "false" for m in macros)
+    failures: dict[str, int] = {}
+    for t in trials:
+        p = t["program"]
+        if not p["success"]:
+            key = f"macro {p['failed_macro']}" if p["failed_macro"] else p["reason"].split(":")[0]
+            failures[key] = failures.get(key, 0) + 1
+    per: dict[str, list[dict[str, Any]]] = {}
+    for v in setup.variations:
+        rows = []
+        for lo, hi in _bins(v):
+            inside = [
+                i for i, t in enumerate(trials)
+                if lo <= v.level(t["values"][v.key]) <= hi + 1e-12 and not (hi < v.level(t["values"][v.key]))
+            ]  # fmt: skip
+            rows.append(
+                {
+                    "level": [lo, hi],
+                    "trials": len(inside),
+                    "program": _rate([prog[i] for i in inside]),
+                    "openloop": _rate([ol[i] for i in inside]) if has_ol else None,
+                }
+            )
+        per[v.key] = rows
+    walls = [t["wall_time"] for t in trials]
+    return {
+        "program": setup.program.name,
+        "scene": setup.scene.name,
+        "trials": len(trials),
+        "seed": setup.seed,
+        "vary": [f"{v.key}={v.spec}" for v in setup.variations],
+        "detect": setup.opts.detect,
+        "noise_n": setup.opts.noise,
+        "path": "demo" if setup.use_track and setup.track is not None else "program",
+        "program_success_rate": _rate(prog),
+        "openloop_success_rate": _rate(ol) if has_ol else None,
+        "program_only": sum(p and not o for p, o in zip(prog, ol, strict=True)) if has_ol else None,
+        "openloop_only": sum(o and not p for p, o in zip(prog, ol, strict=True)) if has_ol else None,
+        "macros_run": len(macros),
+        "false_detections": false,
+        "false_detection_rate": false / len(macros) if macros else None,
+        "missed_detections": sum(m["outcome"] == "missed" for m in macros),
+        "median_latency_s": statistics.median(lat) if lat else None,
+        "latencies": len(lat),
+        "failures": failures,
+        "per_parameter": per,
+        "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
+    }
+
+
+def write_outputs(
+    out_dir: str | Path, trials: Sequence[dict[str, Any]], summary: dict[str, Any]
+) -> list[Path]:
+    """Write the per-trial JSON, ``trials.csv``, ``summary.json`` and ``plot.png``; their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for t in trials:
+        p = out / f"trial_{t['trial']:03d}.json"
+        p.write_text(json.dumps(t, indent=1) + "\n", encoding="utf-8")
+        paths.append(p)
+    keys = sorted({k for t in trials for k in t["values"]})
+    with (out / "trials.csv").open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["trial", *keys, "program_success", "failed_macro", "reason", "openloop_goal",
+                    "false_detections", "median_latency_s", "wall_time_s"])  # fmt: skip
+        for t in trials:
+            p = t["program"]
+            lat = [m["latency"] for m in p["macros"] if m["outcome"] == "ok" and m["latency"] is not None]
+            vals = [_cell(t["values"].get(k)) for k in keys]
+            w.writerow([t["trial"], *vals, p["success"], p["failed_macro"] or "", p["reason"],
+                        t["openloop"]["goal_reached"] if "openloop" in t else "",
+                        sum(m["outcome"] == "false" for m in p["macros"]),
+                        statistics.median(lat) if lat else "", round(t["wall_time"], 3)])  # fmt: skip
+    paths.append(out / "trials.csv")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    paths.append(out / "summary.json")
+    paths.append(plot(summary, out / "plot.png"))
+    return paths
+
+
+def _cell(x: Any) -> Any:
+    return json.dumps(x) if isinstance(x, list) else x
+
+
+def _level_label(key: str, level: Sequence[float] | None) -> str:
+    if level is None:
+        return ""
+    if key.endswith(".pos"):
+        return f"{level[0] * 1000:.1f}-{level[1] * 1000:.1f} mm"
+    return f"x{level[0]:.2f}-{level[1]:.2f}"
+
+
+def plot(summary: dict[str, Any], path: str | Path) -> Path:
+    """Bar charts of the success rate of program and open loop per variation parameter and level."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    per = summary["per_parameter"]
+    keys = list(per) or ["all"]
+    fig, axes = plt.subplots(1, len(keys) + 1, figsize=(3.2 * (len(keys) + 1), 3.2), squeeze=False)
+    total = {
+        "level": None,
+        "trials": summary["trials"],
+        "program": summary["program_success_rate"],
+        "openloop": summary["openloop_success_rate"],
+    }
+    groups = [("all trials", [total])]
+    groups += [(k, per[k]) for k in per]
+    for ax, (key, rows) in zip(axes[0], groups, strict=False):
+        xs = list(range(len(rows)))
+        prog = [r["program"] if r["program"] is not None else 0.0 for r in rows]
+        ax.bar([x - 0.2 for x in xs], prog, width=0.4, label="program", color="tab:blue")
+        if summary.get("openloop_success_rate") is not None:
+            ol = [r["openloop"] if r["openloop"] is not None else 0.0 for r in rows]
+            ax.bar([x + 0.2 for x in xs], ol, width=0.4, label="open loop", color="tab:orange")
+        labels = [_level_label(key, r["level"]) + f"\n(n={r['trials']})" for r in rows]
+        ax.set_xticks(xs, labels, fontsize=7)
+        ax.set_ylim(0, 1.05)
+        ax.set_title(key, fontsize=9)
+    axes[0][0].set_ylabel("goal reached (fraction of trials)")
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle(f"{summary['program']}: {summary['trials']} trials, seed {summary['seed']}, "
+                 f"detection {summary['detect']}", fontsize=9)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)

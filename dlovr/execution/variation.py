@@ -1,0 +1,143 @@
+"""Perturbing a scene for robustness trials: ``--vary KEY=SPEC``.
+
+Keys name scene-file entries (docs/scenes.md):
+
+- ``dlo.length``, ``dlo.radius``, ``dlo.young``, ``dlo.damping``, ``dlo.mass``, ``dlo.poisson``,
+  ``dlo.friction``: a number of the cable;
+- ``gripper.pos``: the gripper's start position (the cable hangs from it);
+- ``objects.pos``: the positions of all objects together (one common shift: the environment as a
+  whole sits elsewhere); ``objects.NAME.pos``: the position of the object ``NAME`` alone.
+
+Specs:
+
+- ``P%`` (numbers only): a relative change, the factor drawn uniformly from ``[1 - P/100, 1 + P/100]``;
+- ``A..B`` (numbers only): a factor drawn from ``[A, B]``, log-uniformly (``0.5..2`` makes halving
+  as likely as doubling); ``0 < A <= B``;
+- ``D`` (positions only): an absolute offset in metres, each coordinate drawn uniformly from
+  ``[-D, D]``.
+
+Draws are deterministic: trial ``k`` of seed ``s`` draws key ``K`` from a generator seeded with
+``(s, k, crc32(K))``, so a trial's perturbation does not depend on the other keys or trials.
+Every problem is a :class:`VaryError` (one line).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+NUMBER_KEYS = ("length", "radius", "young", "damping", "mass", "poisson", "friction")
+_POS_HINT = "positions vary by an absolute offset in metres, e.g. {key}=0.005"
+_NUM = r"[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?"
+
+
+class VaryError(ValueError):
+    """A ``--vary`` argument is not understood; the message is one line."""
+
+
+@dataclass(frozen=True)
+class Variation:
+    """One ``--vary`` item: ``key``, ``kind`` (``relative``, ``range`` or ``offset``) and its bounds:
+    ``lo``/``hi`` factors, or ``hi`` the offset bound (m)."""
+
+    key: str
+    kind: str
+    lo: float
+    hi: float
+    spec: str
+
+    @property
+    def is_position(self) -> bool:
+        return self.key.endswith(".pos")
+
+    def draw(self, seed: int, trial: int) -> float | tuple[float, float, float]:
+        """This variation's value in ``trial`` of ``seed``: a factor, or an offset (m, world)."""
+        rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(trial), zlib.crc32(self.key.encode())])
+        if self.kind == "offset":
+            return tuple(float(x) for x in rng.uniform(-self.hi, self.hi, 3))  # type: ignore[return-value]
+        if self.kind == "range":
+            return float(math.exp(rng.uniform(math.log(self.lo), math.log(self.hi))))
+        return float(rng.uniform(self.lo, self.hi))
+
+    def level(self, value: float | Sequence[float]) -> float:
+        """A scalar for plotting: the factor, or the offset's length (m)."""
+        if isinstance(value, int | float):
+            return float(value)
+        return float(math.sqrt(sum(float(x) ** 2 for x in value)))
+
+
+def parse_vary(item: str, scene: Any = None) -> Variation:
+    """Parse ``KEY=SPEC`` (see the module docstring); with ``scene``, object names are checked."""
+    if "=" not in item:
+        raise VaryError(f"--vary {item!r}: expected KEY=SPEC, e.g. dlo.length=10%")
+    key, spec = (x.strip() for x in item.split("=", 1))
+    parts = key.split(".")
+    valid = (
+        (len(parts) == 2 and parts[0] == "dlo" and parts[1] in NUMBER_KEYS)
+        or key in ("gripper.pos", "objects.pos")
+        or (len(parts) == 3 and parts[0] == "objects" and parts[2] == "pos")
+    )
+    if not valid:
+        known = ", ".join(
+            [*(f"dlo.{k}" for k in NUMBER_KEYS), "gripper.pos", "objects.pos", "objects.NAME.pos"]
+        )
+        raise VaryError(f"--vary {item!r}: unknown key {key!r} (known: {known})")
+    if len(parts) == 3 and scene is not None and parts[1] not in {o.name for o in scene.objects}:
+        names = ", ".join(o.name for o in scene.objects)
+        raise VaryError(f"--vary {item!r}: scene {scene.name} has no object {parts[1]!r} (objects: {names})")
+    is_pos = key.endswith(".pos")
+    if m := re.fullmatch(rf"({_NUM})\s*%", spec):
+        p = float(m.group(1))
+        if is_pos:
+            raise VaryError(f"--vary {item!r}: {_POS_HINT.format(key=key)}")
+        if not 0 <= p < 100:
+            raise VaryError(f"--vary {item!r}: a relative change must be in [0, 100) %")
+        return Variation(key, "relative", 1.0 - p / 100.0, 1.0 + p / 100.0, spec)
+    if m := re.fullmatch(rf"({_NUM})\s*\.\.\s*({_NUM})", spec):
+        a, b = float(m.group(1)), float(m.group(2))
+        if is_pos:
+            raise VaryError(f"--vary {item!r}: {_POS_HINT.format(key=key)}")
+        if not (0 < a <= b) or not math.isfinite(b):
+            raise VaryError(f"--vary {item!r}: a factor range A..B needs 0 < A <= B")
+        return Variation(key, "range", a, b, spec)
+    if re.fullmatch(_NUM, spec):
+        d = float(spec)
+        if not is_pos:
+            raise VaryError(f"--vary {item!r}: {key} varies by a relative change (10%) or a range (0.5..2)")
+        if not (0 <= d <= 0.1):
+            raise VaryError(f"--vary {item!r}: a position offset must be in [0, 0.1] m")
+        return Variation(key, "offset", 0.0, d, spec)
+    raise VaryError(f"--vary {item!r}: bad spec {spec!r} (use P%, A..B or metres)")
+
+
+def _shift(pos: Sequence[float], d: Sequence[float]) -> tuple[float, float, float]:
+    return (float(pos[0]) + d[0], float(pos[1]) + d[1], float(pos[2]) + d[2])
+
+
+def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) -> tuple[Any, dict[str, Any]]:
+    """The scene of ``trial`` (a ``dlovr.scene.Scene`` with its values changed) and the drawn values
+    by key (factors; offsets as lists, m). The scene keeps its name and files: the convex
+    decomposition of its objects (their own frames) still applies."""
+    values: dict[str, Any] = {}
+    dlo, gripper, objects = scene.dlo, scene.gripper, list(scene.objects)
+    for v in variations:
+        x = v.draw(seed, trial)
+        values[v.key] = list(x) if isinstance(x, tuple) else x
+        parts = v.key.split(".")
+        if parts[0] == "dlo":
+            dlo = replace(dlo, **{parts[1]: getattr(dlo, parts[1]) * float(x)})  # type: ignore[arg-type]
+        elif v.key == "gripper.pos":
+            gripper = replace(gripper, pos=_shift(gripper.pos, x))  # type: ignore[arg-type]
+        elif v.key == "objects.pos":
+            objects = [replace(o, pos=_shift(o.pos, x)) for o in objects]  # type: ignore[arg-type]
+        else:
+            objects = [replace(o, pos=_shift(o.pos, x)) if o.name == parts[1] else o for o in objects]  # type: ignore[arg-type]
+    if not -1.0 < dlo.poisson < 0.5:
+        dlo = replace(dlo, poisson=min(max(dlo.poisson, -0.99), 0.49))
+    return replace(scene, dlo=dlo, gripper=gripper, objects=tuple(objects)), values

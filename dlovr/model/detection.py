@@ -1,0 +1,386 @@
+"""Force-based detection of contact-state transitions, one detector per class (paper §V.B; docs/model.md).
+
+Pure numpy. A detector watches the wrench a wrist sensor at the gripper reads (force N and torque
+N m, world frame, one sample per simulation step) while a macro's guarded motion runs, and says
+when the transition the macro expects has happened. It never sees the contact model: what it knows
+of the transition is what the program carries -- the class, the contact vectors of the principal
+contacts that end and begin (unit, world frame, eq. 2: the direction in which the environment
+blocks the cable, so the environment pushes the cable along ``-v``), and the detection parameters.
+
+Sign convention: the sensed force is the force the cable exerts on the gripper. In a static
+situation it is the cable's weight plus the forces the environment exerts on the cable, so a contact
+that begins adds about ``-v * F`` to it and one that ends removes that (adds ``+v * F``).
+
+- ``E`` (``force_along_contact_vector``): the force rises, from the lowest it has been since the
+  macro started, by at least ``force_threshold_n`` along ``-v`` of a contact that begins (or ``+v``
+  of one that ends), the rise within ``max_angle_deg`` of that direction;
+- ``C`` (``force_direction_turn``): the contact force turns from the old contact vector to the new
+  one: the change points along ``v_old - v_new`` (within ``max_angle_deg``) and reaches
+  ``min_turn_fraction`` of the turn of a force of the size sensed at the start;
+- ``T`` (``force_rise_then_change``): the force first rises by ``rise_n`` (the cable bends against
+  the contact), then its change turns by ``max_angle_deg`` from the direction it rose in or falls
+  back to half of it;
+- ``I`` (``force_enters_instable_vector``): the change of force enters the cone of ``max_angle_deg``
+  about ``-v`` of the instable contact that begins, with at least ``min_force_n``;
+- ``S`` (``force_jump``): the force jumps by ``jump_n`` within ``window_s`` (needs a sampling rate of
+  ``min_rate_hz`` or more: a spontaneous transition is over in a few milliseconds).
+
+Shared signal conditioning: :class:`NoiseModel` (optional Gaussian sensor noise) and
+:class:`LowPass` (first-order low-pass filter, time constant ``filter_tau_s``), applied by
+:class:`WrenchConditioner` before the detectors see the samples. Parameters missing from a program
+take the defaults of :data:`DEFAULTS`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Default parameters per class (forces N, angles degrees, times s, rates Hz).
+DEFAULTS: dict[str, dict[str, float]] = {
+    "E": {"force_threshold_n": 0.5, "max_angle_deg": 30.0},
+    "C": {"min_turn_fraction": 0.5, "max_angle_deg": 20.0},
+    "T": {"rise_n": 0.5, "max_angle_deg": 20.0},
+    "I": {"max_angle_deg": 15.0, "min_force_n": 0.05},
+    "S": {"jump_n": 0.5, "min_rate_hz": 500.0, "window_s": 0.01},
+}
+ALGORITHMS = {
+    "E": "force_along_contact_vector",
+    "C": "force_direction_turn",
+    "T": "force_rise_then_change",
+    "I": "force_enters_instable_vector",
+    "S": "force_jump",
+}
+#: Time constant (s) of the shared low-pass filter when the program gives none.
+DEFAULT_FILTER_TAU_S = 0.004
+#: Ratio of torque noise (N m) to force noise (N) of :class:`NoiseModel` (a lever of 5 cm).
+TORQUE_NOISE_LEVER_M = 0.05
+
+
+# --------------------------------------------------------------------------------------------------
+# Signal conditioning
+
+
+@dataclass
+class LowPass:
+    """First-order low-pass filter of a vector signal: ``y += (x - y) * dt / (tau + dt)``.
+
+    ``tau`` (s) 0 passes the signal through. The first sample initialises the output.
+    """
+
+    tau: float
+    _y: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.tau >= 0.0:
+            raise ValueError(f"filter time constant must be >= 0 s, got {self.tau}")
+
+    def reset(self) -> None:
+        self._y = None
+
+    def __call__(self, x: np.ndarray, dt: float) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if self._y is None or self.tau == 0.0:
+            self._y = x.copy()
+        else:
+            self._y = self._y + (x - self._y) * (dt / (self.tau + dt))
+        return self._y.copy()
+
+
+@dataclass
+class NoiseModel:
+    """Gaussian sensor noise: ``force_std`` (N) on each force component, ``torque_std`` (N m) on each
+    torque component (default ``force_std *`` :data:`TORQUE_NOISE_LEVER_M`), from ``seed``."""
+
+    force_std: float = 0.0
+    torque_std: float | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.force_std >= 0.0 or (self.torque_std is not None and not self.torque_std >= 0.0):
+            raise ValueError("noise standard deviations must be >= 0")
+        self._rng = np.random.default_rng(self.seed)
+
+    def __call__(self, force: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.force_std == 0.0 and not self.torque_std:
+            return np.asarray(force, float), np.asarray(torque, float)
+        ts = self.force_std * TORQUE_NOISE_LEVER_M if self.torque_std is None else self.torque_std
+        n = self._rng.standard_normal(6)
+        return np.asarray(force, float) + self.force_std * n[:3], np.asarray(torque, float) + ts * n[3:]
+
+
+@dataclass
+class WrenchConditioner:
+    """Noise, then the low-pass filter, on the raw wrench: what the detectors see."""
+
+    noise: NoiseModel = field(default_factory=NoiseModel)
+    tau: float = DEFAULT_FILTER_TAU_S
+
+    def __post_init__(self) -> None:
+        self._filter = LowPass(self.tau)
+
+    def __call__(self, force: np.ndarray, torque: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        f, t = self.noise(force, torque)
+        y = self._filter(np.concatenate([f, t]), dt)
+        return y[:3], y[3:]
+
+
+# --------------------------------------------------------------------------------------------------
+# Detectors
+
+
+def _unit(v: Sequence[float] | np.ndarray) -> np.ndarray | None:
+    a = np.asarray(v, dtype=float)
+    n = float(np.sqrt((a * a).sum()))
+    return None if n < 1e-12 else a / n
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = float(np.sqrt((a * a).sum())), float(np.sqrt((b * b).sum()))
+    if na < 1e-12 or nb < 1e-12:
+        return 180.0
+    c = float((a * b).sum()) / (na * nb)
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+@dataclass(frozen=True)
+class Expectation:
+    """What a detector knows of the transition: the contact vectors (unit, world) of the principal
+    contacts that end (``released``) and begin (``established``); ``None`` entries have no vector."""
+
+    released: tuple[tuple[float, float, float] | None, ...] = ()
+    established: tuple[tuple[float, float, float] | None, ...] = ()
+
+
+class Detector:
+    """Base of the detectors: :meth:`start` with the first sample of a macro, then :meth:`update`
+    with every later one; ``update`` returns True once the transition is detected (and keeps
+    returning True). ``signal``: how far the detection criterion is met (1 = fires), for display."""
+
+    cls = "?"
+
+    def __init__(self, params: Mapping[str, float], expect: Expectation):
+        self.params = {**DEFAULTS[self.cls], **{k: float(v) for k, v in params.items()}}
+        self.expect = expect
+        self.fired_at: float | None = None
+        self.signal = 0.0
+        self._f0 = np.zeros(3)
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        self._f0 = np.asarray(force, dtype=float).copy()
+        self.fired_at = None
+        self.signal = 0.0
+
+    def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
+        if self.fired_at is not None:
+            return True
+        self.signal = self._signal(t, np.asarray(force, float) - self._f0)
+        if self.signal >= 1.0:
+            self.fired_at = t
+        return self.fired_at is not None
+
+    def _signal(self, t: float, df: np.ndarray) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class EDetector(Detector):
+    """``E``: the force changes along ``-v`` of a contact that begins or ``+v`` of one that ends.
+
+    The change is measured from the lowest the force has been along that direction since the macro
+    started (not from its first sample), so a force still settling from the previous transition
+    when the macro begins neither hides the step nor fakes one.
+    """
+
+    cls = "E"
+
+    def __init__(self, params: Mapping[str, float], expect: Expectation):
+        super().__init__(params, expect)
+        dirs = [-np.asarray(v) for v in expect.established if v is not None]
+        dirs += [np.asarray(v, float) for v in expect.released if v is not None]
+        self.dirs = [u for d in dirs if (u := _unit(d)) is not None]
+        self._low: list[np.ndarray] = []
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        super().start(t, force, torque)
+        self._low = [np.zeros(3) for _ in self.dirs]  # per direction: the change where it was lowest
+
+    def _signal(self, t: float, df: np.ndarray) -> float:
+        thr, cone = self.params["force_threshold_n"], self.params["max_angle_deg"]
+        if not self.dirs:  # no vector known: any change of that size
+            return float(np.sqrt((df * df).sum())) / thr
+        best = 0.0
+        for k, u in enumerate(self.dirs):
+            if float((df * u).sum()) < float((self._low[k] * u).sum()):
+                self._low[k] = df.copy()
+            rise = df - self._low[k]
+            along = float((rise * u).sum())
+            if along > 0 and _angle_deg(rise, u) <= cone:
+                best = max(best, along / thr)
+        return best
+
+
+class CDetector(Detector):
+    """``C``: the change of force points along ``v_old - v_new`` and reaches the set fraction of the
+    turn of a force as large as the one sensed when the macro started."""
+
+    cls = "C"
+
+    def __init__(self, params: Mapping[str, float], expect: Expectation):
+        super().__init__(params, expect)
+        old = [np.asarray(v, float) for v in expect.released if v is not None]
+        new = [np.asarray(v, float) for v in expect.established if v is not None]
+        turn = (sum(old, np.zeros(3)) / len(old) if old else np.zeros(3)) - (
+            sum(new, np.zeros(3)) / len(new) if new else np.zeros(3)
+        )
+        self.turn = float(np.sqrt((turn * turn).sum()))
+        self.dir = _unit(turn)
+        self._scale = 0.0
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        super().start(t, force, torque)
+        f = np.asarray(force, float)
+        self._scale = float(np.sqrt((f * f).sum()))
+
+    def threshold(self) -> float:
+        if "force_threshold_n" in self.params:
+            return self.params["force_threshold_n"]
+        return max(self.params["min_turn_fraction"] * max(self.turn, 0.1) * self._scale, 1e-3)
+
+    def _signal(self, t: float, df: np.ndarray) -> float:
+        thr = self.threshold()
+        if self.dir is None:
+            return float(np.sqrt((df * df).sum())) / thr
+        along = float((df * self.dir).sum())
+        if along <= 0 or _angle_deg(df, self.dir) > self.params["max_angle_deg"]:
+            return 0.0
+        return along / thr
+
+
+class TDetector(Detector):
+    """``T``: a rise of the force by ``rise_n``, then a turn of its change by ``max_angle_deg`` from
+    the direction it rose in, or a fall back to half of the rise."""
+
+    cls = "T"
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        super().start(t, force, torque)
+        self._peak: np.ndarray | None = None
+
+    def _signal(self, t: float, df: np.ndarray) -> float:
+        rise = self.params["rise_n"]
+        mag = float(np.sqrt((df * df).sum()))
+        if self._peak is None:
+            if mag >= rise:
+                self._peak = df.copy()
+            return 0.5 * min(mag / rise, 1.0)
+        pk = float(np.sqrt((self._peak * self._peak).sum()))
+        if mag > pk and _angle_deg(df, self._peak) < 0.5 * self.params["max_angle_deg"]:
+            self._peak = df.copy()  # still rising the same way
+            return 0.5
+        turned = _angle_deg(df, self._peak) / self.params["max_angle_deg"]
+        fell = (pk - mag) / (0.5 * pk) if pk > 0 else 0.0
+        return max(0.5, turned, fell)
+
+
+class IDetector(Detector):
+    """``I``: the change of force enters the cone about ``-v`` of the instable contact that begins."""
+
+    cls = "I"
+
+    def __init__(self, params: Mapping[str, float], expect: Expectation):
+        super().__init__(params, expect)
+        dirs = [_unit(-np.asarray(v, float)) for v in expect.established if v is not None]
+        self.dirs = [u for u in dirs if u is not None]
+
+    def _signal(self, t: float, df: np.ndarray) -> float:
+        mag = float(np.sqrt((df * df).sum()))
+        size = min(mag / self.params["min_force_n"], 1.0)
+        if not self.dirs:  # no vector known: a change of that size
+            return size
+        if min(_angle_deg(df, u) for u in self.dirs) > self.params["max_angle_deg"]:
+            return 0.0
+        return size
+
+
+class SDetector(Detector):
+    """``S``: the force jumps by ``jump_n`` within ``window_s``."""
+
+    cls = "S"
+
+    def __init__(self, params: Mapping[str, float], expect: Expectation, rate_hz: float | None = None):
+        super().__init__(params, expect)
+        if rate_hz is not None and rate_hz < self.params["min_rate_hz"] * (1.0 - 1e-6):
+            raise ValueError(
+                f"force_jump needs {self.params['min_rate_hz']:g} Hz of force samples, got {rate_hz:g} Hz"
+            )
+        self._hist: list[tuple[float, np.ndarray]] = []
+
+    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
+        super().start(t, force, torque)
+        self._hist = [(t, np.asarray(force, float).copy())]
+
+    def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
+        if self.fired_at is not None:
+            return True
+        f = np.asarray(force, float)
+        w = self.params["window_s"]
+        self._hist.append((t, f.copy()))
+        while len(self._hist) > 2 and self._hist[1][0] <= t - w - 1e-12:
+            self._hist.pop(0)
+        d = f - self._hist[0][1]
+        self.signal = float(np.sqrt((d * d).sum())) / self.params["jump_n"]
+        if self.signal >= 1.0:
+            self.fired_at = t
+        return self.fired_at is not None
+
+    def _signal(self, t: float, df: np.ndarray) -> float:  # pragma: no cover - update overrides
+        return 0.0
+
+
+_CLASSES: dict[str, type[Detector]] = {
+    "E": EDetector, "C": CDetector, "T": TDetector, "I": IDetector, "S": SDetector,
+}  # fmt: skip
+
+
+def make_detector(
+    cls: str, params: Mapping[str, float], expect: Expectation, rate_hz: float | None = None
+) -> Detector:
+    """The detector of class ``cls`` with the program's parameters (defaults where absent)."""
+    if cls not in _CLASSES:
+        raise ValueError(f"no detector for class {cls!r} (known: {', '.join(_CLASSES)})")
+    if cls == "S":
+        return SDetector(params, expect, rate_hz)
+    return _CLASSES[cls](params, expect)
+
+
+def detect(
+    cls: str,
+    params: Mapping[str, float],
+    expect: Expectation,
+    times: Sequence[float] | np.ndarray,
+    forces: Iterable[Sequence[float]] | np.ndarray,
+    torques: Iterable[Sequence[float]] | np.ndarray | None = None,
+    conditioner: WrenchConditioner | None = None,
+) -> int | None:
+    """Run a detector over a whole wrench stream; the index of the sample where it fires, or None.
+
+    ``times`` (s), ``forces`` (N) and ``torques`` (N m) per sample, world frame; ``conditioner``
+    (default: the shared low-pass filter, no noise) is applied first.
+    """
+    t = np.asarray(times, dtype=float)
+    f = np.asarray(forces, dtype=float).reshape(len(t), 3)
+    tq = np.zeros_like(f) if torques is None else np.asarray(torques, dtype=float).reshape(len(t), 3)
+    cond = conditioner if conditioner is not None else WrenchConditioner()
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else None
+    det = make_detector(cls, params, expect, rate)
+    for i in range(len(t)):
+        dt = float(t[i] - t[i - 1]) if i else 0.0
+        fi, ti = cond(f[i], tq[i], dt)
+        if i == 0:
+            det.start(float(t[i]), fi, ti)
+        elif det.update(float(t[i]), fi, ti):
+            return i
+    return None

@@ -1,0 +1,183 @@
+"""The pieces of program execution that need no simulation: the tolerant program reader, the guarded
+motion's path, and the scene variation of the trials."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dlovr.execution.motion import ScrewPath, TrackPath
+from dlovr.execution.programs import ProgramError, find_recording, load_program, parse_program
+from dlovr.execution.variation import VaryError, parse_vary, perturb
+from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
+
+ROOT = Path(__file__).resolve().parents[2]
+PROGRAMS = sorted((ROOT / "recordings" / "programs").glob("*.program.json"))
+
+
+# -- the program reader ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("path", PROGRAMS, ids=lambda p: p.stem)
+def test_reads_every_sample_program(path):
+    p = load_program(path)
+    raw = json.loads(path.read_text())
+    assert len(p.macros) == len(raw["macros"]) and p.name == raw["name"]
+    for m in p.macros:
+        assert m.classes and m.detection and {d.cls for d in m.detection} == set(m.classes)
+        assert m.released or m.established  # a classed transition changes some principal contact
+    assert find_recording(p) == ROOT / "recordings" / raw["source"]
+
+
+def test_reader_tolerates_new_fields_and_a_final_macro():
+    raw = json.loads((ROOT / "recordings/programs/table.program.json").read_text())
+    raw["future_field"] = {"anything": 1}
+    raw["macros"][0]["risk"] = "none"
+    raw["macros"][0]["detection"][0]["params"]["derived_from"] = "demo"  # non-numbers are skipped
+    final = {**raw["macros"][-1], "classes": [], "detection": [], "final": True, "index": 9}
+    raw["macros"].append(final)
+    p = parse_program(raw)
+    assert len(p.macros) == 8 and p.final is not None and p.final.final
+    assert p.goal == ()  # the table demonstration ends with the cable in the air
+    assert p.macros[0].detection[0].params == {"force_threshold_n": 0.5, "max_angle_deg": 30.0}
+    assert p.macros[0].expected == "N -> V/F[table.F1]"
+    assert p.objects == {"table"}
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda r: r.pop("macros"), "missing field 'macros'"),
+        (lambda r: r["macros"][0].pop("motion"), r"macros\[0\]: missing field 'motion'"),
+        (lambda r: r["macros"][0]["motion"].update(world=[0, 0]), r"macros\[0\].motion.world"),
+        (lambda r: r["macros"][1].update(classes=["X"]), r"macros\[1\].classes"),
+        (lambda r: r["macros"][0]["motion"].update(duration=-1), "must not be negative"),
+        (lambda r: r["macros"][0]["to_contacts"][0].update(vector=[0, 0, "x"]), "finite number"),
+        (lambda r: r.update(version=7), "program format 7"),
+    ],
+)
+def test_malformed_programs_are_one_line_errors(mutate, message):
+    raw = json.loads((ROOT / "recordings/programs/table.program.json").read_text())
+    mutate(raw)
+    with pytest.raises(ProgramError, match=message) as ei:
+        parse_program(raw, "p.json")
+    assert "\n" not in str(ei.value) and str(ei.value).startswith("p.json")
+
+
+def test_unreadable_program_files(tmp_path):
+    bad = tmp_path / "bad.program.json"
+    bad.write_text("{ not json")
+    with pytest.raises(ProgramError, match="not valid JSON"):
+        load_program(bad)
+    with pytest.raises(ProgramError, match="no such program file"):
+        load_program(tmp_path / "missing.json")
+    bad.write_text("[]")
+    with pytest.raises(ProgramError, match="not a program"):
+        load_program(bad)
+
+
+# -- the guarded motion's path -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("frame", ["world", "relative"])
+def test_screw_reaches_the_demonstrated_end_pose(frame):
+    p = load_program(ROOT / "recordings/programs/peg_in_hole.program.json")
+    for m in p.macros:
+        mo = m.motion
+        path = ScrewPath(mo.start_pos, mo.start_quat, mo.rotation, mo.relative, mo.start_quat, frame)
+        pos, quat = path.at(1.0)
+        np.testing.assert_allclose(pos - np.array(mo.start_pos), mo.world, atol=1e-9)
+        rel = quat_to_matrix(mo.start_quat).T @ quat_to_matrix(quat)
+        np.testing.assert_allclose(matrix_to_rotvec(rel), mo.rotation, atol=1e-7)
+        np.testing.assert_allclose(path.at(0.0)[0], mo.start_pos, atol=1e-12)
+
+
+def test_a_turn_about_the_tip_keeps_the_tip_in_place():
+    """A demonstrated 60 deg turn about the cable's tip (0.3 m below the gripper) is repeated as that
+    turn: the tip stays put all along, it is no straight line."""
+    ang = math.radians(60.0)
+    tip_local = np.array([0.0, 0.0, -0.3])
+    rot = (0.0, ang, 0.0)
+    r = quat_to_matrix([math.cos(ang / 2), 0.0, math.sin(ang / 2), 0.0])
+    disp = tuple(tip_local - r @ tip_local)  # gripper frame: the tip (fixed) minus where R puts it
+    path = ScrewPath((0.1, 0.2, 0.5), (1.0, 0.0, 0.0, 0.0), rot, disp, (1.0, 0.0, 0.0, 0.0), "relative")
+    for s in (0.0, 0.3, 0.7, 1.0, 1.5):
+        pos, quat = path.at(s)
+        tip = pos + quat_rotate(quat, tip_local)
+        np.testing.assert_allclose(tip, [0.1, 0.2, 0.2], atol=1e-9)
+
+
+def test_track_path_repeats_the_recorded_stretch_from_where_the_gripper_is():
+    t = np.linspace(0.0, 1.0, 11)
+    pos = np.stack([t * 0.1, np.zeros_like(t), 0.5 - 0.2 * t * t], axis=1)  # a curve, not a line
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (11, 1))
+    here = (1.0, 1.0, 1.0)
+    beyond = ((0.0, 0.0, 0.0), (0.0, 0.0, -0.1))
+    path = TrackPath(t, pos, quat, 0.2, 0.6, here, (1.0, 0.0, 0.0, 0.0), "world", beyond)
+    np.testing.assert_allclose(path.at(0.0)[0], here)
+    np.testing.assert_allclose(path.at(0.5)[0], np.array(here) + pos[4] - pos[2], atol=1e-12)
+    np.testing.assert_allclose(path.at(1.0)[0], np.array(here) + pos[6] - pos[2], atol=1e-12)
+    # beyond the demonstrated stretch: the macro's own motion goes on (a guarded approach keeps going)
+    np.testing.assert_allclose(path.at(1.5)[0], path.at(1.0)[0] + [0.0, 0.0, -0.05], atol=1e-12)
+
+
+# -- variation ---------------------------------------------------------------------------------------
+
+
+def test_vary_specs():
+    v = parse_vary("dlo.length=10%")
+    assert (v.kind, v.lo, v.hi) == ("relative", 0.9, 1.1)
+    v = parse_vary("dlo.young=0.5..2")
+    assert (v.kind, v.lo, v.hi) == ("range", 0.5, 2.0)
+    v = parse_vary("objects.pos=0.005")
+    assert (v.kind, v.hi) == ("offset", 0.005)
+    for k in range(20):
+        assert 0.9 <= parse_vary("dlo.friction=10%").draw(3, k) <= 1.1
+        assert 0.5 <= parse_vary("dlo.young=0.5..2").draw(3, k) <= 2.0
+        assert max(map(abs, parse_vary("gripper.pos=0.005").draw(3, k))) <= 0.005
+
+
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("dlo.colour=10%", "unknown key 'dlo.colour'"),
+        ("speed=2", "unknown key"),
+        ("dlo.length", "expected KEY=SPEC"),
+        ("dlo.length=0.005", "relative change"),
+        ("objects.pos=10%", "absolute offset in metres"),
+        ("dlo.young=2..0.5", "0 < A <= B"),
+        ("dlo.length=abc", "bad spec"),
+        ("objects.pos=1", r"\[0, 0.1\] m"),
+    ],
+)
+def test_bad_vary_items_are_one_line_errors(item, message):
+    with pytest.raises(VaryError, match=message) as ei:
+        parse_vary(item)
+    assert "\n" not in str(ei.value)
+
+
+def test_variation_is_deterministic_and_keys_are_independent():
+    from dlovr.scene import load_scene
+
+    scene = load_scene("peg_in_hole", check_geometry=False)
+    a = [parse_vary("dlo.length=10%"), parse_vary("objects.pos=0.005")]
+    s1, v1 = perturb(scene, a, seed=5, trial=3)
+    s2, v2 = perturb(scene, a, seed=5, trial=3)
+    assert v1 == v2 and s1 == s2
+    _, v3 = perturb(scene, [a[1]], seed=5, trial=3)
+    assert v3["objects.pos"] == v1["objects.pos"]  # adding a key does not change the others' draws
+    _, v4 = perturb(scene, a, seed=5, trial=4)
+    assert v4 != v1
+    assert s1.dlo.length == pytest.approx(scene.dlo.length * v1["dlo.length"])
+    shift = np.array(v1["objects.pos"])
+    for o, o1 in zip(scene.objects, s1.objects, strict=True):
+        np.testing.assert_allclose(np.array(o1.pos) - o.pos, shift)  # the objects move together
+    one, _ = perturb(scene, [parse_vary("objects.holeblock.pos=0.005", scene)], seed=1, trial=0)
+    assert one.object("block").pos == scene.object("block").pos
+    assert one.object("holeblock").pos != scene.object("holeblock").pos
+    with pytest.raises(VaryError, match="no object 'nope'"):
+        parse_vary("objects.nope.pos=0.005", scene)
