@@ -19,6 +19,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from dlovr.model.program import PROGRAM_VERSION
+
+#: Program formats this reader understands (each later one only adds fields).
+READABLE_VERSIONS = tuple(range(1, PROGRAM_VERSION + 1))
+
 CLASSES = ("E", "S", "I", "T", "C")
 
 
@@ -277,8 +282,9 @@ def parse_program(raw: Any, path: str = "<program>") -> ProgramSpec:
     r = _Reader(path)
     if not isinstance(raw, dict):
         raise r.err("", "not a program (a JSON object with 'macros' expected)")
-    if raw.get("version", 1) != 1:
-        raise r.err("version", f"program format {raw.get('version')!r}, this dlovr runs format 1")
+    if raw.get("version", 1) not in READABLE_VERSIONS:
+        known = ", ".join(str(v) for v in READABLE_VERSIONS)
+        raise r.err("version", f"program format {raw.get('version')!r}, this dlovr runs formats {known}")
     macros_raw = r.get(raw, "macros", "")
     if not isinstance(macros_raw, list):
         raise r.err("macros", "must be a list")
