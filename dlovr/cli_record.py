@@ -121,11 +121,17 @@ def _kept_rows(tracker) -> list[dict]:
     "-o", "--record", "out", type=click.Path(dir_okay=False), help="Also record it to this MCAP file."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the situations as JSON.")
+@click.option("-f", "--force", is_flag=True, help="Overwrite the -o file if it exists.")
 @_one_line
-def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool) -> None:
-    """Run a built-in demonstration headless and print its contact situations (Fig. 11 style)."""
+def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool, force: bool) -> None:
+    """Run a built-in demonstration headless and print its contact situations (Fig. 11 style).
+
+    With -o FILE it is recorded too; an existing FILE is refused unless --force.
+    """
     import json
 
+    if out is not None:
+        _refuse_existing(out, force)
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
     _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")

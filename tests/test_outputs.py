@@ -126,3 +126,13 @@ def test_atomic_output_removes_its_temporary_file_on_any_failure(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert mode == 0o666 & ~umask  # the usual permissions, not a temporary file's 0600
+
+
+def test_demo_refuses_to_overwrite_a_recording_unless_forced(short_script, tmp_path):
+    out = tmp_path / "d.mcap"
+    out.write_bytes(b"precious")
+    one_line_exit_2(cli("demo", "--script", short_script, "-o", out), str(out), "exists")
+    assert out.read_bytes() == b"precious"
+    r = cli("demo", "--script", short_script, "-o", out, "--force")
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:8] == b"\x89MCAP0\r\n"
