@@ -35,6 +35,7 @@ from dlovr.ui.loop import realtime_loop
 from dlovr.ui.panels import (
     ForcePanel,
     RecordingPanel,
+    RunPanel,
     SimulationPanel,
     StatePanel,
     TimelinePanel,
@@ -122,6 +123,7 @@ class DemoServer:
         self.recording_panel = RecordingPanel(self)
         self.timeline_panel = TimelinePanel(self)
         self.simulation_panel = SimulationPanel(self)
+        self.run_panel = RunPanel(self)
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -156,6 +158,7 @@ class DemoServer:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self._stop.set()
         self.timeline_panel.cancel_resim()
+        self.run_panel.cancel(None)
         if self._thread is not None:
             self._thread.join(timeout=10)
             self._thread = None
@@ -312,6 +315,7 @@ class DemoServer:
         if slow:
             self._panels_at = now
             self.timeline_panel.update()
+            self.run_panel.update()
             if not viewing:
                 self.force_panel.show_live()
 
@@ -323,6 +327,7 @@ class DemoServer:
         self.state_panel.build(gui)
         self.force_panel.build(gui)
         self.recording_panel.build(gui)
+        self.run_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
 

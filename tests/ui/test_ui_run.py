@@ -1,0 +1,77 @@
+"""Running a program in `dlovr serve` (issue 18, in the browser) and the network view (issue 19), in
+headless chromium. Screenshots go to ``tests/artifacts/`` (ignored by git; or ``DLOVR_UI_ARTIFACTS``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from test_ui import open_page, wait_for
+
+from dlovr.ui import DemoServer
+
+ROOT = Path(__file__).resolve().parents[2]
+ARTIFACTS = Path(os.environ.get("DLOVR_UI_ARTIFACTS", ROOT / "tests" / "artifacts"))
+TABLE_PROGRAM = ROOT / "recordings" / "programs" / "table.program.json"
+
+
+def shot(page, name: str) -> Path:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    close = page.locator(".mantine-Notification-closeButton")  # "software WebGL" notice over the view
+    for i in range(close.count()):
+        close.nth(i).click()
+    page.screenshot(path=str(path), full_page=True)
+    print(f"screenshot: {path}")
+    return path
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[DemoServer]:
+    srv = DemoServer("table", port=None, recordings_dir=tmp_path / "recordings").start()
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def test_the_run_panel_offers_the_programs_of_the_scene_only(server: DemoServer):
+    choices = server.run_panel.choices
+    assert list(choices) == ["sample: table"] and choices["sample: table"].resolve() == TABLE_PROGRAM
+    server.load("peg_in_hole")
+    server.run_panel.update()
+    assert list(server.run_panel.choices) == ["sample: peg_in_hole"]
+
+
+def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServer, browser):
+    page = open_page(browser, server.url)
+    page.set_viewport_size({"width": 1100, "height": 1500})  # the whole panel in the screenshots
+    page.get_by_role("button", name="Run program").wait_for(timeout=30_000)
+    wait_for(lambda: server.status()["t"] > 0.2, what="the simulation to run")
+    path = server.start_recording()  # the run is recorded like a demonstration
+    page.get_by_role("button", name="Run program").click()
+    wait_for(lambda: server.run_panel.runner is not None and server.run_panel.runner.macro >= 2,
+             timeout=30, what="the run to reach its second macro")  # fmt: skip
+    server.pause(True)  # hold the run on that macro to look at it
+    runner = server.run_panel.runner
+    macro = runner.macro
+    row = page.locator(f'tr[data-current="1"][data-macro="{macro}"]')
+    row.wait_for(timeout=10_000)
+    assert page.locator('tr[data-current="1"]').count() == 1
+    assert page.locator('tr[data-outcome="ok"][data-macro="1"]').count() == 1  # macro 1 was detected
+    wait_for(lambda: "detector of macro" in page.content(), timeout=10, what="the detector caption")
+    shot(page, "run-program-running")
+    server.pause(False)
+    result = page.get_by_text("table (force):")
+    result.wait_for(timeout=60_000)
+    text = result.inner_text()
+    assert "Goal reached" in text or ("Failed" in text and "macro" in text), text
+    assert server.run_panel.runner is None and server.session.runner is None
+    assert server.status()["recording"] is not None  # still recording after the run
+    shot(page, "run-program-result")
+    out = server.stop_recording()
+    assert out is not None and out.is_file() and out != path  # the run's own recording
+    page.close()
