@@ -34,6 +34,7 @@ from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situat
 from dlovr.ui.loop import realtime_loop
 from dlovr.ui.panels import (
     ForcePanel,
+    NetworkPanel,
     RecordingPanel,
     RunPanel,
     SimulationPanel,
@@ -124,6 +125,7 @@ class DemoServer:
         self.timeline_panel = TimelinePanel(self)
         self.simulation_panel = SimulationPanel(self)
         self.run_panel = RunPanel(self)
+        self.network_panel = NetworkPanel(self)
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -316,6 +318,7 @@ class DemoServer:
             self._panels_at = now
             self.timeline_panel.update()
             self.run_panel.update()
+            self.network_panel.update()
             if not viewing:
                 self.force_panel.show_live()
 
@@ -328,6 +331,7 @@ class DemoServer:
         self.force_panel.build(gui)
         self.recording_panel.build(gui)
         self.run_panel.build(gui)
+        self.network_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
 

@@ -75,3 +75,28 @@ def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServe
     out = server.stop_recording()
     assert out is not None and out.is_file() and out != path  # the run's own recording
     page.close()
+
+
+def test_the_network_view_shows_the_nodes_and_highlights_the_live_one(server: DemoServer, browser):
+    net = server.network_panel.net
+    assert net is not None and net.scene_name == "table" and len(net.nodes) >= 2  # from table.mcap
+    page = open_page(browser, server.url)
+    page.set_viewport_size({"width": 1100, "height": 1500})
+    view = page.locator("div.dlovr-network")
+    view.wait_for(timeout=30_000)
+    assert page.locator("div.dlovr-network svg g.node[data-node]").count() == len(net.nodes)
+    assert page.locator("div.dlovr-network svg g.edge[data-edge]").count() == len(net.edges)
+    start = net.locate("V/G & E/N & V/N")
+    assert start is not None
+    page.locator(f'div.dlovr-network[data-live="{start}"]').wait_for(timeout=10_000)
+    shot(page, "network-live-start")
+    # demonstrate: lower the cable onto the table; the live node follows the kept situation
+    p = server.status()["gripper_pos"].copy()
+    p[2] = 0.3
+    server.set_target(p)
+    wait_for(lambda: server.network_panel.live not in (start, None), timeout=30, what="another live node")
+    live = server.network_panel.live
+    page.locator(f'div.dlovr-network[data-live="{live}"]').wait_for(timeout=10_000)
+    assert live in {n.id for n in net.nodes}
+    shot(page, "network-live-contact")
+    page.close()
