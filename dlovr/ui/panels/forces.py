@@ -73,7 +73,7 @@ class ForcePanel:
                     "mark": {"auto": False, "range": (0.0, 1.0)},
                     "signal": {"auto": False, "range": SIGNAL_RANGE},
                 },
-                axes=({"label": "t [s]"}, {"scale": "y"}),
+                axes=({"label": "t [s]"}, {"scale": "y"}, {"scale": "signal", "side": 1, "size": 34}),
                 legend={"show": True, "live": True},
                 height=190,
             )
