@@ -46,6 +46,27 @@ def test_the_run_panel_offers_the_programs_of_the_scene_only(server: DemoServer)
     assert list(server.run_panel.choices) == ["sample: peg_in_hole"]
 
 
+def test_the_last_recordings_program_is_offered_and_a_run_can_be_stopped(server: DemoServer):
+    wait_for(lambda: server.status()["t"] > 0.2, what="the simulation to run")
+    server.start_recording()
+    server.jog(dz=-0.05)
+    wait_for(lambda: server.status()["t"] > 1.0, what="some recorded time")
+    rec = server.stop_recording()
+    assert rec is not None and server.last_program is not None
+    server.run_panel.update()
+    label = f"last recording: {rec.stem}"
+    assert next(iter(server.run_panel.choices)) == label
+    assert server.run_panel.choices["sample: table"].resolve() == TABLE_PROGRAM
+    runner = server.run_panel.run(TABLE_PROGRAM, detect="oracle")
+    wait_for(lambda: runner.macro >= 1, what="the run to start")
+    server.pause(True)  # the run cannot end before it is stopped
+    server.run_panel.cancel()
+    server.pause(False)
+    assert runner.done and server.session.runner is None and server.run_panel.result == "run stopped"
+    t = server.status()["t"]
+    wait_for(lambda: server.status()["t"] > t + 0.1, what="the simulation to go on after the run")
+
+
 def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServer, browser):
     page = open_page(browser, server.url)
     page.set_viewport_size({"width": 1100, "height": 1500})  # the whole panel in the screenshots
