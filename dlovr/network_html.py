@@ -250,3 +250,9 @@ def network_html(net: Network, program: NetworkProgram | None = None, title: str
         f"<h1>{escape(title)}</h1><p>{summary}</p>{_legend()}"
         f'<div class="scroll">{_svg(net, plan_edges)}</div>{_tables(net)}</body></html>\n'
     )
+
+
+def network_svg(net: Network, plan_edges: set[str] | None = None) -> str:
+    """The drawing alone (inline SVG, ``id="network"``; style it with :data:`CSS`): one
+    ``g.node[data-node]`` per node, one ``g.edge[data-edge]`` per edge (used by the browser UI)."""
+    return _svg(net, set(plan_edges or ()))

@@ -118,3 +118,21 @@ def plot_arrays(
         t, f, mark = x[order], f[order], mark[order]
     mag = np.linalg.norm(f, axis=1)
     return (t, f[:, 0].copy(), f[:, 1].copy(), f[:, 2].copy(), mag, mark)
+
+
+SIGNAL_LABELS = ("detector", "threshold")
+SIGNAL_COLORS = ("#ff7f0e", "#ff7f0e")
+SIGNAL_RANGE = (0.0, 1.25)
+"""The detector signal's own scale: 0 to a little above 1, the threshold at which a detector fires."""
+
+
+def signal_arrays(x: np.ndarray, trace: ForceTrace | None) -> tuple[np.ndarray, np.ndarray]:
+    """The detector signal of a program run (the first component of ``trace``, dimensionless: 1 =
+    fires) and its threshold line, at the plot's times ``x`` (s); off the plot where no run is."""
+    off = np.full(len(x), MARK_LOW)
+    if trace is None or not len(trace):
+        return off, off.copy()
+    t, s = trace.t, trace.f[:, 0]
+    inside = (x >= t[0]) & (x <= t[-1])
+    sig = np.where(inside, np.interp(x, t, s), MARK_LOW)
+    return sig, np.where(inside, 1.0, MARK_LOW)

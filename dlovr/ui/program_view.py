@@ -10,7 +10,7 @@ principal change where the macro names it, else the whole situations; a final ma
 from __future__ import annotations
 
 import html
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -120,19 +120,43 @@ def risk_reasons(program: Any) -> list[str]:
     return out
 
 
-def program_html(program: Any, files: Sequence[tuple[str, str | Path]] = ()) -> str:
+OUTCOME_MARKS = {"ok": ("&#10003;", "#2e9e44"), "failed": ("&#10007;", "#d62728")}
+CURRENT_BACKGROUND = "#ffe58a"
+
+
+def program_html(
+    program: Any,
+    files: Sequence[tuple[str, str | Path]] = (),
+    *,
+    current: int | None = None,
+    outcomes: Mapping[int, str] | None = None,
+) -> str:
     """The program as an HTML table (class, from -> to, risk), the files (label, path) and, when it has
-    risky macros, why; ``data-risk`` on each row names its risk for tests and styling."""
+    risky macros, why; ``data-risk`` on each row names its risk for tests and styling.
+
+    While the program runs: the row of macro ``current`` (its index) is highlighted
+    (``data-current="1"``), and ``outcomes`` (macro index -> ``ok`` or ``failed``) marks the macros
+    that ended (``data-outcome``)."""
     macros = list(getattr(program, "macros", ()) or ())
+    outcomes = outcomes or {}
     rows = []
     for k, m in enumerate(macros, start=1):
         risk = macro_risk(m)
         a, b = macro_change(m)
         classes = macro_classes(m)
+        idx = getattr(m, "index", k)
         tip = html.escape("; ".join(CLASS_NAMES.get(c, c) for c in classes) or "motion to the end pose")
+        attrs = f' data-macro="{idx}"'
+        if idx == current:
+            attrs += f' data-current="1" style="background:{CURRENT_BACKGROUND}"'
+        mark = ""
+        if idx in outcomes:
+            sym, color = OUTCOME_MARKS.get(outcomes[idx], ("?", "#888"))
+            attrs += f' data-outcome="{html.escape(outcomes[idx])}"'
+            mark = f' <span style="color:{color}">{sym}</span>'
         rows.append(
-            f'<tr data-risk="{risk}" title="{tip}">'
-            f'<td style="padding:1px 4px">{getattr(m, "index", k)}</td>'
+            f'<tr data-risk="{risk}"{attrs} title="{tip}">'
+            f'<td style="padding:1px 4px;white-space:nowrap">{idx}{mark}</td>'
             f'<td style="padding:1px 4px"><b>{html.escape(macro_label(m))}</b></td>'
             f'<td style="padding:1px 4px"><code>{html.escape(a)}</code> &rarr; '
             f"<code>{html.escape(b)}</code></td>"

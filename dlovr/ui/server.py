@@ -34,7 +34,9 @@ from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situat
 from dlovr.ui.loop import realtime_loop
 from dlovr.ui.panels import (
     ForcePanel,
+    NetworkPanel,
     RecordingPanel,
+    RunPanel,
     SimulationPanel,
     StatePanel,
     TimelinePanel,
@@ -122,6 +124,8 @@ class DemoServer:
         self.recording_panel = RecordingPanel(self)
         self.timeline_panel = TimelinePanel(self)
         self.simulation_panel = SimulationPanel(self)
+        self.run_panel = RunPanel(self)
+        self.network_panel = NetworkPanel(self)
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -156,6 +160,7 @@ class DemoServer:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self._stop.set()
         self.timeline_panel.cancel_resim()
+        self.run_panel.cancel(None)
         if self._thread is not None:
             self._thread.join(timeout=10)
             self._thread = None
@@ -312,6 +317,8 @@ class DemoServer:
         if slow:
             self._panels_at = now
             self.timeline_panel.update()
+            self.run_panel.update()
+            self.network_panel.update()
             if not viewing:
                 self.force_panel.show_live()
 
@@ -323,6 +330,8 @@ class DemoServer:
         self.state_panel.build(gui)
         self.force_panel.build(gui)
         self.recording_panel.build(gui)
+        self.run_panel.build(gui)
+        self.network_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
 

@@ -33,6 +33,7 @@ class Session:
         self.tracker: ContactTracker = self.sim.tracker
         self.geometry = self.tracker.geometry
         self.recorder: DemoRecorder | None = None
+        self.runner: Any = None  # a program run that takes the steps (dlovr.execution.stepper)
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
         self.forces = ForceTrace()  # the gripper force, mean of every 10 steps
@@ -61,9 +62,17 @@ class Session:
     ) -> int | None:
         """Step up to ``n`` times toward ``target``, stopping early (after at least one step) once
         ``time.perf_counter()`` reaches ``deadline``; the number of steps taken, or None (and the
-        state restored) if the sim diverged."""
+        state restored) if the sim diverged. While a program runs (``runner``), it takes the steps
+        and ``target`` is ignored."""
         done = 0
         with self.lock:
+            if self.runner is not None and not self.runner.done:
+                while done < n and not self.runner.done:
+                    done += self.runner.advance(min(5, n - done))
+                    if deadline is not None and time.perf_counter() >= deadline:
+                        break
+                self._timeline_update()
+                return done
             sim = self.sim
             if target is not None:
                 sim.set_target(target[0], target[1])
@@ -81,14 +90,18 @@ class Session:
                     self.record = sim.record()
                     self.note = f"simulation diverged ({e.reason}); gripper stopped, state restored"
                     return None
-                st = rec.state  # the simulator tracks the contacts (track=True)
-                if self.recorder is not None:
-                    self.recorder.step(rec)
-                self.record, self.state = rec, st
-                self.forces.add(rec.time, rec.gripper_force)
+                self.took(rec)
                 done += 1
             self._timeline_update()
             return done
+
+    def took(self, rec: Any) -> None:
+        """The bookkeeping of a step taken (by :meth:`advance` or by a program run): record it, keep
+        its state and its gripper force. Called under ``lock``."""
+        if self.recorder is not None:
+            self.recorder.step(rec)
+        self.record, self.state = rec, rec.state  # the simulator tracks the contacts (track=True)
+        self.forces.add(rec.time, rec.gripper_force)
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept

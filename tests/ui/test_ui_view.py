@@ -189,7 +189,8 @@ PLOTS_JS = """() => Object.values((window.__viserTestpoints || {}).uplots || {})
 
 
 def plot_data(page) -> list[np.ndarray]:
-    """The data of the page's (only) uPlot chart, as the browser holds it: x, Fx, Fy, Fz, |F|, marks."""
+    """The data of the page's (only) uPlot chart, as the browser holds it: x, Fx, Fy, Fz, |F|, marks, and a
+    program run's detector signal and threshold."""
     plots = page.evaluate(PLOTS_JS)
     assert len(plots) == 1, f"{len(plots)} plots on the page"
     return [np.asarray(a, dtype=float) for a in plots[0]]
@@ -201,7 +202,8 @@ def test_the_force_plot_follows_a_drag_and_marks_the_transitions(server: DemoSer
     page = open_page(browser, server.url)
     page.wait_for_function("() => Object.keys((window.__viserTestpoints || {}).uplots || {}).length > 0")
     before = plot_data(page)
-    assert len(before) == 6
+    assert len(before) == 8  # x, Fx, Fy, Fz, |F|, transition marks, detector signal, threshold
+    assert np.all(before[6] < 0) and np.all(before[7] < 0)  # no program runs: off the plot
     hanging = float(np.median(before[4]))
     assert 0.4 < hanging < 0.8  # the weight of the hanging 60 g cable, about 0.59 N
     p0 = server.status()["gripper_pos"]

@@ -1,5 +1,6 @@
 """The force panel: a uPlot chart of the gripper wrench over the last seconds (what the detection
-algorithms of a program's macros watch), transitions marked, live or at a timeline moment."""
+algorithms of a program's macros watch), transitions marked, live or at a timeline moment; while a
+program runs (:mod:`dlovr.ui.panels.run`), its current macro's detector signal and threshold."""
 
 from __future__ import annotations
 
@@ -8,7 +9,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dlovr.model.transitions import format_classes
-from dlovr.ui.forces import SERIES_COLORS, SERIES_LABELS, WINDOW_S, plot_arrays
+from dlovr.ui.forces import (
+    SERIES_COLORS,
+    SERIES_LABELS,
+    SIGNAL_COLORS,
+    SIGNAL_LABELS,
+    SIGNAL_RANGE,
+    WINDOW_S,
+    ForceTrace,
+    plot_arrays,
+    signal_arrays,
+)
 from dlovr.ui.timeline import Timeline
 
 if TYPE_CHECKING:
@@ -28,7 +39,16 @@ def _series(points: bool) -> tuple[dict[str, Any], ...]:
         else:
             s["points"] = {"show": False}
         out.append(s)
+    for label, color in zip(SIGNAL_LABELS, SIGNAL_COLORS, strict=True):
+        dash = (2.0, 2.0) if label == "threshold" else None
+        sig: dict[str, Any] = {"label": label, "stroke": color, "scale": "signal", "width": 1.5}
+        sig.update(points={"show": False}, **({"dash": dash} if dash else {}))
+        out.append(sig)
     return tuple(out)
+
+
+def _with_signal(data: tuple[np.ndarray, ...], trace: ForceTrace | None) -> tuple[np.ndarray, ...]:
+    return (*data, *signal_arrays(data[0], trace))
 
 
 class ForcePanel:
@@ -41,17 +61,19 @@ class ForcePanel:
         self.updates = 0
 
     def build(self, gui: viser.GuiApi) -> None:
+        s = self.app.session
         with gui.add_folder("Gripper wrench"):
             self.plot = gui.add_uplot(
-                data=plot_arrays(self.app.session.forces, [], self.app.session.record.time),
+                data=_with_signal(plot_arrays(s.forces, [], s.record.time), None),
                 series=_series(points=False),
                 title=f"force on the gripper [N], last {WINDOW_S:g} s",
                 scales={
                     "x": {"time": False},
                     "y": {"auto": True},
                     "mark": {"auto": False, "range": (0.0, 1.0)},
+                    "signal": {"auto": False, "range": SIGNAL_RANGE},
                 },
-                axes=({"label": "t [s]"}, {"scale": "y"}),
+                axes=({"label": "t [s]"}, {"scale": "y"}, {"scale": "signal", "side": 1, "size": 34}),
                 legend={"show": True, "live": True},
                 height=190,
             )
@@ -64,12 +86,20 @@ class ForcePanel:
             s = app.session
             tl = s.timeline
             data = plot_arrays(s.forces, tl.transition_times(), s.record.time)
+            data = _with_signal(data, self.signal_trace())
             bands = [b for b in tl.bands[-12:] if b.classes]
-        self._show(data, bands, "live", f"force on the gripper [N], last {WINDOW_S:g} s")
+        run = getattr(self.app, "run_panel", None)
+        extra = run.signal_caption() if run is not None else ""
+        self._show(data, bands, "live", f"force on the gripper [N], last {WINDOW_S:g} s", extra)
+
+    def signal_trace(self) -> ForceTrace | None:
+        """The detector signal of the program run in the current scene, if any."""
+        run = getattr(self.app, "run_panel", None)
+        return run.signals if run is not None else None
 
     def show_at(self, tl: Timeline, t: float) -> None:
         """The seconds before moment ``t`` of a timeline being scrubbed (a recording, or the live one)."""
-        data = plot_arrays(tl.forces, tl.transition_times(), t)
+        data = _with_signal(plot_arrays(tl.forces, tl.transition_times(), t), None)
         bands = [b for b in tl.bands if b.classes and b.start <= t]
         live = tl is self.app.session.timeline
         title = f"force on the gripper [N] up to {t:.2f} s"
@@ -78,12 +108,16 @@ class ForcePanel:
         dense = live or tl.forces.every > 1  # a step-rate trace, not samples at state changes
         self._show(data, bands, "live" if dense else "recording", title)
 
-    def _show(self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str) -> None:
+    def _show(
+        self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str, extra: str = ""
+    ) -> None:
         if not hasattr(self, "plot"):
             return
         t0 = float(data[0][-1]) - WINDOW_S
         marks = [f"{b.start:.2f} s **{format_classes(b.classes)}**" for b in bands if b.start >= t0]
         caption = "transitions (dashed): " + ", ".join(marks[-6:]) if marks else "no transition in the window"
+        if extra:
+            caption += "  \n" + extra
         with self.app.server.atomic():
             if mode != self._mode:
                 self.plot.series = _series(points=mode == "recording")
