@@ -21,7 +21,7 @@ from dlovr.recording import Recording
 from dlovr.ui import DemoServer
 from dlovr.ui.framing import box_corners, projected_extent
 
-ARTIFACTS = Path(os.environ.get("DLOVR_UI_ARTIFACTS", Path(__file__).resolve().parent / "artifacts"))
+ARTIFACTS = Path(os.environ.get("DLOVR_UI_ARTIFACTS", Path(__file__).resolve().parents[1] / "artifacts"))
 
 
 def shot(page, name: str) -> Path:
