@@ -62,13 +62,18 @@ _VARY_HELP = (
 @click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
 @click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
 @click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
-@click.option("-o", "--output", "out", metavar="DIR", help="Directory for the trials' results.")
+@click.option(
+    "-o", "--output", "out", metavar="DIR|FILE",
+    help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
+)  # fmt: skip
+@click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(
     program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
     recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
     trials_raw: str | None, seed_raw: str,
-    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, as_json: bool,
+    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, record: bool,
+    as_json: bool,
 ) -> None:  # fmt: skip
     """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
     its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
@@ -81,7 +86,10 @@ def run_cmd(
     --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
     summary.json and plot.png. Exit code 0 when the trials ran (their failures are results), 2 bad input.
 
-    Recording a run as MCAP (-o run.mcap without --trials) is not available yet.
+    Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
+    events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
+    `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
+    writes each trial's run as DIR/trial_KKK.mcap.
     """
     import json
 
@@ -108,8 +116,10 @@ def run_cmd(
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
     if trials is None and (varies or baseline):
         raise _BadInput("--vary and --baseline need --trials N")
-    if trials is None and out:
-        raise _BadInput("-o DIR is for --trials; recording a single run as MCAP is not available yet")
+    if trials is None and record:
+        raise _BadInput("--record is for --trials (a single run is recorded with -o run.mcap)")
+    if trials is None and out and not out.endswith(".mcap"):
+        raise _BadInput(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if trials is not None and not out:
         raise _BadInput("--trials needs -o DIR for its results")
     try:
@@ -133,11 +143,24 @@ def run_cmd(
         raise _BadInput(str(e)) from None
     use_track = path_mode != "program" and track is not None
     if trials is not None:
-        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out)
+        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out,
+                record)  # fmt: skip
         return
-    from dlovr.execution.run import run_program
+    if out:
+        from dlovr.execution.recorded import record_run
+        from dlovr.outputs import OutputError, output_error, prepare_output
 
-    res = run_program(program, scene, opts, track=track if use_track else None)
+        try:
+            prepare_output(out)
+            res = record_run(program, scene, out, opts, track=track if use_track else None)
+        except OutputError as e:
+            raise _BadInput(str(e)) from None
+        except OSError as e:
+            raise _BadInput(str(output_error(out, e))) from None
+    else:
+        from dlovr.execution.run import run_program
+
+        res = run_program(program, scene, opts, track=track if use_track else None)
     if as_json:
         click.echo(json.dumps(res.to_json(), indent=1))
     else:
@@ -147,7 +170,7 @@ def run_cmd(
 
 def _trials(
     program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
-    varies: tuple[str, ...], baseline: bool, workers: int, out: str,
+    varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
 ) -> None:  # fmt: skip
     from pathlib import Path
 
@@ -165,7 +188,8 @@ def _trials(
     if Path(out).exists() and not Path(out).is_dir():
         raise _BadInput(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)
-    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track)
+    record_dir = str(Path(out).resolve()) if record else None
+    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir)
     with click.progressbar(length=n, label=f"{n} trials", file=sys.stderr, show_eta=True) as bar:
         done = [0]
 

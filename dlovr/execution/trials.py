@@ -38,7 +38,8 @@ class TrialSetup:
 
     ``pieces``: the scene objects' convex decomposition (their own frames, so valid for every
     perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
-    ``use_track`` and by the open-loop baseline when ``baseline``.
+    ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
+    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
     """
 
     program: ProgramSpec
@@ -50,6 +51,7 @@ class TrialSetup:
     opts: ExecOptions
     baseline: bool = False
     use_track: bool = True
+    record_dir: str | None = None
 
 
 def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
@@ -59,9 +61,18 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     from dataclasses import replace
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
-    res = run_program(
-        setup.program, scene, opts, track=setup.track if setup.use_track else None, pieces=setup.pieces
-    )
+    track = setup.track if setup.use_track else None
+    if setup.record_dir is not None:
+        from dlovr.execution.recorded import record_run
+
+        Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
+        path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
+        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        res = record_run(
+            setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta
+        )
+    else:
+        res = run_program(setup.program, scene, opts, track=track, pieces=setup.pieces)
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": res.to_json()}
     if setup.baseline and setup.track is not None:
         out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
