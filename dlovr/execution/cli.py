@@ -8,6 +8,8 @@ from typing import Any
 
 import click
 
+from dlovr.batch import cluster_option
+
 
 class _BadInput(click.ClickException):
     """A problem with the user's input: one line, exit code 2."""
@@ -67,13 +69,14 @@ _VARY_HELP = (
     help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
 )  # fmt: skip
 @click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
+@cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(
     program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
     recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
     trials_raw: str | None, seed_raw: str,
     varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, record: bool,
-    as_json: bool,
+    cluster: str | None, as_json: bool,
 ) -> None:  # fmt: skip
     """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
     its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
@@ -84,7 +87,9 @@ def run_cmd(
 
     With --trials N -o DIR: N runs in scenes perturbed by --vary (deterministic from --seed), with
     --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
-    summary.json and plot.png. Exit code 0 when the trials ran (their failures are results), 2 bad input.
+    summary.json and plot.png. The trials run on --workers local processes, or with --cluster on Ray
+    (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
+    the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
 
     Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
     events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
@@ -116,6 +121,8 @@ def run_cmd(
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
     if trials is None and (varies or baseline):
         raise _BadInput("--vary and --baseline need --trials N")
+    if trials is None and cluster:
+        raise _BadInput("--cluster is for --trials")
     if trials is None and record:
         raise _BadInput("--record is for --trials (a single run is recorded with -o run.mcap)")
     if trials is None and out and not out.endswith(".mcap"):
@@ -144,7 +151,7 @@ def run_cmd(
     use_track = path_mode != "program" and track is not None
     if trials is not None:
         _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out,
-                record)  # fmt: skip
+                record, cluster)  # fmt: skip
         return
     if out:
         from dlovr.execution.recorded import record_run
@@ -171,6 +178,7 @@ def run_cmd(
 def _trials(
     program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
     varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
+    cluster: str | None = None,
 ) -> None:  # fmt: skip
     from pathlib import Path
 
@@ -190,14 +198,7 @@ def _trials(
     pieces = scene_pieces(scene)
     record_dir = str(Path(out).resolve()) if record else None
     setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir)
-    with click.progressbar(length=n, label=f"{n} trials", file=sys.stderr, show_eta=True) as bar:
-        done = [0]
-
-        def progress(k: int, total: int) -> None:
-            bar.update(k - done[0])
-            done[0] = k
-
-        results = run_trials(setup, n, workers=workers, progress=progress)
+    results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)
     rate = summary["program_success_rate"]
@@ -211,4 +212,7 @@ def _trials(
         line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
         line += f" ({fr:.1%})"
     click.echo(line)
+    if summary["retried_trials"] or summary["lost_trials"]:
+        lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
+        click.echo(lost)
     click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
