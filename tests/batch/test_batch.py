@@ -227,3 +227,15 @@ def test_run_trials_on_ray_give_the_same_outcomes_as_local_processes(ray_instanc
     a, b = _outcomes(tmp_path / "local"), _outcomes(tmp_path / "ray")
     assert len(a) == 3 and a == b
     assert cli("run", prog, "--cluster", "local").exit_code == 2  # --cluster needs --trials
+
+
+def test_record_trials_on_ray_record_the_same_demonstrations(ray_instance, tmp_path):
+    from dlovr.recording import Recording
+
+    script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
+    args = ["record", "--script", script, "--trials", "2", "--seed", "3", "--vary", "dlo.young=0.5..2"]
+    assert cli(*args, "-o", tmp_path / "local").exit_code == 0
+    r = cli(*args, "--cluster", "local", "-o", tmp_path / "ray")
+    assert r.exit_code == 0, r.output
+    for name in ("demo_000.mcap", "demo_001.mcap"):
+        assert Recording(tmp_path / "ray" / name).states() == Recording(tmp_path / "local" / name).states()
