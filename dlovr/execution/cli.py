@@ -129,6 +129,19 @@ def run_cmd(
         raise _BadInput(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if trials is not None and not out:
         raise _BadInput("--trials needs -o DIR for its results")
+    from dlovr.execution.network_run import load_network_program
+
+    try:
+        nprog = load_network_program(program_path)
+    except ProgramError as e:
+        raise _BadInput(str(e)) from None
+    if nprog is not None:
+        if baseline or recording or path_mode == "demo":
+            why = "a network program has no single demonstration to replay or follow"
+            raise _BadInput(f"{program_path}: {why}")
+        _network(nprog, scene_ref, detect, noise, allowance, trials, seed, varies, workers, out, record,
+                 cluster, as_json)  # fmt: skip
+        return
     try:
         program = load_program(program_path)
         rec_path = find_recording(program, recording)
@@ -175,10 +188,46 @@ def run_cmd(
     sys.exit(0 if res.success else 1)
 
 
+def _network(
+    nprog: Any, scene_ref: str | None, detect: str, noise: float, allowance: float, trials: int | None,
+    seed: int, varies: tuple[str, ...], workers: int, out: str | None, record: bool, cluster: str | None,
+    as_json: bool,
+) -> None:  # fmt: skip
+    """``dlovr run NETWORK-PROGRAM.json``: one run (optionally recorded), or trials."""
+    import json
+
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.network_run import format_network_result, network_scene, run_network
+    from dlovr.execution.programs import ProgramError, ProgramSpec
+    from dlovr.scene import SceneError
+
+    try:
+        scene = network_scene(nprog, scene_ref)
+        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance)
+    except (ProgramError, SceneError, ValueError) as e:
+        raise _BadInput(str(e)) from None
+    if trials is not None:
+        holder = ProgramSpec(nprog.name or "network", nprog.source, ())
+        _trials(holder, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
+                cluster, nprog)  # fmt: skip
+        return
+    if out:
+        from dlovr.execution.recorded import record_run
+
+        try:
+            res = record_run(ProgramSpec(nprog.name, nprog.source, ()), scene, out, opts, network=nprog)
+        except OSError as e:
+            raise _BadInput(f"{out}: cannot write: {e.strerror}") from None
+    else:
+        res = run_network(nprog, scene, opts)
+    click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_network_result(res))
+    sys.exit(0 if res.success else 1)
+
+
 def _trials(
     program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
     varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
-    cluster: str | None = None,
+    cluster: str | None = None, network: Any = None,
 ) -> None:  # fmt: skip
     from pathlib import Path
 
@@ -197,7 +246,9 @@ def _trials(
         raise _BadInput(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)
     record_dir = str(Path(out).resolve()) if record else None
-    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir)
+    setup = TrialSetup(
+        program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir, network
+    )
     results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)

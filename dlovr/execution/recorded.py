@@ -7,8 +7,9 @@ Foxglove and the browser timeline open it like any recording.
 - :func:`record_run`: :func:`dlovr.execution.run.run_program` with a recorder attached.
 
 The events channel :data:`TOPIC_EVENTS` carries one message per :class:`dlovr.execution.executor.Event`
-(``start``, ``macro`` -- a macro starts --, ``detected``, ``failed``, ``final``, ``end``, ``replan``,
-``outside``) at the step it happened, and a last ``result`` message with the run's outcome.
+(``start``, ``macro`` -- a macro starts --, ``detected``, ``failed``, ``final``, ``end``; for network
+programs also ``plan``, ``replan`` and ``outside``) at the step it happened, and a last ``result``
+message with the run's outcome.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 
 from dlovr.execution.executor import DemoTrack, Event, ExecOptions, execute
 from dlovr.execution.programs import ProgramSpec
-from dlovr.execution.scoring import RunResult, score
+from dlovr.execution.scoring import score
 
 TOPIC_EVENTS = "/dlovr/executor_events"
 EVENT_SCHEMA_NAME = "dlovr.ExecutorEvent"
@@ -101,17 +102,25 @@ def record_run(
     track: DemoTrack | None = None,
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
-) -> RunResult:
-    """Run ``program`` in ``scene`` (like :func:`dlovr.execution.run.run_program`) while recording it to
-    ``path``. A run that cannot start writes no file."""
+    network: Any = None,
+) -> Any:
+    """Run ``program`` in ``scene`` (like :func:`dlovr.execution.run.run_program`; with ``network``, a
+    :class:`dlovr.model.planning.NetworkProgram`, that instead, like
+    :func:`dlovr.execution.network_run.run_network`) while recording it to ``path``. A run that cannot
+    start writes no file."""
     from dlovr.execution.run import _simulator, run_program
     from dlovr.recording import DemoRecorder
 
     opts = opts if opts is not None else ExecOptions()
     sim, _ = _simulator(scene, pieces)
-    if sim is None:
-        return run_program(program, scene, opts, track=track, pieces=pieces)  # the same failed result
-    meta = {"source": "dlovr run", "program": program.name, "detect": opts.detect, **(extra_metadata or {})}
+    if sim is None:  # the same failed result
+        if network is not None:
+            from dlovr.execution.network_run import run_network
+
+            return run_network(network, scene, opts, pieces=pieces)
+        return run_program(program, scene, opts, track=track, pieces=pieces)
+    name = network.name if network is not None else program.name
+    meta = {"source": "dlovr run", "program": name, "detect": opts.detect, **(extra_metadata or {})}
     rec = DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta)
     with rec:
         rec.rec.add_channel(TOPIC_EVENTS, EVENT_SCHEMA_NAME, EVENT_SCHEMA)
@@ -119,10 +128,17 @@ def record_run(
         def on_event(ev: Event) -> None:
             rec.rec.message(ev.step, TOPIC_EVENTS, ev.payload())
 
-        ex = execute(program, sim, opts, track=track, on_step=rec.step, on_event=on_event)
-        if ex.diverged:
-            rec.end_reason = ex.diverged
-        res = score(ex, scene.name)
+        if network is not None:
+            from dlovr.execution.network_run import run_network_in
+
+            res = run_network_in(network, sim, scene, opts, on_step=rec.step, on_event=on_event)
+            if res.reason.startswith("simulation diverged"):
+                rec.end_reason = res.reason
+        else:
+            ex = execute(program, sim, opts, track=track, on_step=rec.step, on_event=on_event)
+            if ex.diverged:
+                rec.end_reason = ex.diverged
+            res = score(ex, scene.name)
         text = "goal reached" if res.success else f"failed: {res.reason}"
         result = {"success": res.success, "goal_reached": res.goal_reached, "reason": res.reason}
         payload = Event(float(sim.time), int(sim.step_index), "result", 0, text).payload()

@@ -38,7 +38,9 @@ class TrialSetup:
     ``pieces``: the scene objects' convex decomposition (their own frames, so valid for every
     perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
     ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
-    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
+    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`);
+    ``network``: a :class:`dlovr.model.planning.NetworkProgram` run instead of ``program`` (then a
+    placeholder naming it), see :func:`dlovr.execution.network_run.run_network`.
     """
 
     program: ProgramSpec
@@ -51,6 +53,7 @@ class TrialSetup:
     baseline: bool = False
     use_track: bool = True
     record_dir: str | None = None
+    network: Any = None
 
 
 def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
@@ -61,6 +64,8 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
     track = setup.track if setup.use_track else None
+    if setup.network is not None:
+        return _network_trial(setup, trial, scene, values, opts, t0)
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
 
@@ -75,6 +80,31 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": res.to_json()}
     if setup.baseline and setup.track is not None:
         out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
+    out["wall_time"] = time.perf_counter() - t0
+    return out
+
+
+def _network_trial(
+    setup: TrialSetup, trial: int, scene: Any, values: dict[str, Any], opts: ExecOptions, t0: float
+) -> dict[str, Any]:
+    """A trial of a network program: its result JSON under ``network_run``, and under ``program`` the
+    fields the summary reads (no per-macro latencies: network macros are not judged one by one)."""
+    if setup.record_dir is not None:
+        from dlovr.execution.recorded import record_run
+
+        Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
+        path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
+        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        res = record_run(setup.program, scene, path, opts, pieces=setup.pieces, extra_metadata=meta,
+                         network=setup.network)  # fmt: skip
+    else:
+        from dlovr.execution.network_run import run_network
+
+        res = run_network(setup.network, scene, opts, pieces=setup.pieces)
+    prog = {"success": res.success, "goal_reached": res.goal_reached, "failed_macro": None,
+            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}  # fmt: skip
+    out = {"trial": trial, "seed": setup.seed, "values": values, "program": prog}
+    out["network_run"] = res.to_json()
     out["wall_time"] = time.perf_counter() - t0
     return out
 
