@@ -82,6 +82,9 @@ def run_cmd(
     its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
 
     Prints a table per macro (class, detected at, true transition at, latency, outcome) and the result.
+    A network program (from `dlovr compile --network`) runs with sensing and re-planning: after each
+    detection the sensed contact vector picks the node reached, and the planner chooses from there; a
+    situation outside the network stops the run (dlovr.execution.network_run).
     Exit code: 0 the goal was reached, 1 the run failed (a macro's transition never came, the goal
     was not reached, the simulation diverged), 2 bad input.
 
