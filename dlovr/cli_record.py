@@ -3,8 +3,11 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
+from dlovr.batch import cluster_option
 from dlovr.cli_common import (
     UserError,
     _builtin_script,
@@ -139,28 +142,96 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
 
-@click.command("record", short_help="Record a scripted demonstration to an MCAP file.")
+@click.command("record", short_help="Record a scripted demonstration (or N perturbed ones) to MCAP.")
 @click.option("--scene", "scene_ref", help="Built-in scene name or path (default: the script's scene).")
 @click.option(
     "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
 )
 @click.option(
-    "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Output MCAP file."
-)
+    "-o", "--output", "out", required=True, type=click.Path(),
+    help="Output MCAP file (with --trials: a directory).",
+)  # fmt: skip
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
+@click.option("--trials", type=click.IntRange(min=1), help="Record N demonstrations in perturbed scenes.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the trials.")
+@click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help="Perturb, as `dlovr run --vary`.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True, help="Processes.")
+@cluster_option
 @_one_line
-def record_cmd(scene_ref: str | None, script_path: str, out: str, force: bool) -> None:
+def record_cmd(
+    scene_ref: str | None, script_path: str, out: str, force: bool, trials: int | None, seed: int,
+    varies: tuple[str, ...], workers: int, cluster: str | None,
+) -> None:  # fmt: skip
     """Record a scripted demonstration headless to an MCAP file.
 
     An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
     two steps: the file is kept, finished, and replays and verifies (`dlovr replay --verify`).
 
-    Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there);
+    With --trials N -o DIR: N demonstrations, each in the scene perturbed by --vary (the syntax and
+    draws of `dlovr run --vary`, deterministic from --seed), as DIR/demo_KKK.mcap with DIR/demos.json;
+    on --workers local processes or, with --cluster, on Ray. `dlovr network DIR` merges them.
+
+    Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there;
+    with --trials: any demonstration diverged or could not start);
     130 (Ctrl-C, SIGINT) or 143 (SIGTERM) interrupted, the recording so far kept.
     """
-    _refuse_existing(out, force)
-    _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
-    click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
+    if trials is None:
+        if varies or cluster:
+            raise UserError("--vary and --cluster need --trials N")
+        if os.path.isdir(out):
+            raise UserError(f"{out}: is a directory (a directory of recordings needs --trials N)")
+        _refuse_existing(out, force)
+        _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
+        click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
+        return
+    _record_trials(scene_ref, script_path, out, force, trials, seed, varies, workers, cluster)
+
+
+def _record_trials(
+    scene_ref: str | None, script_path: str, out: str, force: bool, n: int, seed: int,
+    varies: tuple[str, ...], workers: int, cluster: str | None,
+) -> None:  # fmt: skip
+    from pathlib import Path
+
+    from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
+    from dlovr.execution.variation import VaryError, parse_vary
+    from dlovr.geometry import scene_pieces
+    from dlovr.outputs import prepare_output_dir
+    from dlovr.recording.bundle import SceneBundle
+
+    script = _script(script_path)
+    if scene_ref is not None:
+        scene = _scene(scene_ref)
+    else:
+        scene = _scene(script.scene, script) if script.scene else _scene("table")
+    try:
+        variations = tuple(parse_vary(v, scene) for v in varies)
+    except VaryError as e:
+        raise UserError(str(e)) from None
+    keys = [v.key for v in variations]
+    if len(set(keys)) != len(keys):
+        raise UserError(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise UserError(f"{out}: exists and is not a directory")
+    setup = DemoSetup(scene, scene_pieces(scene), script, variations, seed, str(Path(out).resolve()),
+                      SceneBundle.from_path(scene.path).digest)  # fmt: skip
+    existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
+    if existing and not force:
+        raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")
+    prepare_output_dir(out)
+    demos = record_demos(setup, n, workers=workers, cluster=cluster, progress=True)
+    write_index(setup, demos)
+    bad = [d for d in demos if d["error"]]
+    for d in bad:
+        click.echo(f"demo {d['trial']}: {d['error']}", err=True)
+    retried = sum(d["attempts"] > 1 for d in demos)
+    wrote = sum(d["path"] is not None for d in demos)
+    click.echo(
+        f"wrote {wrote} recordings of {scene.name} to {out}/ (demos.json): {len(bad)} diverged or failed, "
+        f"{retried} retried"
+    )
+    if bad:
+        raise SystemExit(1)
 
 
 @click.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")

@@ -8,6 +8,8 @@ from typing import Any
 
 import click
 
+from dlovr.batch import cluster_option
+
 
 class _BadInput(click.ClickException):
     """A problem with the user's input: one line, exit code 2."""
@@ -62,26 +64,40 @@ _VARY_HELP = (
 @click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
 @click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
 @click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
-@click.option("-o", "--output", "out", metavar="DIR", help="Directory for the trials' results.")
+@click.option(
+    "-o", "--output", "out", metavar="DIR|FILE",
+    help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
+)  # fmt: skip
+@click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
+@cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(
     program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
     recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
     trials_raw: str | None, seed_raw: str,
-    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, as_json: bool,
+    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, record: bool,
+    cluster: str | None, as_json: bool,
 ) -> None:  # fmt: skip
     """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
     its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
 
     Prints a table per macro (class, detected at, true transition at, latency, outcome) and the result.
+    A network program (from `dlovr compile --network`) runs with sensing and re-planning: after each
+    detection the sensed contact vector picks the node reached, and the planner chooses from there; a
+    situation outside the network stops the run (dlovr.execution.network_run).
     Exit code: 0 the goal was reached, 1 the run failed (a macro's transition never came, the goal
     was not reached, the simulation diverged), 2 bad input.
 
     With --trials N -o DIR: N runs in scenes perturbed by --vary (deterministic from --seed), with
     --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
-    summary.json and plot.png. Exit code 0 when the trials ran (their failures are results), 2 bad input.
+    summary.json and plot.png. The trials run on --workers local processes, or with --cluster on Ray
+    (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
+    the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
 
-    Recording a run as MCAP (-o run.mcap without --trials) is not available yet.
+    Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
+    events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
+    `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
+    writes each trial's run as DIR/trial_KKK.mcap.
     """
     import json
 
@@ -108,10 +124,27 @@ def run_cmd(
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
     if trials is None and (varies or baseline):
         raise _BadInput("--vary and --baseline need --trials N")
-    if trials is None and out:
-        raise _BadInput("-o DIR is for --trials; recording a single run as MCAP is not available yet")
+    if trials is None and cluster:
+        raise _BadInput("--cluster is for --trials")
+    if trials is None and record:
+        raise _BadInput("--record is for --trials (a single run is recorded with -o run.mcap)")
+    if trials is None and out and not out.endswith(".mcap"):
+        raise _BadInput(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if trials is not None and not out:
         raise _BadInput("--trials needs -o DIR for its results")
+    from dlovr.execution.network_run import load_network_program
+
+    try:
+        nprog = load_network_program(program_path)
+    except ProgramError as e:
+        raise _BadInput(str(e)) from None
+    if nprog is not None:
+        if baseline or recording or path_mode == "demo":
+            why = "a network program has no single demonstration to replay or follow"
+            raise _BadInput(f"{program_path}: {why}")
+        _network(nprog, scene_ref, detect, noise, allowance, trials, seed, varies, workers, out, record,
+                 cluster, as_json)  # fmt: skip
+        return
     try:
         program = load_program(program_path)
         rec_path = find_recording(program, recording)
@@ -133,11 +166,24 @@ def run_cmd(
         raise _BadInput(str(e)) from None
     use_track = path_mode != "program" and track is not None
     if trials is not None:
-        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out)
+        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out,
+                record, cluster)  # fmt: skip
         return
-    from dlovr.execution.run import run_program
+    if out:
+        from dlovr.execution.recorded import record_run
+        from dlovr.outputs import OutputError, output_error, prepare_output
 
-    res = run_program(program, scene, opts, track=track if use_track else None)
+        try:
+            prepare_output(out)
+            res = record_run(program, scene, out, opts, track=track if use_track else None)
+        except OutputError as e:
+            raise _BadInput(str(e)) from None
+        except OSError as e:
+            raise _BadInput(str(output_error(out, e))) from None
+    else:
+        from dlovr.execution.run import run_program
+
+        res = run_program(program, scene, opts, track=track if use_track else None)
     if as_json:
         click.echo(json.dumps(res.to_json(), indent=1))
     else:
@@ -145,9 +191,46 @@ def run_cmd(
     sys.exit(0 if res.success else 1)
 
 
+def _network(
+    nprog: Any, scene_ref: str | None, detect: str, noise: float, allowance: float, trials: int | None,
+    seed: int, varies: tuple[str, ...], workers: int, out: str | None, record: bool, cluster: str | None,
+    as_json: bool,
+) -> None:  # fmt: skip
+    """``dlovr run NETWORK-PROGRAM.json``: one run (optionally recorded), or trials."""
+    import json
+
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.network_run import format_network_result, network_scene, run_network
+    from dlovr.execution.programs import ProgramError, ProgramSpec
+    from dlovr.scene import SceneError
+
+    try:
+        scene = network_scene(nprog, scene_ref)
+        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance)
+    except (ProgramError, SceneError, ValueError) as e:
+        raise _BadInput(str(e)) from None
+    if trials is not None:
+        holder = ProgramSpec(nprog.name or "network", nprog.source, ())
+        _trials(holder, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
+                cluster, nprog)  # fmt: skip
+        return
+    if out:
+        from dlovr.execution.recorded import record_run
+
+        try:
+            res = record_run(ProgramSpec(nprog.name, nprog.source, ()), scene, out, opts, network=nprog)
+        except OSError as e:
+            raise _BadInput(f"{out}: cannot write: {e.strerror}") from None
+    else:
+        res = run_network(nprog, scene, opts)
+    click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_network_result(res))
+    sys.exit(0 if res.success else 1)
+
+
 def _trials(
     program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
-    varies: tuple[str, ...], baseline: bool, workers: int, out: str,
+    varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
+    cluster: str | None = None, network: Any = None,
 ) -> None:  # fmt: skip
     from pathlib import Path
 
@@ -165,15 +248,11 @@ def _trials(
     if Path(out).exists() and not Path(out).is_dir():
         raise _BadInput(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)
-    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track)
-    with click.progressbar(length=n, label=f"{n} trials", file=sys.stderr, show_eta=True) as bar:
-        done = [0]
-
-        def progress(k: int, total: int) -> None:
-            bar.update(k - done[0])
-            done[0] = k
-
-        results = run_trials(setup, n, workers=workers, progress=progress)
+    record_dir = str(Path(out).resolve()) if record else None
+    setup = TrialSetup(
+        program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir, network
+    )
+    results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)
     rate = summary["program_success_rate"]
@@ -187,4 +266,7 @@ def _trials(
         line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
         line += f" ({fr:.1%})"
     click.echo(line)
+    if summary["retried_trials"] or summary["lost_trials"]:
+        lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
+        click.echo(lost)
     click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")

@@ -1,5 +1,5 @@
 """Robustness trials: a program (and optionally the open-loop replay of its demonstration) on many
-perturbed copies of its scene, on local processes.
+perturbed copies of its scene, on local processes or a Ray cluster (:func:`dlovr.batch.run_batch`).
 
 Trial ``k`` of seed ``s`` perturbs the scene with :func:`dlovr.execution.variation.perturb`, runs the
 program (:func:`dlovr.execution.run.run_program`) and, with the baseline, replays the demonstration's
@@ -17,8 +17,7 @@ import json
 import math
 import statistics
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,7 +37,10 @@ class TrialSetup:
 
     ``pieces``: the scene objects' convex decomposition (their own frames, so valid for every
     perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
-    ``use_track`` and by the open-loop baseline when ``baseline``.
+    ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
+    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`);
+    ``network``: a :class:`dlovr.model.planning.NetworkProgram` run instead of ``program`` (then a
+    placeholder naming it), see :func:`dlovr.execution.network_run.run_network`.
     """
 
     program: ProgramSpec
@@ -50,6 +52,8 @@ class TrialSetup:
     opts: ExecOptions
     baseline: bool = False
     use_track: bool = True
+    record_dir: str | None = None
+    network: Any = None
 
 
 def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
@@ -59,12 +63,48 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     from dataclasses import replace
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
-    res = run_program(
-        setup.program, scene, opts, track=setup.track if setup.use_track else None, pieces=setup.pieces
-    )
+    track = setup.track if setup.use_track else None
+    if setup.network is not None:
+        return _network_trial(setup, trial, scene, values, opts, t0)
+    if setup.record_dir is not None:
+        from dlovr.execution.recorded import record_run
+
+        Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
+        path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
+        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        res = record_run(
+            setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta
+        )
+    else:
+        res = run_program(setup.program, scene, opts, track=track, pieces=setup.pieces)
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": res.to_json()}
     if setup.baseline and setup.track is not None:
         out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
+    out["wall_time"] = time.perf_counter() - t0
+    return out
+
+
+def _network_trial(
+    setup: TrialSetup, trial: int, scene: Any, values: dict[str, Any], opts: ExecOptions, t0: float
+) -> dict[str, Any]:
+    """A trial of a network program: its result JSON under ``network_run``, and under ``program`` the
+    fields the summary reads (no per-macro latencies: network macros are not judged one by one)."""
+    if setup.record_dir is not None:
+        from dlovr.execution.recorded import record_run
+
+        Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
+        path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
+        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        res = record_run(setup.program, scene, path, opts, pieces=setup.pieces, extra_metadata=meta,
+                         network=setup.network)  # fmt: skip
+    else:
+        from dlovr.execution.network_run import run_network
+
+        res = run_network(setup.network, scene, opts, pieces=setup.pieces)
+    prog = {"success": res.success, "goal_reached": res.goal_reached, "failed_macro": None,
+            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}  # fmt: skip
+    out = {"trial": trial, "seed": setup.seed, "values": values, "program": prog}
+    out["network_run"] = res.to_json()
     out["wall_time"] = time.perf_counter() - t0
     return out
 
@@ -74,26 +114,46 @@ def run_trials(
     n: int,
     *,
     workers: int = 1,
-    progress: Callable[[int, int], None] | None = None,
+    cluster: str | None = None,
+    progress: bool = False,
 ) -> list[dict[str, Any]]:
-    """Trials ``0..n-1``, on ``workers`` processes (1: in this process); results in trial order."""
-    results: dict[int, dict[str, Any]] = {}
-    if workers <= 1 or n <= 1:
-        for k in range(n):
-            results[k] = run_trial(setup, k)
-            if progress is not None:
-                progress(k + 1, n)
-    else:
-        import multiprocessing
+    """Trials ``0..n-1`` through :func:`dlovr.batch.run_batch`: in this process (``workers`` 1), on
+    ``workers`` local processes, or on Ray (``cluster`` ``local`` or an address); results in trial
+    order, the same wherever they ran (each trial's draws depend on the seed and its number only).
 
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(workers, n), mp_context=ctx) as pool:
-            futures = {pool.submit(run_trial, setup, k): k for k in range(n)}
-            for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                if progress is not None:
-                    progress(len(results), n)
+    A trial whose task failed (it raised, or its worker died on every attempt) is a failed result
+    with the reason, never an exception; ``attempts`` says how many runs each trial took (> 1: its
+    worker died and it ran again). ``progress`` draws a progress bar on stderr.
+    """
+    from dlovr.batch import Task, run_batch
+
+    tasks = [Task(f"trial {k}", (setup, k)) for k in range(n)]
+    results: dict[int, dict[str, Any]] = {}
+    batch = run_batch(
+        run_trial, tasks, workers=workers, cluster=cluster, progress=progress, label=f"{n} trials"
+    )
+    for r in batch:
+        out = r.value if r.ok else lost_trial(setup, r.index, str(r.error))
+        results[r.index] = {**out, "attempts": r.attempts}
     return [results[k] for k in range(n)]
+
+
+def lost_trial(setup: TrialSetup, trial: int, error: str) -> dict[str, Any]:
+    """The failed result of a trial whose task gave no result (``error``: why)."""
+    _, values = perturb(setup.scene, setup.variations, setup.seed, trial)
+    reason = f"trial lost: {error}"
+    program = {
+        "program": setup.program.name, "scene": setup.scene.name, "detect": setup.opts.detect,
+        "success": False, "goal_reached": False, "goal": list(setup.program.goal), "final_situation": "",
+        "final_principals": [], "failed_macro": None, "reason": reason, "macros": [], "sim_time": 0.0,
+        "wall_time": 0.0,
+    }  # fmt: skip
+    out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": program}
+    if setup.baseline and setup.track is not None:
+        out["openloop"] = {"goal_reached": False, "final_situation": "", "final_principals": [],
+                           "reason": reason, "sim_time": 0.0, "wall_time": 0.0}  # fmt: skip
+    out["wall_time"] = 0.0
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -170,6 +230,8 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "failures": failures,
         "per_parameter": per,
         "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
+        "retried_trials": sum(t.get("attempts", 1) > 1 for t in trials),
+        "lost_trials": sum(t["program"]["reason"].startswith("trial lost:") for t in trials),
     }
 
 

@@ -16,7 +16,9 @@ from dlovr.recording.reader import Recording, kept_states
 
 def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
     """One recording as a :class:`~dlovr.model.network.Demonstration` (scene name and hash from its
-    metadata; gripper poses from its contact-state messages, world frame, m and wxyz)."""
+    metadata: for a demonstration in a perturbed scene (``dlovr record --trials``) the hash of the
+    unperturbed scene, ``base_scene_sha256``, so that perturbed runs of one scene merge; gripper poses
+    from its contact-state messages, world frame, m and wxyz)."""
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
@@ -32,7 +34,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         tuple(states),
         poses,
         rec.metadata.get("scene_name", ""),
-        rec.metadata.get("scene_sha256", ""),
+        rec.metadata.get("base_scene_sha256") or rec.metadata.get("scene_sha256", ""),
     )
 
 

@@ -181,6 +181,20 @@ class Recorder:
         ns = self._ns(step)
         self._w.add_message(self._ch[topic], ns, payload, ns, self._seq)
 
+    def add_channel(self, topic: str, schema_name: str, schema: Mapping[str, Any]) -> None:
+        """Register an extra JSON channel ``topic`` (its JSON schema ``schema`` named ``schema_name``),
+        e.g. the executor events of a recorded program run; readers ignore channels they do not know."""
+        if topic in self._ch:
+            raise ValueError(f"channel {topic} already exists")
+        sid = self._w.register_schema(schema_name, "jsonschema", dumps(dict(schema)))
+        self._ch[topic] = self._w.register_channel(topic, "json", sid)
+
+    def message(self, step: int, topic: str, payload: Mapping[str, Any]) -> None:
+        """One JSON message on a channel of :meth:`add_channel`, logged at step ``step``."""
+        if topic not in self._ch or any(topic == t for t, _ in CHANNELS):
+            raise ValueError(f"no extra channel {topic} (register it with add_channel)")
+        self._add(topic, step, dumps(dict(payload)))
+
     def command(self, step: int, pos: Sequence[float], quat: Sequence[float]) -> None:
         """The gripper target commanded for step ``step`` (applied before that step); steps come in
         order, written in messages of :data:`COMMAND_BATCH` steps."""
@@ -299,8 +313,10 @@ class DemoRecorder:
     """Records a running demonstration: call :meth:`step` after every simulation step.
 
     ``sim`` is a :class:`dlovr.sim.Simulator`, ``tracker`` its :class:`dlovr.sim.tracker.ContactTracker`;
-    the scene is embedded from ``scene.path``. The first checkpoint is written at construction (so a
-    recording may start at any moment of a session), then one every second of simulated time.
+    the scene is embedded from ``scene.path``, or from ``bundle`` (a :class:`SceneBundle`) when given
+    (a scene that exists only in memory, e.g. a perturbed one). The first checkpoint is written at
+    construction (so a recording may start at any moment of a session), then one every second of
+    simulated time.
     """
 
     def __init__(self, path: str | Path, scene: Any, sim: Any, tracker: Any, **kw: Any):
@@ -311,7 +327,7 @@ class DemoRecorder:
             "flight": repr(float(tracker.flight)),
             **dict(kw.pop("extra_metadata", None) or {}),
         }
-        bundle = SceneBundle.from_path(scene.path)
+        bundle = kw.pop("bundle", None) or SceneBundle.from_path(scene.path)
         self.rec = Recorder(
             path, bundle, scene_name=scene.name, dt=dt, extra_metadata=meta, pieces=sim.pieces, **kw
         )

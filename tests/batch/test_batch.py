@@ -185,3 +185,57 @@ def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance
         for ext in (".program.json", ".program.txt"):
             out = Path(n).stem + ext
             assert (tmp_path / "ray" / out).read_bytes() == (tmp_path / "local" / out).read_bytes()
+
+
+def _touch_program(d: Path) -> Path:
+    """A 0.9 s demonstration on the table (lower the cable onto it), recorded and compiled."""
+    from dlovr.recording import DemoRecorder, compile_recording
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+    from dlovr.sim import Simulator
+
+    scene = load_scene("table")
+    sim = Simulator(scene, track=True)
+    with DemoRecorder(d / "touch.mcap", scene, sim, sim.tracker) as rec:
+        for r in sim.run(load_script(Path(__file__).parents[1] / "data" / "touch_press.script.toml")):
+            rec.step(r)
+    path = d / "touch.program.json"
+    path.write_text(compile_recording(d / "touch.mcap").dumps())
+    return path
+
+
+def _outcomes(d: Path) -> list[dict]:
+    import json
+
+    out = []
+    for p in sorted(d.glob("trial_*.json")):
+        t = json.loads(p.read_text())
+        t.pop("wall_time")
+        for k in ("program", "openloop"):
+            t[k].pop("wall_time")
+        out.append(t)
+    return out
+
+
+def test_run_trials_on_ray_give_the_same_outcomes_as_local_processes(ray_instance, tmp_path):
+    prog = _touch_program(tmp_path)
+    args = ["run", prog, "--scene", "table", "--trials", "3", "--seed", "5", "--baseline", "replay",
+            "--vary", "dlo.length=10%", "--vary", "objects.pos=0.004"]  # fmt: skip
+    local = cli(*args, "--workers", "2", "-o", tmp_path / "local")
+    on_ray = cli(*args, "--cluster", "local", "-o", tmp_path / "ray")
+    assert local.exit_code == 0 and on_ray.exit_code == 0, local.output + on_ray.output
+    a, b = _outcomes(tmp_path / "local"), _outcomes(tmp_path / "ray")
+    assert len(a) == 3 and a == b
+    assert cli("run", prog, "--cluster", "local").exit_code == 2  # --cluster needs --trials
+
+
+def test_record_trials_on_ray_record_the_same_demonstrations(ray_instance, tmp_path):
+    from dlovr.recording import Recording
+
+    script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
+    args = ["record", "--script", script, "--trials", "2", "--seed", "3", "--vary", "dlo.young=0.5..2"]
+    assert cli(*args, "-o", tmp_path / "local").exit_code == 0
+    r = cli(*args, "--cluster", "local", "-o", tmp_path / "ray")
+    assert r.exit_code == 0, r.output
+    for name in ("demo_000.mcap", "demo_001.mcap"):
+        assert Recording(tmp_path / "ray" / name).states() == Recording(tmp_path / "local" / name).states()

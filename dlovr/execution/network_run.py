@@ -1,0 +1,370 @@
+"""Executing a network program (``dlovr compile --network``): sense the situation reached after each
+detected transition and plan again from there (paper §VI, §VII; docs/networks.md).
+
+The loop, from the network's start node and the scene's gripper position:
+
+1. :meth:`dlovr.model.planning.NetworkProgram.replan` at the current node and gripper position gives
+   the macro toward the goal (its network edges, classes, summed mean displacement and rotation) and
+   the nodes its transition may lead to (successors with their expected contact vectors);
+2. the macro runs as a guarded motion like a compiled program's (:mod:`dlovr.execution.executor`):
+   from where the gripper is, along the demonstrated mean motion, ended by the detectors of its
+   classes (or, with ``detect="oracle"``, by the contact tracker), failed at its allowance;
+3. after the detection the gripper holds still ``sense_settle`` s, and the **sensed contact vector**
+   is taken from the wrench: the sensed force minus the force sensed in free space (the cable's
+   weight ``-m g`` along z, known from the scene as a robot knows its payload; the first samples of
+   a run are not settled enough to tare on), negated and normalised -- a contact
+   that begins adds about ``-v * F`` to the sensed force (:mod:`dlovr.model.detection`), so the
+   environment's share is ``-v`` times its size; below ``free_force`` N it is no contact (the zero
+   vector). :func:`dlovr.model.planning.identify` picks the successor whose expected vector is
+   closest; farther than ``tolerance`` from every one is **a situation outside the network**: the run
+   stops with a report of the sensed vector and the expected ones. With the oracle the node is the
+   one whose principal contacts the tracker sees;
+4. from the identified node the planner chooses again (``replan`` event when it is not the node
+   the previous plan expected); the goal node ends the run, a node with no demonstrated path to the
+   goal stops it.
+
+Node-level vectors only: a network node carries the normalised sum of its principal contacts'
+vectors, so a macro's detectors expect the target node's vector for the contacts that begin and the
+source node's for those that end. The run is judged by the tracker (never read by the loop in force
+mode): the goal is reached when the last debounced situation has the goal node's principal contacts.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from dlovr.execution.executor import (
+    ExecOptions,
+    Execution,
+    _run_final,
+    _run_macro,
+    _Session,
+    principal_states,
+)
+from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, MotionSpec, ProgramSpec
+from dlovr.transforms import quat_rotate
+
+#: Gravity (m/s^2) for the cable's weight, the force sensed in free space.
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class NetworkOptions:
+    """How a network program is executed beyond :class:`ExecOptions`: ``tolerance`` (Euclidean
+    distance between unit vectors) for :func:`dlovr.model.planning.identify`; ``sense_settle`` (s)
+    held still before sensing; ``free_force`` (N): a contact force below it is no contact;
+    ``max_macros``: the run stops after that many macros."""
+
+    tolerance: float = 0.8
+    sense_settle: float = 0.05
+    free_force: float = 0.05
+    max_macros: int = 50
+
+
+@dataclass(frozen=True)
+class NetMacro:
+    """One macro of a network run: from ``node`` toward ``expected`` (the plan's target) along the
+    network ``edges``; ``ended`` as :class:`dlovr.execution.executor.MacroRun`; ``sensed``: the sensed
+    contact vector (world, unit or zero; None before sensing); ``identified``: the node it chose
+    (None: outside the network); ``true_node``: the node with the tracker's principal contacts then
+    (``?`` when none has them)."""
+
+    index: int
+    node: str
+    expected: str
+    classes: tuple[str, ...]
+    edges: tuple[str, ...]
+    started_at: float
+    ended_at: float
+    ended: str
+    sensed: tuple[float, float, float] | None
+    identified: str | None
+    true_node: str
+    true_principals: tuple[str, ...]
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class NetworkRunResult:
+    """A judged network run: ``success`` when the loop arrived at the goal node and the tracker's
+    last situation has the goal's principal contacts; ``path`` the identified nodes in order."""
+
+    program: str
+    scene: str
+    detect: str
+    success: bool
+    goal_reached: bool
+    goal: str
+    goal_principals: tuple[str, ...]
+    final_principals: tuple[str, ...]
+    reason: str
+    path: tuple[str, ...]
+    replans: int
+    macros: tuple[NetMacro, ...]
+    sim_time: float
+    wall_time: float
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["kind"] = "network-run"
+        return d
+
+
+def _macro_spec(index: int, nprog: Any, node: str, plan: Any, sim: Any) -> MacroSpec:
+    """The executor's macro for a network macro plan, starting at the gripper's pose now."""
+    net = nprog.network
+    src, dst = net.node(node), net.node(plan.target)
+    mid = sim.built.mocap_id
+    here = tuple(float(x) for x in sim.data.mocap_pos[mid])
+    q = tuple(float(x) for x in sim.data.mocap_quat[mid])
+    inv = np.array([q[0], -q[1], -q[2], -q[3]])
+    rel = tuple(float(x) for x in quat_rotate(inv, np.asarray(plan.world, float)))
+    motion = MotionSpec(tuple(plan.world), rel, tuple(plan.rotation), float(plan.duration), here, q)  # type: ignore[arg-type]
+
+    def contacts(n: Any) -> tuple[ContactVec, ...]:
+        v = None if n.vector is None or math.sqrt(sum(x * x for x in n.vector)) < 1e-9 else tuple(n.vector)
+        return tuple(ContactVec(s, v) for s in n.principal)  # type: ignore[arg-type]
+
+    det = tuple(DetectionSpec(c, "", {}) for c in plan.classes)
+    return MacroSpec(index, tuple(plan.classes), 0.0, src.situation, dst.situation, contacts(src),
+                     contacts(dst), motion, det, final=plan.final, frame="world")  # fmt: skip
+
+
+def _hold(ses: _Session, seconds: float) -> None:
+    sim = ses.sim
+    mid = sim.built.mocap_id
+    pos, quat = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
+    for _ in range(round(seconds / ses.dt)):
+        ses.step(pos, quat)
+
+
+def _true_node(nprog: Any, sim: Any) -> tuple[str, tuple[str, ...]]:
+    cur = sim.tracker.current
+    have = principal_states(cur.discrete) if cur is not None else ()
+    for n in nprog.network.nodes:
+        if tuple(sorted(n.principal)) == have:
+            return n.id, have
+    return "?", have
+
+
+def run_network_in(
+    nprog: Any,
+    sim: Any,
+    scene: Any,
+    opts: ExecOptions | None = None,
+    nopts: NetworkOptions | None = None,
+    *,
+    on_step: Any = None,
+    on_event: Any = None,
+) -> NetworkRunResult:
+    """Run the network program ``nprog`` (a :class:`dlovr.model.planning.NetworkProgram`) in ``sim``
+    (a :class:`dlovr.sim.Simulator` with ``track=True`` at its start pose); see the module docstring.
+    Never raises for a failed run: the reason is in the result."""
+    opts = opts if opts is not None else ExecOptions()
+    nopts = nopts if nopts is not None else NetworkOptions()
+    net = nprog.network
+    wall0 = time.perf_counter()
+    holder = ProgramSpec(nprog.name or "network", nprog.source, ())
+    out = Execution(holder, opts)
+    ses = _Session(sim, opts, out, on_step, on_event)
+    weight = np.array([0.0, 0.0, -float(scene.dlo.mass) * GRAVITY])
+    tare = weight
+    head = f"network program {nprog.name}: start {net.start}, goal {net.goal}, detection {opts.detect}"
+    ses.emit("start", 0, head)
+    node, path, macros, replans = net.start, [net.start], [], 0
+    reason, arrived = "", False
+    from dlovr.sim import SimulationDiverged
+
+    try:
+        while len(macros) < nopts.max_macros:
+            mid = sim.built.mocap_id
+            pos = tuple(float(x) for x in sim.data.mocap_pos[mid])
+            if node == net.goal:
+                arrived = True
+                break
+            choice = nprog.replan(node, pos)
+            if choice is None:
+                where = f"{node} ({net.node(node).situation})"
+                reason = f"no demonstrated path from {where} to the goal {net.goal}"
+                ses.emit("failed", 0, reason)
+                break
+            plan = choice.macro
+            k = len(macros) + 1
+            m = _macro_spec(k, nprog, node, plan, sim)
+            ses.emit("plan", k, f"at {node}: edges {' '.join(plan.edges)} toward {plan.target}, "
+                                f"P(goal)={choice.reach_probability:.3f}")  # fmt: skip
+            t0 = float(sim.time)
+            if plan.final:
+                _run_final(m, ses, None)
+                node = plan.target
+                tn, tp = _true_node(nprog, sim)
+                macros.append(NetMacro(k, choice.node, plan.target, (), plan.edges, t0, float(sim.time),
+                                       "final", None, node, tn, tp))  # fmt: skip
+                path.append(node)
+                continue
+            run = _run_macro(m, ses, None)
+            if run.ended != "detected":
+                tn, tp = _true_node(nprog, sim)
+                macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
+                                       run.ended_at, run.ended, None, None, tn, tp, run.reason))  # fmt: skip
+                reason = f"macro {k} ({','.join(plan.classes)}, {node} -> {plan.target}): {run.reason}"
+                break
+            _hold(ses, nopts.sense_settle)
+            tn, tp = _true_node(nprog, sim)
+            sensed = sensed_contact_vector(ses.f, tare, nopts.free_force)
+            if opts.detect == "oracle":
+                found = next((s for s in choice.successors if s.node == tn), None)
+            else:
+                from dlovr.model.planning import identify
+
+                found = identify(choice.successors, sensed, nopts.tolerance)
+            sv = None if sensed is None else tuple(round(float(x), 4) for x in sensed)
+            if found is None:
+                exp = ", ".join(f"{s.node} {list(s.vector) if s.vector is not None else '-'}"
+                                for s in choice.successors)  # fmt: skip
+                reason = (
+                    f"macro {k}: sensed contact vector {list(sv) if sv else 'none (free space)'} matches "
+                    f"none of the expected situations ({exp}) within {nopts.tolerance:g}: a situation "
+                    "outside the network"
+                    f" (tracker: {' + '.join(tp) or 'N'})"
+                )
+                ses.emit("outside", k, reason)
+                macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
+                                       run.ended_at, "outside", sv, None, tn, tp, reason))  # fmt: skip
+                break
+            macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
+                                   run.ended_at, "detected", sv, found.node, tn, tp))  # fmt: skip
+            if found.node != plan.target:
+                replans += 1
+                what = f"reached {found.node} ({found.situation}), not {plan.target}: planning again"
+                ses.emit("replan", k, what)
+            node = found.node
+            path.append(node)
+        else:
+            reason = f"stopped after {nopts.max_macros} macros without reaching the goal"
+            ses.emit("failed", 0, reason)
+        if arrived or node == net.goal:
+            arrived = True
+            _hold(ses, opts.final_settle)
+            ses.emit("end", 0, "network program done")
+    except SimulationDiverged as e:
+        reason = f"simulation diverged: {e}"
+        ses.emit("failed", 0, reason)
+    kept = list(sim.tracker.kept)
+    final = principal_states(kept[-1].situation) if kept else ()
+    goal_p = tuple(sorted(net.node(net.goal).principal))
+    reached = final == goal_p and not reason.startswith("simulation diverged")
+    if arrived and not reached and not reason:
+        reason = f"final situation {final or ('N',)} is not the goal {goal_p or ('N',)}"
+    return NetworkRunResult(
+        nprog.name, scene.name, opts.detect, arrived and reached, reached, net.goal, goal_p, final, reason,
+        tuple(path), replans, tuple(macros), float(sim.time), time.perf_counter() - wall0,
+    )  # fmt: skip
+
+
+def run_network(
+    nprog: Any, scene: Any, opts: ExecOptions | None = None, nopts: NetworkOptions | None = None,
+    *, pieces: Any = None,
+) -> NetworkRunResult:  # fmt: skip
+    """:func:`run_network_in` in a fresh simulation of ``scene``."""
+    from dlovr.execution.run import _simulator
+
+    opts = opts if opts is not None else ExecOptions()
+    sim, why = _simulator(scene, pieces)
+    if sim is None:
+        net = nprog.network
+        goal_p = tuple(sorted(net.node(net.goal).principal))
+        return NetworkRunResult(nprog.name, scene.name, opts.detect, False, False, net.goal, goal_p, (),
+                                str(why), (), 0, (), 0.0, 0.0)  # fmt: skip
+    return run_network_in(nprog, sim, scene, opts, nopts)
+
+
+def format_network_result(res: NetworkRunResult) -> str:
+    """The per-macro table and the result line of a network run."""
+    lines = [f"network program {res.program} in scene {res.scene}, detection {res.detect}",
+             f"{'#':>3}  {'from':<5} {'class':<5} {'expected':<8} {'identified':<10} {'true':<5} "
+             f"{'ended':>9}  outcome  sensed"]  # fmt: skip
+    for m in res.macros:
+        sensed = "-" if m.sensed is None else "[" + ", ".join(f"{x:+.2f}" for x in m.sensed) + "]"
+        lines.append(
+            f"{m.index:>3}  {m.node:<5} {','.join(m.classes) or '-':<5} {m.expected:<8} "
+            f"{m.identified or '-':<10} "
+            f"{m.true_node:<5} {m.ended_at:>8.3f}s  {m.ended:<8} {sensed}"
+        )
+    lines.append(f"path: {' -> '.join(res.path)}; {res.replans} replans")
+    if res.success:
+        lines.append(f"result: goal reached ({res.goal}: {' + '.join(res.goal_principals) or 'N'})")
+    else:
+        lines.append(f"result: FAILED: {res.reason}")
+    return "\n".join(lines)
+
+
+def sensed_contact_vector(force: Any, tare: Any, free_force: float) -> np.ndarray | None:
+    """The sensed contact vector: ``-(force - tare)`` normalised (world frame); None below
+    ``free_force`` N (no contact). See the module docstring for the sign."""
+    d = -(np.asarray(force, float) - np.asarray(tare, float))
+    n = float(np.sqrt((d * d).sum()))
+    return None if n < free_force else d / n
+
+
+def load_network_program(path: str | Any) -> Any:
+    """The :class:`dlovr.model.planning.NetworkProgram` in the JSON file ``path``, or None when the
+    file is not a network program (``"kind": "network-program"``; then it is read as a compiled
+    program). Raises :class:`dlovr.execution.programs.ProgramError` (one line) for a bad one."""
+    import json
+    from pathlib import Path
+
+    from dlovr.execution.programs import ProgramError
+    from dlovr.model.network import NetworkError
+    from dlovr.model.planning import NetworkProgram
+
+    try:
+        raw = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None  # the compiled-program reader reports it
+    if not isinstance(raw, dict) or raw.get("kind") != "network-program":
+        return None
+    try:
+        return NetworkProgram.from_json(raw)
+    except NetworkError as e:
+        raise ProgramError(f"{path}: {e}") from None
+
+
+def network_scene(nprog: Any, scene_ref: str | None) -> Any:
+    """The scene to run a network program in: ``scene_ref`` or the network's scene; raises
+    :class:`dlovr.execution.programs.ProgramError` when the scene lacks an object the network's
+    contacts name, or ``dlovr.scene.SceneError``."""
+    from dlovr.execution.programs import ProgramError
+    from dlovr.scene import load_scene
+
+    scene = load_scene(scene_ref or nprog.network.scene_name)
+    names = {o.name for o in scene.objects}
+    used = {
+        f.rpartition(".")[0]
+        for n in nprog.network.nodes
+        for s in n.principal
+        if "[" in s
+        for f in s[s.index("[") + 1 : s.rindex("]")].split(",")
+    }
+    missing = sorted(used - names)
+    if missing:
+        raise ProgramError(
+            f"network program {nprog.name}: touches object {missing[0]!r}, which scene {scene.name} does "
+            f"not have (a program for another scene?)"
+        )
+    from dlovr.execution.run import START_TOL_M
+
+    net = nprog.network
+    start = next(p for p in net.starts if p.node == net.start)
+    d = math.dist(start.position, scene.gripper.pos)
+    if d > START_TOL_M:
+        raise ProgramError(
+            f"network program {nprog.name}: starts {d * 1000:.0f} mm from scene {scene.name}'s gripper pose "
+            f"(a program for another scene?)"
+        )
+    return scene
