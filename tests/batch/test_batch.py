@@ -179,7 +179,7 @@ def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance
     local = cli("compile", src, "-o", tmp_path / "local", "--workers", "2")
     on_ray = cli("compile", src, "-o", tmp_path / "ray", "--cluster", "local")
     for r in (local, on_ray):
-        assert r.exit_code == 1, r.output
+        assert r.exit_code == 2, r.output  # any recording failed
         assert f"{len(names)} compiled, 1 failed, 0 retried" in r.output and "broken.mcap" in r.output
     for n in names:
         for ext in (".program.json", ".program.txt"):
