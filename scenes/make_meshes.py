@@ -38,9 +38,12 @@ def prism(profile_xz: list[tuple[float, float]], depth: float) -> M.Manifold:
 
 def meshes() -> dict[str, trimesh.Trimesh]:
     out: dict[str, trimesh.Trimesh] = {}
-    # peg_in_hole: a block with a rectangular blind hole (pocket), 16 x 16 x 6 cm, hole 4 x 4 x 4 cm
+    # peg_in_hole (world frame): a 6 cm high block beside the peg_in_hole block's +x side, wrapping
+    # around its -y end; the hole (4 x 4 cm, 2 cm deep) lies just past that end, under the groove's end
     out["hole_block"] = to_trimesh(
-        box([-0.08, -0.08, 0], [0.08, 0.08, 0.06]) - box([-0.06, -0.02, 0.02], [-0.02, 0.02, 0.07])
+        box([0.0, -0.1, 0], [0.16, 0.1, 0.06])
+        + box([-0.06, -0.1, 0], [0.0, -0.045, 0.06])
+        - box([-0.025, -0.085, 0.04], [0.015, -0.045, 0.07])
     )
     # l_block: paper Fig. 2, foot 30 x 20 x 6 cm, leg 10 x 20 x 16 cm
     out["l_block"] = to_trimesh(

@@ -14,7 +14,8 @@ import pytest
 
 from dlovr.geometry import SceneGeometry
 from dlovr.model.discrete import STATES, DiscreteSituation
-from dlovr.model.transitions import classify_step
+from dlovr.model.network import principal_contacts
+from dlovr.model.transitions import DEFAULT_FLIGHT_S
 from dlovr.scene import load_scene
 from dlovr.script import Script, Waypoint, load_script
 from dlovr.sim import Simulator
@@ -89,13 +90,13 @@ REACHED: dict[str, tuple[str, str | None, tuple[str, ...]]] = {
     "E/E^LI": ("edges", None, ("convex185.F2", "convex185.F3")),
     # the tip in the groove between the block's side face and the hole block's top
     "V/E^LS": ("peg_in_hole", None, ("block.F3", "holeblock.F2")),
-    # the tip pushed into a bottom corner of the hole (bottom F1, walls F3 at y -0.02 and F5 at x 0.02)
-    "V/VS": ("peg_in_hole", None, ("holeblock.F1", "holeblock.F3", "holeblock.F5")),
-    # the tip on the hole's -x rim edge (top F2, wall F5), then on the rim's (-x, +y) corner (walls F5, F9)
-    "V/E^LI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F5")),
-    "V/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F5", "holeblock.F9")),
+    # the tip pushed into a bottom corner of the hole (floor F1, -x wall F6, the block's end face F5)
+    "V/VS": ("peg_in_hole", None, ("block.F5", "holeblock.F1", "holeblock.F6")),
+    # the tip on the hole's -x rim edge (top F2, wall F6), then on the rim's (-x, -y) corner (walls F6, F3)
+    "V/E^LI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F6")),
+    "V/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F3", "holeblock.F6")),
     # ... where the cable, slipping off the corner into the hole, crosses the rim's corner
-    "E/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F5", "holeblock.F9")),
+    "E/VI": ("peg_in_hole", RIM, ("holeblock.F2", "holeblock.F3", "holeblock.F6")),
     # corners: the tip set on the 175° valley line, then dragged into the corner with the 10° ramp
     "V/E^LT": ("corners", None, ("valley175.F1", "valley175.F2")),
     "V/VT": ("corners", None, ("valley175.F1", "valley175.F2", "valley175.F3")),
@@ -188,65 +189,59 @@ def test_edges_convex_instable_then_spontaneous(plate, faces):
 # --------------------------------------------------------------------------------------------------
 # peg_in_hole (paper Fig. 11)
 
-# The demonstration's kept situations reduced to their principal-kind contacts (state, faces), repeats
-# merged: the whole story, strictly in order, nothing else in between. The cable stays in contact from
-# the block's top to the groove (it is never lifted off and carried; while it is laid down the tip,
-# at a shallow angle, stays an E contact of the last segment: docs/model.md, section 2); it leaves all
-# contact only where the paper's story does too: the tip dropping from the rim's corner into the hole.
 B_TOP = ("block.F1",)
 B_EDGE = ("block.F1", "block.F3")  # the block's +x edge
 B_SIDE = ("block.F3",)  # the block's +x side face
 GROOVE = ("block.F3", "holeblock.F2")  # the concave groove between the side face and the hole block's top
-STORY = [
-    [("V/F", B_TOP)],  # 2: the tip touches the block's top
-    [("E/F", B_TOP)],  # 3: the cable is laid down on the top
-    [("E/F", B_TOP), ("E/E^P", B_EDGE)],  # 4: pushed over the block's +x edge
-    [("E/E^P", B_EDGE)],  # 5: turned about the edge, off the top
-    [("E/E^P", B_EDGE), ("E/F", B_SIDE)],  # hanging down along the side face
-    [("E/E^P", B_EDGE), ("E/F", B_SIDE), ("V/F", ("holeblock.F2",))],  # slid down: the tip on the hole block
-    [("E/F", B_SIDE), ("V/E^LS", GROOVE)],  # the tip in the groove, the cable along the side face
-    [("V/E^LS", GROOVE)],  # 7: leaned away, the tip alone in the groove
-    [("V/F", ("holeblock.F2",))],  # dragged out of the groove across the hole block's top
-    [("V/E^LI", ("holeblock.F2", "holeblock.F5"))],  # onto the hole's -x rim edge
-    [("V/VI", ("holeblock.F2", "holeblock.F3", "holeblock.F5"))],  # 8: onto the rim's corner
-    [],  # 9: it drops into the hole
-    [("V/F", ("holeblock.F1",))],  # the tip on the hole's bottom
-    [("V/VS", ("holeblock.F1", "holeblock.F3", "holeblock.F5"))],  # 10: in the hole's bottom corner
+# the groove's end: the block's side and -y end faces meet the hole's rim (top F2, +y wall F11)
+CORNER = ("block.F3", "block.F5", "holeblock.F2", "holeblock.F11")
+HOLE_GROOVE = ("holeblock.F1", "holeblock.F6")  # the hole's floor and -x wall
+HOLE_CORNER = ("block.F5", "holeblock.F1", "holeblock.F6")  # ... where they meet the block's end face
+# The demonstration's kept transitions that have a class (`-` steps left out), each with the principal
+# contacts of the situation it leads to: paper Fig. 11, steps 2-10, with this scene's faces.
+FIG11 = [
+    (("E",), [("V/F", B_TOP)]),  # 2: the tip touches the block's top
+    (("C",), [("E/F", B_TOP)]),  # 3: the cable laid down on it (4, `-`: pushed over the +x edge)
+    (("C",), [("E/E^P", B_EDGE)]),  # 5: turned about the edge, the cable lies on the edge only
+    # 6: hanging down along the side face, the tip's last segment on it (the paper has the tip alone,
+    # V/F; a straight cable on the edge cannot reach the side face with its tip alone)
+    (("C",), [("E/F", B_SIDE)]),
+    (("E",), [("V/E^LS", GROOVE)]),  # 7: the tip in the groove with the hole block
+    (("I",), [("V/VI", CORNER)]),  # 8: dragged onto the corner at the groove's end, the hole's rim
+    (("S", "E"), [("V/E^LS", HOLE_GROOVE)]),  # 9: it slips off, a flight, and lands in the hole
+    (("E",), [("V/VS", HOLE_CORNER)]),  # 10: slid into the hole's corner with the block's end face
 ]
-# the transition classes into some of these steps (index into STORY)
-STORY_CLASSES = {
-    1: ("C",), 3: ("C",), 4: ("C",), 9: ("I",), 10: ("I",), 11: ("S",), 12: ("E",), 13: ("C",)
-}  # 10: rim edge -> rim corner, instable to instable: I
 
 
-def _story(kept) -> list[tuple[list, tuple[str, ...]]]:
-    """Principal-kind contacts of the kept situations, consecutive repeats merged, each with the
-    classes of the transition into its first situation."""
-    out: list[tuple[list, tuple[str, ...]]] = []
-    for i, k in enumerate(kept):
-        p = principal(k.situation)
-        if i == 0:
-            continue  # the start: the cable hanging free
-        if out and out[-1][0] == p:
-            continue
-        out.append((p, classify_step(kept[i - 1].situation, k.situation, k.through_free)))
-    return out
+def _principals(sit: DiscreteSituation) -> list[tuple[str, frozenset[str]]]:
+    return [(c.state.name, frozenset(c.faces)) for c in principal_contacts(sit)]
 
 
-def test_peg_in_hole_tells_the_fig11_story_in_order():
-    """V/F, E/F, E/F + E/E^P, E/E^P on the block; down the side face into the groove with the hole block;
-    over the hole's rim corner into the hole, ending in its bottom corner (paper Fig. 11, steps 2-10)."""
-    story = _story(demo("peg_in_hole").tracker.kept)
-    want = [[(s, tuple(sorted(f))) for s, f in step] for step in STORY]
-    assert [p for p, _ in story] == want, [p for p, _ in story]
-    for i, classes in STORY_CLASSES.items():
-        assert story[i][1] == classes, (i, story[i])
+def test_peg_in_hole_tells_the_fig11_story_with_its_classes():
+    """Paper Fig. 11, steps 2-10: exactly the classes E, C, C, C, E, I, S,E, E over these principal
+    contacts, in this order, and nothing else classed in between."""
+    run = demo("peg_in_hole")
+    got = [(classes, _principals(k.situation)) for k, classes in run.transitions if classes]
+    want = [(classes, [(s, frozenset(f)) for s, f in ps]) for classes, ps in FIG11]
+    assert got == want, [(",".join(c), k.situation.format()) for k, c in run.transitions if c]
+
+
+def test_peg_in_hole_flight_into_the_hole():
+    """Paper step 9: the tip leaves the instable corner for free space and lands within the flight time;
+    the free interval is no kept situation of its own (docs/model.md, section 5)."""
+    transitions = demo("peg_in_hole").transitions
+    i = next(i for i, (_, c) in enumerate(transitions) if c == ("S", "E"))
+    corner, landing = transitions[i - 1][0], transitions[i][0]
+    assert _principals(corner.situation) == [("V/VI", frozenset(CORNER))]
+    assert landing.through_free
+    assert 0.0 < landing.start - corner.end < DEFAULT_FLIGHT_S
 
 
 def test_peg_in_hole_block_part_has_no_class_where_the_paper_has_none():
     """Paper step 4: E/F -> E/F + E/E^P keeps the principal contact E/F, so no transition class."""
-    story = _story(demo("peg_in_hole").tracker.kept)
-    assert story[2][1] == (), story[2]
+    transitions = demo("peg_in_hole").transitions
+    over = [c for k, c in transitions if has(k.situation, "E/F", B_TOP) and has(k.situation, "E/E^P", B_EDGE)]
+    assert over and all(c == () for c in over), over
 
 
 # --------------------------------------------------------------------------------------------------
