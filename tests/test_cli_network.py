@@ -58,9 +58,8 @@ def test_network_of_three_copies_counts_every_transition_three_times(built):
     assert nodes[net["start"]]["visits"] == 3  # free space, once in each recording (the flight is not kept)
     free_out = [e for e in net["edges"] if e["source"] == net["start"]]
     assert [e["probability"] for e in free_out] == [1.0]
-    # the network classes an edge from its two situations alone: the flight off the corner is S here
-    # (S,E in the program, which knows it passed through free space)
-    assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S"]
+    # the flight off the corner is S,E, as in the program: the edge knows it passed through free space
+    assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S,E"]
 
 
 def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_path):
@@ -72,11 +71,8 @@ def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_pa
     single = compile_recording(PEG)
     plan = prog["plan"]
     transitions = [m for m in single.macros if m.kind != "final"]
-    # the network classes an edge from its two situations alone: the flight off the corner, S,E in the
-    # program (which knows the cable passed through free space), is S in the network
-    assert [tuple(c["macro"]["classes"]) for c in plan] == [
-        ("S",) if m.classes == ("S", "E") else m.classes for m in transitions
-    ]
+    # the same classes as the program's, the flight off the corner (S,E) included
+    assert [tuple(c["macro"]["classes"]) for c in plan] == [m.classes for m in transitions]
     for c, m in zip(plan, transitions, strict=True):
         np.testing.assert_allclose(c["macro"]["world"], m.motion.world, atol=1e-8)
         assert [s["node"] for s in c["successors"]] == [c["macro"]["target"]]

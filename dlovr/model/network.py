@@ -35,7 +35,7 @@ import numpy as np
 
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 from dlovr.model.program import PoseTrack, TimedSituation, motion_between
-from dlovr.model.transitions import classify_step, principal, successional_contacts
+from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
 
 NETWORK_VERSION = 1
 """Version of the network JSON format (``version`` field); bump on incompatible changes."""
@@ -380,7 +380,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     sits: dict[str, DiscreteSituation] = {}
     held: dict[str, list[float]] = {}
     vectors: dict[str, list[np.ndarray]] = {}
-    occ: dict[tuple[str, str], list[tuple[int, float, Any, np.ndarray, np.ndarray]]] = {}
+    occ: dict[tuple[str, str], list[tuple[int, float, Any, np.ndarray, np.ndarray, bool]]] = {}
     firsts: list[tuple[str, np.ndarray]] = []
     lasts: list[tuple[str, np.ndarray]] = []
     for di, d in enumerate(demos):
@@ -402,7 +402,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
             a, b = d.states[k - 1], d.states[k]
             mv = motion_between(d.poses, a.t, b.t)
             occ.setdefault((keys[k - 1], keys[k]), []).append(
-                (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0])
+                (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
             )
     by_id = {v: k for k, v in ids.items()}
     nodes = []
@@ -424,7 +424,10 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         departures[u] += len(xs)
     edges = []
     for (u, v), xs in sorted(occ.items(), key=lambda kv: (int(kv[0][0][1:]), int(kv[0][1][1:]))):
-        classes = classify_step(sits[by_id[u]], sits[by_id[v]])
+        # a flight (through free space) is S,E where a direct step is S: an edge taken both ways has both
+        flights = sorted({x[5] for x in xs})
+        union = {c for f in flights for c in classify_step(sits[by_id[u]], sits[by_id[v]], f)}
+        classes = tuple(c for c in CLASS_ORDER if c in union)
         world = np.array([x[2].world for x in xs])
         starts, ends = np.array([x[3] for x in xs]), np.array([x[4] for x in xs])
         motion = MotionStats(

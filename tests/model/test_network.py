@@ -313,3 +313,22 @@ def test_network_program_json_round_trip():
     assert "P(goal)=0.667" in prog.listing()
     with pytest.raises(NetworkError, match="not a network program"):
         NetworkProgram.from_json({"kind": "program"})
+
+
+def test_a_flight_edge_is_classed_as_the_program_classes_it():
+    """An instable contact left through free space and landed on within the flight time is S,E (as in
+    programs), a direct snap S; an edge demonstrated both ways carries both classes."""
+    from dlovr.model.discrete import parse_discrete_situation as P
+    from dlovr.model.network import Demonstration, build_network
+    from dlovr.model.program import PoseTrack, TimedSituation
+
+    corner, landed = P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]"), P("V/G & E/N & V/F[a.F1]")  # same object
+    track = PoseTrack(np.array([0.0, 2.0]), np.zeros((2, 3)), np.array([[1.0, 0, 0, 0]] * 2))
+
+    def demo(flight: bool) -> Demonstration:
+        states = (TimedSituation(0.0, 1.0, corner), TimedSituation(1.0, 1.0, landed, through_free=flight))
+        return Demonstration(f"d{flight}", states, track, "scene", "0" * 64)
+
+    for demos, label in (([demo(True)], ("S", "E")), ([demo(False)], ("S",))):
+        (edge,) = build_network(demos).edges
+        assert edge.classes == label
