@@ -277,8 +277,8 @@ def parse_program(raw: Any, path: str = "<program>") -> ProgramSpec:
     r = _Reader(path)
     if not isinstance(raw, dict):
         raise r.err("", "not a program (a JSON object with 'macros' expected)")
-    if raw.get("version", 1) != 1:
-        raise r.err("version", f"program format {raw.get('version')!r}, this dlovr runs format 1")
+    if raw.get("version", 1) not in (1, 2):
+        raise r.err("version", f"program format {raw.get('version')!r}, this dlovr runs formats 1 and 2")
     macros_raw = r.get(raw, "macros", "")
     if not isinstance(macros_raw, list):
         raise r.err("macros", "must be a list")

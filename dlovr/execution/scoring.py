@@ -95,7 +95,7 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
     m = run.macro
     true_at = _truth(run, kept)
     latency = None
-    if run.ended == "detected":
+    if run.ended in ("detected", "motion"):
         outcome = "ok" if true_at is not None else "false"
         if true_at is not None and run.detected_at is not None:
             latency = run.detected_at - true_at
@@ -112,13 +112,13 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
 def score(ex: Execution, scene_name: str = "") -> RunResult:
     """Judge an :class:`Execution` (see the module docstring)."""
     macros = [score_macro(r, ex.kept) for r in ex.runs]
-    failed = next((r for r in ex.runs if r.ended != "detected"), None)
+    failed = next((r for r in ex.runs if r.ended not in ("detected", "motion")), None)
     reason = ""
     failed_index = None
     if ex.diverged is not None:
         failed_index = ex.runs[-1].macro.index if ex.runs else 0
         reason = f"simulation diverged: {ex.diverged}"
-        if ex.runs and ex.runs[-1].ended == "detected" and ex.final_done:
+        if ex.runs and ex.runs[-1].ended in ("detected", "motion") and ex.final_done:
             failed_index = None  # diverged after the last macro (final motion or settling)
     elif failed is not None:
         failed_index = failed.macro.index

@@ -14,9 +14,14 @@ the cable exerts on the gripper, N, world frame) gives
   that begins, ``+v`` of one that ends for ``E``; ``v_old - v_new`` for ``C``; the step's own
   direction for ``T``, ``I`` and ``S``);
 - the **threshold**: :attr:`DerivationRules.fraction` of the step, but at least
-  :attr:`DerivationRules.k_noise` times the noise and :attr:`DerivationRules.floor_n`.
+  :attr:`DerivationRules.k_noise` times the noise, :attr:`DerivationRules.quiet_margin` times the
+  largest rise along that direction within :attr:`DerivationRules.window_s` while the previous state
+  held (the quiet level a detector with that sliding reference sees before the transition), and
+  :attr:`DerivationRules.floor_n`.
 
-Each parameter carries a text saying how it was derived (``derived: 40% of the 0.31 N step along -v,
+``step_n`` records the demonstrated step itself: where the threshold is not below it, the force
+signal cannot show the transition (the executor then ends the macro by its motion). Each parameter
+carries a text saying how it was derived (``derived: 40% of the 0.31 N step along -v,
 noise 0.004 N``); a parameter the signal cannot give keeps the class's default, marked ``default: ...``
 with the reason (no wrench samples around the transition, too short a state, no expected vector).
 """
@@ -76,7 +81,10 @@ class DerivationRules:
     """How thresholds are derived: ``window_s`` before and after the transition (s, cut to the time
     the states held), ``gap_s`` left out on either side of it, at least ``min_samples`` samples per
     window; threshold ``fraction`` of the step, at least ``k_noise`` x noise and ``floor_n`` N; the
-    cone widened to the step's angle plus ``cone_margin_deg`` (at most ``max_cone_deg``)."""
+    cone widened to the step's angle plus ``cone_margin_deg`` (at most ``max_cone_deg``); and at least
+    ``quiet_margin`` x the largest rise along the watched direction within ``window_s`` while the
+    previous state held (what a detector with that sliding reference would have seen without the
+    transition)."""
 
     window_s: float = 0.15
     gap_s: float = 0.01
@@ -84,6 +92,7 @@ class DerivationRules:
     fraction: float = 0.4
     k_noise: float = 4.0
     floor_n: float = 0.01
+    quiet_margin: float = 1.25
     cone_margin_deg: float = 15.0
     max_cone_deg: float = 75.0
 
@@ -130,6 +139,18 @@ def _directions(
     return []  # T, S: the step's own direction
 
 
+def _quiet(wrench: WrenchSeries, u: np.ndarray, t0: float, t1: float, lag: float) -> float:
+    """The largest rise of the force along ``u`` (N) within ``lag`` s, between ``t0`` and ``t1``."""
+    a, b = np.searchsorted(wrench.t, t0, side="left"), np.searchsorted(wrench.t, t1, side="right")
+    t, x = wrench.t[a:b], wrench.force[a:b] @ u
+    best, j = 0.0, 0
+    for i in range(len(t)):
+        while t[j] < t[i] - lag - 1e-12:
+            j += 1
+        best = max(best, float(x[i] - x[j : i + 1].min()))
+    return best
+
+
 def _default(cls: str, why: str) -> Derived:
     p = dict(DEFAULT_PARAMS[cls])
     return Derived(p, {k: f"default: {why}" for k in p})
@@ -172,8 +193,15 @@ def derive(
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
     frac = r.fraction * size
-    thr = max(frac, r.k_noise * noise, r.floor_n)
-    if size <= 0:
+    quiet = _quiet(wrench, u, t_prev + r.gap_s, t - r.gap_s, r.window_s) if u is not None else 0.0
+    thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
+    if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
+        texts[key] = (
+            f"derived: {r.quiet_margin:g}x the {quiet:.3g} N largest rise along {name} within "
+            f"{r.window_s:g} s while the previous state held (the step is {size:.3g} N"
+            + (", weak signal)" if thr >= size else ")")
+        )
+    elif size <= 0:
         texts[key] = (
             f"derived: {r.k_noise:g}x noise {noise:.3g} N (the demonstrated step along {name} is "
             f"{size:.3g} N: no rise to detect)"
@@ -191,6 +219,18 @@ def derive(
             f"is within {r.k_noise:g}x noise {noise:.3g} N: weak signal)"
         )
     p[key] = round(thr, 6)
+    if cls != "S":  # S compares over its own short window
+        p["ref_lag_s"] = r.window_s
+        texts["ref_lag_s"] = f"derived: the {r.window_s:g} s windows the step was measured over"
+    if not dirs and cls in ("C", "I") and u is not None:
+        for axis, x in zip("xyz", u, strict=True):
+            p[f"dir_{axis}"] = round(float(x), 6)
+            texts[f"dir_{axis}"] = "derived: the demonstrated step's direction (no contact vector to watch)"
+    p["step_n"] = round(size, 6)
+    texts["step_n"] = (
+        f"derived: the demonstrated step along {name} (mean over {len(after)} samples after minus "
+        f"{len(before)} before); a threshold at or above it means the force cannot show the transition"
+    )
     if cls == "C":
         texts.pop("min_turn_fraction", None)
         p.pop("min_turn_fraction", None)

@@ -34,7 +34,7 @@ def test_e_threshold_is_a_fraction_of_the_step_along_minus_v():
 
 def test_noise_raises_the_threshold_to_k_times_the_noise():
     w = series(1.0, [0, 0, 0.0], [0, 0, -0.1], noise=0.02, seed=3)
-    d = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0)
+    d = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0, DerivationRules(quiet_margin=0.0))
     noise = float(w.window(1.0 - 0.15, 1.0 - 0.01)[:, 2].std())
     assert d.params["force_threshold_n"] == pytest.approx(round(4 * noise, 6))
     assert d.derivation["force_threshold_n"].startswith(f"derived: 4x noise {noise:.3g} N (above 40% of the")
@@ -103,3 +103,19 @@ def test_compile_program_derives_per_macro_and_is_pure_and_deterministic():
     assert p1.dumps() == compile_program(states, track, wrench=w).dumps()
     assert '"derivation"' in p1.dumps()
     assert "force_threshold_n: derived: 40% of the 0.3 N step" in p1.listing()
+
+
+def test_the_quiet_level_before_the_transition_raises_the_threshold():
+    """A rise of 0.06 N within 0.15 s while the previous state held (a swing) lifts the threshold to
+    1.25x that, above 40% of the 0.1 N step; 0.2 N would make the step a weak signal."""
+    for swing, weak in ((0.06, False), (0.2, True)):
+        w = series(1.0, [0, 0, 0.0], [0, 0, -0.1])
+        f = w.force.copy()
+        f[(w.t > 0.4) & (w.t < 0.5), 2] -= swing  # along -v = -z for v = (0, 0, 1)
+        w = WrenchSeries(w.t, f, w.torque)
+        d = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0)
+        assert d.params["force_threshold_n"] == pytest.approx(1.25 * swing, abs=1e-6)
+        text = d.derivation["force_threshold_n"]
+        assert text.startswith(f"derived: 1.25x the {swing:.3g} N largest rise along -v within 0.15 s")
+        assert ("weak signal" in text) == weak
+        assert d.params["step_n"] == pytest.approx(0.1) and d.params["ref_lag_s"] == 0.15
