@@ -229,7 +229,9 @@ _THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
 def _weak(cls: str, params: Any) -> bool:
     """Whether a detection's threshold is not below the step its demonstration showed (``step_n``)."""
     step, key = params.get("step_n"), _THRESHOLD.get(cls)
-    return step is not None and key in params and float(params[key]) >= float(step)
+    if step is None:
+        return False
+    return float(step) <= 0.0 or (key in params and float(params[key]) >= float(step))
 
 
 @dataclass(frozen=True)

@@ -177,7 +177,13 @@ def derive(
     if len(before) < r.min_samples or len(after) < r.min_samples:
         which = "before" if len(before) < r.min_samples else "after"
         why = f"no signal (fewer than {r.min_samples} wrench samples {which} the transition)"
-        return _default(cls, why)
+        d = _default(cls, why)
+        held = (t - t_prev) if which == "before" else (t_next - t)
+        return Derived(
+            {**d.params, "step_n": 0.0},
+            {**d.derivation, "step_n": f"derived: none measurable (the state {which} it held "
+             f"{held * 1000:.0f} ms): the force cannot show this transition"},
+        )  # fmt: skip
     base = before.mean(axis=0)
     step = after.mean(axis=0) - base
     dirs = _directions(cls, released, established)
@@ -219,9 +225,9 @@ def derive(
             f"is within {r.k_noise:g}x noise {noise:.3g} N: weak signal)"
         )
     p[key] = round(thr, 6)
-    if cls != "S":  # S compares over its own short window
-        p["ref_lag_s"] = r.window_s
-        texts["ref_lag_s"] = f"derived: the {r.window_s:g} s windows the step was measured over"
+    lag_key = "window_s" if cls == "S" else "ref_lag_s"  # S compares over its own window
+    p[lag_key] = r.window_s
+    texts[lag_key] = f"derived: the {r.window_s:g} s windows the step was measured over"
     if not dirs and cls in ("C", "I") and u is not None:
         for axis, x in zip("xyz", u, strict=True):
             p[f"dir_{axis}"] = round(float(x), 6)

@@ -82,9 +82,12 @@ def test_no_signal_gives_the_defaults_marked(cls):
     # a state too short for the windows: no signal either
     w = series(1.0, [0, 0, 0], [0, 0, -1.0])
     d = derive(cls, [], [(0, 0, 1.0)], w, 0.99, 1.0, 2.0, DerivationRules())
-    assert d.params == DEFAULT_PARAMS[cls]
+    assert d.params == {**DEFAULT_PARAMS[cls], "step_n": 0.0}  # no step: the executor will not wait
     why = "default: no signal (fewer than 3 wrench samples before"
-    assert all(v.startswith(why) for v in d.derivation.values())
+    assert all(v.startswith(why) for k, v in d.derivation.items() if k != "step_n")
+    assert d.derivation["step_n"] == (
+        "derived: none measurable (the state before it held 10 ms): the force cannot show this transition"
+    )
 
 
 def test_compile_program_derives_per_macro_and_is_pure_and_deterministic():
