@@ -63,7 +63,7 @@ class ExecOptions:
     happened earlier and holds is detected then; a passing swing is not). Neither applies to the
     oracle. ``bounce`` (s): a demonstrated transition undone by the next one within this time (the
     cable bouncing off and back: a dynamic accident of the demonstration) is not waited for: both
-    macros end by their motion (force detection only).
+    macros end by their motion (the oracle's too: the bounce need not repeat).
     """
 
     detect: str = "force"
@@ -303,7 +303,7 @@ def execute(
         here = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
         for _ in range(round(opts.start_settle / ses.dt)):
             ses.step(*here)
-        skip = bounces(program.macros, opts.bounce) if opts.detect == "force" else set()
+        skip = bounces(program.macros, opts.bounce)
         resume: float | None = None
         for m in program.macros:
             run = _run_macro(m, ses, track, m.index in skip, resume)
@@ -403,7 +403,7 @@ def _run_macro(
             s = min(opts.allowance, (float(sim.time) + 1e-12 - t0) / period)
             r = ses.step(*path.at(s))
             t = float(r.time)
-            if force and (guard.weak or by_motion):
+            if by_motion or (force and guard.weak):
                 if s >= 1.0:
                     why = "a bounce in the demonstration" if by_motion else "no force signal in it"
                     ses.emit("detected", m.index, f"macro {m.index} {m.label}: ended by its motion ({why})")
@@ -414,7 +414,10 @@ def _run_macro(
                     guard.start(t, ses.f, ses.tq)
                     started = True
                 continue
-            if guard.update(t, ses.f, ses.tq, r, armed=not force or s >= opts.arm):
+            # after the allowance the gripper stops short, which shakes the cable: in force mode
+            # only a transition felt while moving counts (the oracle still waits ``settle``)
+            moving = not force or s < opts.allowance
+            if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= opts.arm) and moving):
                 if track is None:
                     sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
                 ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")

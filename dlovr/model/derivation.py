@@ -83,8 +83,8 @@ class DerivationRules:
     window; threshold ``fraction`` of the step, at least ``k_noise`` x noise and ``floor_n`` N; the
     cone widened to the step's angle plus ``cone_margin_deg`` (at most ``max_cone_deg``); and at least
     ``quiet_margin`` x the largest rise along the watched direction within ``window_s`` while the
-    previous state held (what a detector with that sliding reference would have seen without the
-    transition)."""
+    previous state held, from ``armed_from`` of it on (what a detector with that sliding reference,
+    armed after that fraction of the demonstrated motion, would have seen without the transition)."""
 
     window_s: float = 0.15
     gap_s: float = 0.01
@@ -93,6 +93,7 @@ class DerivationRules:
     k_noise: float = 4.0
     floor_n: float = 0.01
     quiet_margin: float = 1.25
+    armed_from: float = 0.5
     cone_margin_deg: float = 15.0
     max_cone_deg: float = 75.0
 
@@ -199,7 +200,8 @@ def derive(
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
     frac = r.fraction * size
-    quiet = _quiet(wrench, u, t_prev + r.gap_s, t - r.gap_s, r.window_s) if u is not None else 0.0
+    armed = t_prev + r.armed_from * (t - t_prev) - r.window_s  # the reference reaches back one window
+    quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), t - r.gap_s, r.window_s) if u is not None else 0.0
     thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
     if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
         texts[key] = (
