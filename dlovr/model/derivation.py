@@ -106,19 +106,29 @@ class Derived:
     derivation: dict[str, str]
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Dot product without BLAS (whose rounding depends on the processor: programs must compile
+    bit for bit the same everywhere)."""
+    return float((np.asarray(a, float) * np.asarray(b, float)).sum())
+
+
+def _norm(a: np.ndarray) -> float:
+    return float(np.sqrt(_dot(a, a)))
+
+
 def _unit(v: Sequence[float] | np.ndarray | None) -> np.ndarray | None:
     if v is None:
         return None
     a = np.asarray(v, float)
-    n = float(np.linalg.norm(a))
+    n = _norm(a)
     return None if n < 1e-9 else a / n
 
 
 def _angle(a: np.ndarray, u: np.ndarray) -> float:
-    n = float(np.linalg.norm(a))
+    n = _norm(a)
     if n < 1e-12:
         return 180.0
-    return float(np.degrees(np.arccos(np.clip(float(a @ u) / n, -1.0, 1.0))))
+    return float(np.degrees(np.arccos(np.clip(_dot(a, u) / n, -1.0, 1.0))))
 
 
 def _directions(
@@ -143,7 +153,7 @@ def _directions(
 def _quiet(wrench: WrenchSeries, u: np.ndarray, t0: float, t1: float, lag: float) -> float:
     """The largest rise of the force along ``u`` (N) within ``lag`` s, between ``t0`` and ``t1``."""
     a, b = np.searchsorted(wrench.t, t0, side="left"), np.searchsorted(wrench.t, t1, side="right")
-    t, x = wrench.t[a:b], wrench.force[a:b] @ u
+    t, x = wrench.t[a:b], (wrench.force[a:b] * u).sum(axis=1)
     best, j = 0.0, 0
     for i in range(len(t)):
         while t[j] < t[i] - lag - 1e-12:
@@ -189,13 +199,13 @@ def derive(
     step = after.mean(axis=0) - base
     dirs = _directions(cls, released, established)
     if dirs:
-        u, name = max(dirs, key=lambda d: float(step @ d[0]))
-        size = float(step @ u)
-        noise = float((before @ u).std())
+        u, name = max(dirs, key=lambda d: _dot(step, d[0]))
+        size = _dot(step, u)
+        noise = float((before * u).sum(axis=1).std())
     else:
-        n = float(np.linalg.norm(step))
+        n = _norm(step)
         u, name, size = (step / n if n > 1e-12 else None), "its own direction", n
-        noise = float(np.linalg.norm(before.std(axis=0)))
+        noise = _norm(before.std(axis=0))
     p = dict(DEFAULT_PARAMS[cls])
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
