@@ -83,8 +83,9 @@ class DerivationRules:
     window; threshold ``fraction`` of the step, at least ``k_noise`` x noise and ``floor_n`` N; the
     cone widened to the step's angle plus ``cone_margin_deg`` (at most ``max_cone_deg``); and at least
     ``quiet_margin`` x the largest rise along the watched direction within ``window_s`` while the
-    previous state held, from ``armed_from`` of it on (what a detector with that sliding reference,
-    armed after that fraction of the demonstrated motion, would have seen without the transition)."""
+    previous state held, from ``armed_from`` of it on and up to ``window_s`` before the transition
+    (what a detector with that sliding reference, armed after that fraction of the demonstrated
+    motion, would have seen without the transition; the last window holds the transition's onset)."""
 
     window_s: float = 0.15
     gap_s: float = 0.01
@@ -211,7 +212,10 @@ def derive(
     key = THRESHOLD_PARAM[cls]
     frac = r.fraction * size
     armed = t_prev + r.armed_from * (t - t_prev) - r.window_s  # the reference reaches back one window
-    quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), t - r.gap_s, r.window_s) if u is not None else 0.0
+    # up to one window before the transition: the force may start to change before the contact
+    # label does (the transition's onset belongs to the step, not to the quiet level)
+    quiet_to = t - r.window_s
+    quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), quiet_to, r.window_s) if u is not None else 0.0
     thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
     if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
         texts[key] = (

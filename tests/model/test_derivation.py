@@ -114,7 +114,7 @@ def test_the_quiet_level_before_the_transition_raises_the_threshold():
     for swing, weak in ((0.06, False), (0.2, True)):
         w = series(1.0, [0, 0, 0.0], [0, 0, -0.1])
         f = w.force.copy()
-        f[(w.t > 0.4) & (w.t < 0.5), 2] -= swing  # along -v = -z for v = (0, 0, 1)
+        f[(w.t > 0.6) & (w.t < 0.7), 2] -= swing  # along -v = -z for v = (0, 0, 1)
         w = WrenchSeries(w.t, f, w.torque)
         d = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0)
         assert d.params["force_threshold_n"] == pytest.approx(1.25 * swing, abs=1e-6)
