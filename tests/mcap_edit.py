@@ -15,8 +15,10 @@ def rewrite_mcap(
     attachment: Callable[[str, bytes], bytes] = lambda name, data: data,
     message: Callable[[str, bytes], bytes] = lambda topic, data: data,
     metadata: Callable[[str, dict[str, str]], dict[str, str]] = lambda name, data: data,
+    keep: Callable[[str], bool] = lambda topic: True,
 ) -> None:
-    """Write ``dst`` as a copy of ``src`` with metadata, attachments and messages edited."""
+    """Write ``dst`` as a copy of ``src`` with metadata, attachments and messages edited (and the
+    messages of topics that ``keep`` refuses left out)."""
     with open(src, "rb") as fh, open(dst, "wb") as oh:
         rd = make_reader(fh)
         w = Writer(oh)
@@ -27,6 +29,8 @@ def rewrite_mcap(
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, attachment(a.name, a.data))
         chans: dict[int, int] = {}
         for schema, ch, msg in rd.iter_messages():
+            if not keep(ch.topic):
+                continue
             if ch.id not in chans:
                 sid = w.register_schema(schema.name, schema.encoding, schema.data)
                 chans[ch.id] = w.register_channel(ch.topic, ch.message_encoding, sid)

@@ -15,6 +15,7 @@ situations are logged beside the run to judge it afterwards (:mod:`dlovr.executi
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -36,6 +37,10 @@ from dlovr.model.detection import (
 from dlovr.model.transitions import principal, successional_contacts
 
 DETECT_MODES = ("force", "oracle")
+#: How a macro may end and the program go on: its transition detected, or -- a macro whose
+#: demonstration shows no force signal for its transition (threshold not below the demonstrated
+#: step, see :mod:`dlovr.model.derivation`) -- its demonstrated motion completed.
+ENDED_OK = ("detected", "motion")
 
 
 @dataclass(frozen=True)
@@ -52,6 +57,13 @@ class ExecOptions:
     the oracle wants the expected contacts before it ends a macro; ``start_settle`` (s): the gripper
     holds its start pose this long before the first macro (default none: the demonstrations start
     moving at once, and a settled cable repeats some of their dynamic transitions differently).
+    ``blank`` (s): the force detectors take their reference this long after a macro starts (the
+    wrench still rings from the transition that ended the previous macro); ``arm``: they may fire
+    only once the motion has covered this fraction of the demonstrated one (a transition that
+    happened earlier and holds is detected then; a passing swing is not). Neither applies to the
+    oracle. ``bounce`` (s): a demonstrated transition undone by the next one within this time (the
+    cable bouncing off and back: a dynamic accident of the demonstration) is not waited for: both
+    macros end by their motion (the oracle's too: the bounce need not repeat).
     """
 
     detect: str = "force"
@@ -67,11 +79,15 @@ class ExecOptions:
     frame: str = "world"
     oracle_hold: float = 0.02
     start_settle: float = 0.0
+    bounce: float = 0.1
+    blank: float = 0.05
+    arm: float = 0.5
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
-        names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold")
+        names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold", "blank",
+                 "arm", "bounce")  # fmt: skip
         for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -120,6 +136,7 @@ class MacroRun:
     allowed: float
     peak_signal: float
     reason: str = ""
+    resume_at: float | None = None  # demonstration time (s) its motion reached, when short of its end
 
 
 @dataclass
@@ -175,13 +192,17 @@ class _Guard:
         self.peak = 0.0
         self.hold = opts.oracle_hold
         self._since: float | None = None
+        #: every detection's threshold is at or above the demonstrated step: no force signal to watch
+        self.weak = bool(m.detection) and all(_weak(d.cls, d.params) for d in m.detection)
 
     def start(self, t: float, f: np.ndarray, tq: np.ndarray) -> None:
         self._since = None
         for d in self.detectors:
             d.start(t, f, tq)
 
-    def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any) -> bool:
+    def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any, armed: bool = True) -> bool:
+        """Whether the transition is seen at ``t``; before ``armed`` a detector that fires is reset
+        (keeping its reference), so it fires at arming only if its criterion still holds then."""
         if self.oracle:
             st = getattr(record, "state", None)
             if st is None or not transition_seen(principal_states(st.discrete), self.macro):
@@ -193,9 +214,24 @@ class _Guard:
             return t - self._since >= self.hold - 1e-9
         fired = False
         for d in self.detectors:
-            fired = d.update(t, f, tq) or fired
+            hit = d.update(t, f, tq)
+            if hit and not armed:
+                d.fired_at, hit = None, False
+            fired = hit or fired
             self.peak = max(self.peak, d.signal)
         return fired
+
+
+_THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n", "I": "min_force_n",
+              "S": "jump_n"}  # fmt: skip
+
+
+def _weak(cls: str, params: Any) -> bool:
+    """Whether a detection's threshold is not below the step its demonstration showed (``step_n``)."""
+    step, key = params.get("step_n"), _THRESHOLD.get(cls)
+    if step is None:
+        return False
+    return float(step) <= 0.0 or (key in params and float(params[key]) >= float(step))
 
 
 @dataclass(frozen=True)
@@ -267,12 +303,15 @@ def execute(
         here = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
         for _ in range(round(opts.start_settle / ses.dt)):
             ses.step(*here)
+        skip = bounces(program.macros, opts.bounce)
+        resume: float | None = None
         for m in program.macros:
-            run = _run_macro(m, ses, track)
+            run = _run_macro(m, ses, track, m.index in skip, resume)
+            resume = run.resume_at
             out.runs.append(run)
             if run.ended == "diverged":
                 out.diverged = run.reason
-            if run.ended != "detected":
+            if run.ended not in ENDED_OK:
                 break
         else:
             final = program.final
@@ -294,36 +333,68 @@ def execute(
     return out
 
 
-def _path(m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None) -> Any:
+def _path(
+    m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None
+) -> Any:
     mid = sim.built.mocap_id
     mo = m.motion
     here = tuple(float(x) for x in sim.data.mocap_pos[mid]), tuple(float(x) for x in sim.data.mocap_quat[mid])
     frame = m.frame or opts.frame
     if track is not None:
+        # the track holds commanded targets, which lead the gripper: go on from the current target
+        here = tuple(float(x) for x in sim.target_pos), tuple(float(x) for x in sim.target_quat)
+        t0 = m.t - mo.duration if t_from is None else min(t_from, m.t - mo.duration)
         return TrackPath(
-            track.t, track.pos, track.quat, m.t - mo.duration, m.t, *here, frame,  # type: ignore[arg-type]
+            track.t, track.pos, track.quat, t0, m.t, *here, frame,  # type: ignore[arg-type]
             (mo.rotation, mo.relative),
         )  # fmt: skip
     return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame)  # type: ignore[arg-type]
 
 
-def _period(m: MacroSpec, opts: ExecOptions, track: DemoTrack | None) -> float:
-    return pace(m, opts) if track is None else max(m.motion.duration, opts.min_duration)
+def _period(m: MacroSpec, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
+    if track is None:
+        return pace(m, opts)
+    t0 = m.t - m.motion.duration if t_from is None else min(t_from, m.t - m.motion.duration)
+    return max(m.t - t0, opts.min_duration)
 
 
-def _run_macro(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> MacroRun:
-    """One guarded motion: until the detector fires, or the allowance and then ``settle`` pass."""
+def bounces(macros: Any, within: float) -> set[int]:
+    """Indices of macro pairs whose second undoes the first's change of principal contacts within
+    ``within`` s of demonstrated motion (a bounce: off and back, or on and off)."""
+    out: set[int] = set()
+    for a, b in itertools.pairwise(macros):
+        sa, sb = ({c.state for c in a.released}, {c.state for c in a.established}), (
+            {c.state for c in b.released}, {c.state for c in b.established})  # fmt: skip
+        if b.motion.duration <= within and sa == (sb[1], sb[0]) and (sa[0] or sa[1]):
+            out |= {a.index, b.index}
+    return out
+
+
+def _run_macro(
+    m: MacroSpec, ses: _Session, track: DemoTrack | None, by_motion: bool = False, t_from: float | None = None
+) -> MacroRun:
+    """One guarded motion: until the detector fires, or the allowance and then ``settle`` pass;
+    ``by_motion`` (or a macro without force signal): until its demonstrated motion is done.
+
+    Following the recorded track, a macro whose transition came before its demonstrated motion was
+    done leaves the rest of that motion to the next one: ``t_from`` (demonstration time, s) is where
+    the previous macro's motion stopped, and this one's stretch of the track begins there."""
     from dlovr.sim import SimulationDiverged
 
     sim, opts = ses.sim, ses.opts
-    path = _path(m, sim, opts, track)
-    period = _period(m, opts, track)
+    path = _path(m, sim, opts, track, t_from)
+    period = _period(m, opts, track, t_from)
+    t_start = m.t - period
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
     unit = "mm" if m.motion.distance > 1e-9 else "mrad"
     allowed = opts.allowance * scale
     guard = _Guard(m, opts, 1.0 / ses.dt)
     t0 = float(sim.time)
-    guard.start(t0, ses.f, ses.tq)
+    force = not guard.oracle
+    blank = opts.blank if force else 0.0
+    started = blank <= 0.0
+    if started:
+        guard.start(t0, ses.f, ses.tq)
     ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
@@ -332,10 +403,26 @@ def _run_macro(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> MacroRun
             s = min(opts.allowance, (float(sim.time) + 1e-12 - t0) / period)
             r = ses.step(*path.at(s))
             t = float(r.time)
-            if guard.update(t, ses.f, ses.tq, r):
-                sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
+            if by_motion or (force and guard.weak):
+                if s >= 1.0:
+                    why = "a bounce in the demonstration" if by_motion else "no force signal in it"
+                    ses.emit("detected", m.index, f"macro {m.index} {m.label}: ended by its motion ({why})")
+                    return MacroRun(m, t0, t, "motion", t, s * scale, allowed, guard.peak)
+                continue
+            if not started:
+                if t - t0 >= blank - 1e-12:
+                    guard.start(t, ses.f, ses.tq)
+                    started = True
+                continue
+            # after the allowance the gripper stops short, which shakes the cable: in force mode
+            # only a transition felt while moving counts (the oracle still waits ``settle``)
+            moving = not force or s < opts.allowance
+            if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= opts.arm) and moving):
+                if track is None:
+                    sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
                 ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
-                return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak)
+                at = t_start + s * period if track is not None and s < 1.0 else None
+                return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak, resume_at=at)
             if t - t0 >= limit - 1e-12:
                 why = (
                     f"no {m.label} transition detected within the allowance ({opts.allowance:g}x the "

@@ -7,8 +7,10 @@ The tracker's debounced situations are not used to steer a force-detected run, o
   there, those it ends are gone; same states, same faces) when the situation before it did not;
   a detection is **ok** when that situation began no later than ``TRUTH_TOL`` after the detection,
   a **false** detection otherwise; a macro that ended at its allowance **missed** the transition
-  when it happened anyway, else saw **no transition**; **latency** is detection minus true
-  transition (s);
+  when it happened anyway, else saw **no transition**; a macro the executor ended by its motion (no
+  force signal in the demonstration, or a bounce) is **ok** when its transition happened, else
+  **by motion** (no detection, so never a false one); **latency** is detection minus true
+  transition (s), for detected macros only;
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
   being no principal contacts).
@@ -26,7 +28,7 @@ from dlovr.execution.executor import Execution, MacroRun, principal_states, tran
 #: detection may lead the geometric contact label by a fraction of a millimetre of motion.
 TRUTH_TOL = 0.05
 
-OUTCOMES = ("ok", "false", "missed", "no transition", "diverged", "not run")
+OUTCOMES = ("ok", "false", "by motion", "missed", "no transition", "diverged", "not run")
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,9 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
     m = run.macro
     true_at = _truth(run, kept)
     latency = None
-    if run.ended == "detected":
+    if run.ended == "motion":
+        outcome = "ok" if true_at is not None else "by motion"
+    elif run.ended == "detected":
         outcome = "ok" if true_at is not None else "false"
         if true_at is not None and run.detected_at is not None:
             latency = run.detected_at - true_at
@@ -112,13 +116,13 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
 def score(ex: Execution, scene_name: str = "") -> RunResult:
     """Judge an :class:`Execution` (see the module docstring)."""
     macros = [score_macro(r, ex.kept) for r in ex.runs]
-    failed = next((r for r in ex.runs if r.ended != "detected"), None)
+    failed = next((r for r in ex.runs if r.ended not in ("detected", "motion")), None)
     reason = ""
     failed_index = None
     if ex.diverged is not None:
         failed_index = ex.runs[-1].macro.index if ex.runs else 0
         reason = f"simulation diverged: {ex.diverged}"
-        if ex.runs and ex.runs[-1].ended == "detected" and ex.final_done:
+        if ex.runs and ex.runs[-1].ended in ("detected", "motion") and ex.final_done:
             failed_index = None  # diverged after the last macro (final motion or settling)
     elif failed is not None:
         failed_index = failed.macro.index

@@ -25,6 +25,14 @@ that begins adds about ``-v * F`` to it and one that ends removes that (adds ``+
 - ``S`` (``force_jump``): the force jumps by ``jump_n`` within ``window_s`` (needs a sampling rate of
   ``min_rate_hz`` or more: a spontaneous transition is over in a few milliseconds).
 
+Reference: by default a detector measures the change of force from the first sample of the macro.
+With ``ref_lag_s`` > 0 (the compiler derives it: the time scale over which it measured the
+demonstrated step) the reference slides: the change is measured from the force ``ref_lag_s`` before
+the current sample (the first sample until then), so a slow drift of the force while the gripper
+moves is not taken for a transition, while a transition's step, quick on that scale, is. Where the
+program gives no contact vector for a ``C`` or ``I`` detector, ``dir_x``, ``dir_y``, ``dir_z`` (the
+demonstrated step's direction, unit, world frame) stand in for it.
+
 Shared signal conditioning: :class:`NoiseModel` (optional Gaussian sensor noise) and
 :class:`LowPass` (first-order low-pass filter, time constant ``filter_tau_s``), applied by
 :class:`WrenchConditioner` before the detectors see the samples. Parameters missing from a program
@@ -146,6 +154,13 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
+def _step_dir(params: Mapping[str, float]) -> np.ndarray | None:
+    """The demonstrated step's direction the program carries (``dir_x``, ``dir_y``, ``dir_z``), if any."""
+    if not all(k in params for k in ("dir_x", "dir_y", "dir_z")):
+        return None
+    return _unit([params["dir_x"], params["dir_y"], params["dir_z"]])
+
+
 @dataclass(frozen=True)
 class Expectation:
     """What a detector knows of the transition: the contact vectors (unit, world) of the principal
@@ -168,16 +183,31 @@ class Detector:
         self.fired_at: float | None = None
         self.signal = 0.0
         self._f0 = np.zeros(3)
+        self.lag = float(self.params.get("ref_lag_s", 0.0))
+        self._hist: list[tuple[float, np.ndarray]] = []
 
     def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
         self._f0 = np.asarray(force, dtype=float).copy()
+        self._hist = [(t, self._f0.copy())]
         self.fired_at = None
         self.signal = 0.0
+
+    def _reference(self, t: float, f: np.ndarray) -> np.ndarray:
+        """The force the change is measured from: the first sample, or with ``ref_lag_s`` the latest
+        sample at least that long ago (the first one until then)."""
+        if self.lag <= 0.0:
+            return self._f0
+        h = self._hist
+        h.append((t, f.copy()))
+        while len(h) > 1 and h[1][0] <= t - self.lag + 1e-12:
+            h.pop(0)
+        return h[0][1]
 
     def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
         if self.fired_at is not None:
             return True
-        self.signal = self._signal(t, np.asarray(force, float) - self._f0)
+        f = np.asarray(force, float)
+        self.signal = self._signal(t, f - self._reference(t, f))
         if self.signal >= 1.0:
             self.fired_at = t
         return self.fired_at is not None
@@ -213,8 +243,8 @@ class EDetector(Detector):
             return float(np.sqrt((df * df).sum())) / thr
         best = 0.0
         for k, u in enumerate(self.dirs):
-            if float((df * u).sum()) < float((self._low[k] * u).sum()):
-                self._low[k] = df.copy()
+            if self.lag <= 0.0 and float((df * u).sum()) < float((self._low[k] * u).sum()):
+                self._low[k] = df.copy()  # (a sliding reference follows the force by itself)
             rise = df - self._low[k]
             along = float((rise * u).sum())
             if along > 0 and _angle_deg(rise, u) <= cone:
@@ -237,6 +267,8 @@ class CDetector(Detector):
         )
         self.turn = float(np.sqrt((turn * turn).sum()))
         self.dir = _unit(turn)
+        if self.dir is None:
+            self.dir = _step_dir(self.params)
         self._scale = 0.0
 
     def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
@@ -294,6 +326,8 @@ class IDetector(Detector):
         super().__init__(params, expect)
         dirs = [_unit(-np.asarray(v, float)) for v in expect.established if v is not None]
         self.dirs = [u for u in dirs if u is not None]
+        if not self.dirs and (d := _step_dir(self.params)) is not None:
+            self.dirs = [d]
 
     def _signal(self, t: float, df: np.ndarray) -> float:
         mag = float(np.sqrt((df * df).sum()))

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.model.derivation import DerivationRules, WrenchSeries, derive
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation
 from dlovr.model.transitions import (
     CLASS_NAMES,
@@ -157,9 +158,14 @@ def risk(classes: Sequence[str]) -> str:
 
 @dataclass(frozen=True)
 class Detection:
+    """The detection of one class: its algorithm, parameters (forces N, angles degrees, times s) and,
+    per parameter, how it was derived from the demonstration (``derived: ...``) or that it is the
+    class's default (``default: why``); see :mod:`dlovr.model.derivation`."""
+
     cls: str
     algorithm: str
     params: dict[str, float]
+    derivation: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -256,6 +262,8 @@ class Program:
             for det in m.detection:
                 params = ", ".join(f"{k}={v:g}" for k, v in det.params.items())
                 lines.append(f"       until {det.algorithm} ({params})  [{CLASS_NAMES[det.cls]}]")
+                for k, how in det.derivation.items():
+                    lines.append(f"         {k}: {how}")
             if m.kind == "final":
                 lines.append("       to the demonstrated end pose (no detection)")
         s = self.summary
@@ -281,12 +289,22 @@ def _principals(s: DiscreteSituation) -> tuple[ContactSpec, ...]:
     return tuple(_spec(c) for run in successional_contacts(s) for c in principal(run))
 
 
-def _detection(cls: str, force: float | None) -> Detection:
-    d = DETECTORS[cls]
-    params = dict(d["params"])
-    if force is not None and force > 0 and "force_threshold_n" in params:
-        params["force_threshold_n"] = round(max(0.05, 0.5 * force), 6)  # half the demonstrated force
-    return Detection(cls, d["algorithm"], params)
+def _detections(
+    classes: Sequence[str],
+    prev: TimedSituation,
+    cur: TimedSituation,
+    wrench: WrenchSeries | None,
+    rules: DerivationRules | None,
+) -> tuple[Detection, ...]:
+    """The detections of a transition's classes, parameters derived from the wrench around it."""
+    fr, to = _principals(prev.situation), _principals(cur.situation)
+    released = [c.vector for c in fr if c.state not in {x.state for x in to}]
+    established = [c.vector for c in to if c.state not in {x.state for x in fr}]
+    out = []
+    for c in classes:
+        d = derive(c, released, established, wrench, prev.t, cur.t, cur.t + cur.duration, rules)
+        out.append(Detection(c, DETECTORS[c]["algorithm"], d.params, d.derivation))
+    return tuple(out)
 
 
 def _changes(prev: TimedSituation, cur: TimedSituation) -> tuple[ContactChange, ...]:
@@ -301,13 +319,21 @@ def _changes(prev: TimedSituation, cur: TimedSituation) -> tuple[ContactChange, 
 
 
 def compile_program(
-    states: Sequence[TimedSituation], poses: PoseTrack, name: str = "program", source: str = ""
+    states: Sequence[TimedSituation],
+    poses: PoseTrack,
+    name: str = "program",
+    source: str = "",
+    wrench: WrenchSeries | None = None,
+    rules: DerivationRules | None = None,
 ) -> Program:
     """Compile a demonstration into a program of macros (docs/model.md, Programs).
 
     Every step between consecutive kept situations that has a transition class becomes a macro;
     steps without one (``-``) extend the motion of the next macro. The motion after the last classed
-    transition, to the end of ``poses``, is the final macro.
+    transition, to the end of ``poses``, is the final macro. ``wrench``: the demonstration's sensed
+    gripper wrench, from which each macro's detection parameters are derived
+    (:func:`dlovr.model.derivation.derive`); without it every parameter is its class's default,
+    marked as such.
     """
     if not states:
         raise ValueError("a program needs at least one contact situation")
@@ -331,7 +357,7 @@ def compile_program(
                 from_contacts=_principals(prev.situation),
                 to_contacts=_principals(cur.situation),
                 motion=motion_between(poses, start.t, cur.t),
-                detection=tuple(_detection(c, cur.force if c == "E" else None) for c in classes),
+                detection=_detections(classes, prev, cur, wrench, rules),
                 risk=risk(classes),
             )
         )

@@ -1,5 +1,5 @@
 """Compiling recordings into programs: one recording (:func:`compile_recording`, reading only its
-contact-state channel) and batches of them with a content-hash cache (``dlovr compile``)."""
+contact-state and wrench channels) and batches of them with a content-hash cache (``dlovr compile``)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from dlovr.recording.reader import Recording, kept_states
 
 
 def compile_recording(path: str | Path, hold: float | None = None) -> Any:
-    """Compile a recording into a program (docs/model.md, section 6); reads only the contact-state channel."""
+    """Compile a recording into a program (docs/model.md, section 6); reads only the contact-state and
+    wrench channels (detection parameters derived from the wrench; defaults, marked, without it)."""
     return _compile(path, hold)[0]
 
 
@@ -35,7 +36,8 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
         track = PoseTrack(t, pos, quat.reshape(-1, 4))
     except (KeyError, TypeError, ValueError) as e:
         raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
-    prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name)
+    wrench = rec.wrench()
+    prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
 
 

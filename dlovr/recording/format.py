@@ -8,6 +8,11 @@ A recording is an MCAP file that holds everything needed to replay a demonstrati
 - ``/dlovr/checkpoint``: full simulator states (``mjSTATE_INTEGRATION``) at the start and every second;
 - ``/dlovr/contact_states``: the contact situations (topological, discrete, forces, transitions) each
   time they change, written in chunks of their own so batch readers skip the bulk data;
+- ``/dlovr/wrench``: the gripper's wrench (force N, torque N m, world frame) every
+  :data:`WRENCH_EVERY` steps, in messages of one second, in chunks of their own like the contact
+  states: the compiler derives the detection thresholds from it. Optional: files recorded before it
+  existed lack it and the compiler then uses its defaults (marked as such), so the format version
+  stays 2 (a reader needs to know nothing new to read either kind);
 - ``/foxglove/scene`` (``foxglove.SceneUpdate``) and ``/tf`` (``foxglove.FrameTransforms``) at ~30 Hz
   so that Foxglove can show the cable, the gripper and the obstacles.
 
@@ -30,6 +35,7 @@ TOPIC_CHECKPOINT = "/dlovr/checkpoint"
 TOPIC_STATES = "/dlovr/contact_states"
 TOPIC_SCENE = "/foxglove/scene"
 TOPIC_TF = "/tf"
+TOPIC_WRENCH = "/dlovr/wrench"
 REQUIRED_TOPICS = (TOPIC_COMMAND, TOPIC_CHECKPOINT, TOPIC_STATES)
 CHANNELS = (
     (TOPIC_COMMAND, "dlovr.Commands"),
@@ -37,6 +43,7 @@ CHANNELS = (
     (TOPIC_STATES, "dlovr.ContactState"),
     (TOPIC_SCENE, "foxglove.SceneUpdate"),
     (TOPIC_TF, "foxglove.FrameTransforms"),
+    (TOPIC_WRENCH, "dlovr.Wrench"),
 )
 """Topics and schema names in the order the writer registers them: channel and schema ids 1, 2, ...
 (``dlovr recover`` relies on it when a file's channel definitions were lost)."""
@@ -120,6 +127,22 @@ STATES_SCHEMA = {
         "contacts": {"type": "array", "items": {"type": "object"}},
     },
 }
+WRENCH_SCHEMA = {
+    "title": "dlovr.Wrench",
+    "description": "The gripper's wrench (the load of the holding constraints, as a wrist sensor reads "
+    "it) sampled every `every` steps: at simulated times t[i] (s), force[i] (N) and torque[i] (N m, "
+    "about the gripper's origin), world frame.",
+    "type": "object",
+    "properties": {
+        "step": {"type": "integer"},
+        "every": {"type": "integer"},
+        "t": {"type": "array", "items": {"type": "number"}},
+        "force": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
+        "torque": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
+    },
+}
+WRENCH_EVERY = 5
+"""Steps between two wrench samples (10 ms at 2 ms): enough for the force steps of transitions."""
 
 
 def dumps(obj: Any) -> bytes:

@@ -32,6 +32,7 @@ from dlovr.recording.format import (
     TOPIC_SCENE,
     TOPIC_STATES,
     TOPIC_TF,
+    TOPIC_WRENCH,
     RecordingError,
     one_line,
 )
@@ -222,6 +223,31 @@ class Recording:
         for ns, pts in frames:
             gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
             yield (ns - self.t0_ns) / 1e9, pts, gp, gq
+
+    def wrench(self) -> Any:
+        """The sensed gripper wrench as a ``WrenchSeries`` (times s, force N, torque N m, world frame),
+        or None when the recording has no wrench channel (recorded before it existed)."""
+        from dlovr.model.derivation import WrenchSeries
+
+        if self.count(TOPIC_WRENCH) == 0:
+            return None
+        t, f, tq = [], [], []
+        try:
+            for m in self._iter(TOPIC_WRENCH):
+                ti = np.asarray(m["t"], float).ravel()
+                fi, tqi = np.asarray(m["force"], float), np.asarray(m["torque"], float)
+                if fi.shape != (len(ti), 3) or tqi.shape != (len(ti), 3):
+                    raise ValueError("t, force, torque must be (k,), (k, 3), (k, 3)")
+                t.append(ti)
+                f.append(fi)
+                tq.append(tqi)
+            if not t:
+                return None
+            return WrenchSeries(np.concatenate(t), np.concatenate(f), np.concatenate(tq))
+        except RecordingError:  # already names the file and the problem
+            raise
+        except _FIELD_ERRORS as e:
+            raise RecordingError(f"{self.path}: bad wrench message: {one_line(e)}") from None
 
     def checkpoints(self) -> list[Checkpoint]:
         """The full simulator states, in order."""

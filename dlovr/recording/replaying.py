@@ -42,8 +42,9 @@ def load_embedded_scene(recording: Recording, directory: str | Path) -> Any:
 def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> ReplayResult:
     """Re-simulate a recording from its first checkpoint and its command stream alone.
 
-    With ``verify``, the state at every checkpoint is compared bit for bit and the contact-state
-    sequence with the recorded one; the first difference is reported in ``divergence``.
+    With ``verify``, the state at every checkpoint and the wrench samples (when the recording has
+    them) are compared bit for bit and the contact-state sequence with the recorded one; the first
+    difference is reported in ``divergence``.
     ``progress(done, total)`` is called with the number of steps done so far and in all.
     """
     import tempfile
@@ -63,6 +64,10 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
     steps, pos, quat = rec.commands()
     cps = rec.checkpoints()
     recorded_states = rec.states()
+    wrench = rec.wrench() if verify else None
+    wrench_steps: dict[int, int] = {}
+    if wrench is not None:
+        wrench_steps = {round(float(t) / rec.dt): i for i, t in enumerate(wrench.t)}
     with tempfile.TemporaryDirectory(prefix="dlovr-replay-") as tmp:
         scene = load_embedded_scene(rec, tmp)
         if rec.pieces is not None and set(rec.pieces) != {o.name for o in scene.objects}:
@@ -89,7 +94,9 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
         # the recorded targets are the exact ones used (already validated and normalised when
         # recorded): set them as they are, since normalising again may change the last bit
         sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
-        sim.step()
+        r = sim.step()
+        if wrench is not None and divergence is None and int(k) in wrench_steps:
+            divergence = _compare_wrench(wrench, wrench_steps.pop(int(k)), r, dt)
         if verify and divergence is None and int(k) in by_step:
             want = by_step[int(k)].state
             got = sim.get_state().mj
@@ -103,6 +110,8 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
             progress(i + 1, len(steps))
     wall = time.perf_counter() - t0
     replayed = tuple(st.payload() for st in tracker.changes)
+    if wrench is not None and divergence is None and wrench_steps:
+        divergence = f"{len(wrench_steps)} recorded wrench samples lie past the replayed steps"
     if verify and divergence is None:
         divergence = _compare_states([p for p in recorded_states if not p.get("end")], replayed, dt)
     return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
@@ -121,3 +130,19 @@ def _compare_states(
     if len(recorded) != len(replayed):
         return f"recorded {len(recorded)} contact-state changes, replay produced {len(replayed)}"
     return None
+
+
+def _compare_wrench(wrench: Any, i: int, r: Any, dt: float) -> str | None:
+    """The first difference between wrench sample ``i`` and the replayed step's record, or None."""
+    got = np.concatenate([np.asarray(r.gripper_force, float), np.asarray(r.gripper_torque, float)])
+    want = np.concatenate([wrench.force[i], wrench.torque[i]])
+    if wrench.t[i] != r.time:
+        return f"wrench sample {i + 1} is at t={float(wrench.t[i])!r} s, replayed step at {r.time!r} s"
+    if np.array_equal(want.view(np.uint64), got.view(np.uint64)):
+        return None
+    bad = int(np.argmax(want.view(np.uint64) != got.view(np.uint64)))
+    what = ("force x", "force y", "force z", "torque x", "torque y", "torque z")[bad]
+    return (
+        f"wrench sample {i + 1} (t={r.time:.3f} s) differs in {what}: "
+        f"recorded {float(want[bad])!r}, replayed {float(got[bad])!r}"
+    )

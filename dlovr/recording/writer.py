@@ -35,6 +35,9 @@ from dlovr.recording.format import (
     TOPIC_SCENE,
     TOPIC_STATES,
     TOPIC_TF,
+    TOPIC_WRENCH,
+    WRENCH_EVERY,
+    WRENCH_SCHEMA,
     dumps,
     floats,
 )
@@ -46,6 +49,7 @@ def schemas() -> dict[str, bytes]:
         "dlovr.Commands": COMMAND_SCHEMA,
         "dlovr.Checkpoint": CHECKPOINT_SCHEMA,
         "dlovr.ContactState": STATES_SCHEMA,
+        "dlovr.Wrench": WRENCH_SCHEMA,
     }
     return {name: dumps(own[name]) if name in own else foxglove.schema(name) for _, name in CHANNELS}
 
@@ -165,6 +169,8 @@ class Recorder:
         sids = {name: self._w.register_schema(name, "jsonschema", data) for name, data in schemas().items()}
         self._ch = {topic: self._w.register_channel(topic, "json", sids[name]) for topic, name in CHANNELS}
         self._pending_states: list[tuple[int, bytes]] = []
+        self._wrench: list[tuple[int, float, list[float], list[float]]] = []
+        self._wrench_every = WRENCH_EVERY
         self._commands: list[tuple[int, list[float], list[float]]] = []
         self._seq = 0
         self._last_flush = time.monotonic()
@@ -240,6 +246,24 @@ class Recorder:
         """A contact situation that began at ``step`` (buffered; written in chunks of its own)."""
         self._pending_states.append((int(step), dumps(dict(payload))))
 
+    def wrench(self, step: int, t: float, force: Sequence[float], torque: Sequence[float]) -> None:
+        """The gripper's wrench sensed at ``step`` (simulated time ``t`` s; force N, torque N m, world
+        frame); buffered and written with the contact states, in chunks of their own."""
+        self._wrench.append((int(step), float(t), floats(force), floats(torque)))
+
+    def _write_wrench(self) -> None:
+        w = self._wrench
+        if w:
+            payload = {
+                "step": w[0][0],
+                "every": self._wrench_every,
+                "t": [x[1] for x in w],
+                "force": [x[2] for x in w],
+                "torque": [x[3] for x in w],
+            }
+            self._add(TOPIC_WRENCH, w[0][0], dumps(payload))
+            w.clear()
+
     def frame(
         self,
         step: int,
@@ -262,14 +286,18 @@ class Recorder:
     # -- flushing and closing -----------------------------------------------------------------------
 
     def _write_states(self) -> None:
-        """End the bulk chunk, write the buffered contact states, end their chunk."""
-        if not self._pending_states:
-            return
-        self._w.flush()
-        for step, payload in self._pending_states:
-            self._add(TOPIC_STATES, step, payload)
-        self._pending_states.clear()
-        self._w.flush()
+        """End the bulk chunk, write the buffered contact states, end their chunk; the same for the
+        buffered wrench samples (one message, a chunk of its own)."""
+        if self._pending_states:
+            self._w.flush()
+            for step, payload in self._pending_states:
+                self._add(TOPIC_STATES, step, payload)
+            self._pending_states.clear()
+            self._w.flush()
+        if self._wrench:
+            self._w.flush()
+            self._write_wrench()
+            self._w.flush()
 
     def flush(self) -> None:
         """Write everything so far to disk (complete chunks that ``dlovr recover`` can rescue)."""
@@ -357,6 +385,8 @@ class DemoRecorder:
         """Log the step just taken (its command, and on schedule checkpoints, states and frames)."""
         k = int(record.step)
         self.rec.command(k, record.target_pos, record.target_quat)
+        if (k - self.start_step) % WRENCH_EVERY == 0:
+            self.rec.wrench(k, record.time, record.gripper_force, record.gripper_torque)
         for st in self.tracker.changes[self._n_changes :]:
             classes = classify_step(self._prev, st.discrete) if self._prev is not None else ()
             self.rec.contact_state(st.step, st.payload(classes))

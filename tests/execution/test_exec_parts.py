@@ -26,9 +26,8 @@ PROGRAMS = sorted((ROOT / "recordings" / "programs").glob("*.program.json"))
 def test_reads_every_sample_program(path):
     p = load_program(path)
     raw = json.loads(path.read_text())
-    classed = [m for m in raw["macros"] if m.get("kind", "transition") != "final"]
-    assert len(p.macros) == len(classed) and p.name == raw["name"]
-    assert (p.final is not None) == (len(classed) < len(raw["macros"]))  # the final macro, if any
+    assert len(p.macros) == sum(1 for m in raw["macros"] if m["classes"]) and p.name == raw["name"]
+    assert p.final is not None  # the compiler's final macro (kind final, no class)
     for m in p.macros:
         assert m.classes and m.detection and {d.cls for d in m.detection} == set(m.classes)
         assert m.released or m.established  # a classed transition changes some principal contact
@@ -40,11 +39,12 @@ def test_reader_tolerates_new_fields_and_a_final_macro():
     raw["future_field"] = {"anything": 1}
     raw["macros"][0]["risk"] = "none"
     raw["macros"][0]["detection"][0]["params"]["derived_from"] = "demo"  # non-numbers are skipped
-    assert raw["macros"][-1].get("kind") == "final"  # format 2 ends with the final macro
+    assert raw["macros"][-1]["kind"] == "final" and raw["macros"][-1]["classes"] == []
     p = parse_program(raw)
     assert len(p.macros) == len(raw["macros"]) - 1 and p.final is not None and p.final.final
     assert p.goal == ()  # the table demonstration ends with the cable in the air
-    assert p.macros[0].detection[0].params == {"force_threshold_n": 0.5, "max_angle_deg": 30.0}
+    params = p.macros[0].detection[0].params
+    assert {"force_threshold_n", "max_angle_deg"} <= set(params) and "derived_from" not in params
     assert p.macros[0].expected == "N -> V/F[table.F1]"
     assert p.objects == {"table"}
 
@@ -182,3 +182,24 @@ def test_variation_is_deterministic_and_keys_are_independent():
     assert one.object("holeblock").pos != scene.object("holeblock").pos
     with pytest.raises(VaryError, match="no object 'nope'"):
         parse_vary("objects.nope.pos=0.005", scene)
+
+
+def test_bounces_and_weak_detections_end_by_motion():
+    """A transition undone by the next within 0.1 s of demonstrated motion is a bounce; a detection
+    whose threshold is not below the demonstrated step has no force signal to watch."""
+    from dataclasses import replace
+
+    from dlovr.execution.executor import _weak, bounces
+    from dlovr.execution.programs import load_program
+
+    prog = load_program(ROOT / "recordings" / "programs" / "table.program.json")
+    ms = list(prog.macros)
+    assert len(ms) >= 2
+    a, b = ms[0], ms[1]
+    back = replace(b, from_contacts=a.to_contacts, to_contacts=a.from_contacts,
+                   motion=replace(b.motion, duration=0.05))  # fmt: skip
+    assert bounces([a, back], 0.1) == {a.index, back.index}
+    assert bounces([a, replace(back, motion=replace(b.motion, duration=0.5))], 0.1) == set()
+    assert _weak("E", {"force_threshold_n": 0.07, "step_n": 0.06})
+    assert not _weak("E", {"force_threshold_n": 0.03, "step_n": 0.06})
+    assert not _weak("E", {"force_threshold_n": 0.5})  # no derived step: nothing known, detect

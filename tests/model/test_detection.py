@@ -133,3 +133,47 @@ def test_low_pass_and_noise_are_deterministic():
     assert np.all(np.abs(a[1]) < np.abs(a[0]).max() + 1)  # torque noise is scaled down
     with pytest.raises(ValueError):
         LowPass(-1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Sliding reference (``ref_lag_s``) and the demonstrated step's direction (``dir_*``)
+
+
+def _drift_then_step(step_at: int | None) -> np.ndarray:
+    """A force drifting by 0.2 N over the stream (a moving gripper), plus a 0.1 N step along +z."""
+    f = np.tile(WEIGHT, (N, 1))
+    f[:, 0] += 0.2 * np.arange(N) / N  # slow drift along x: 0.2 N in 1.2 s
+    if step_at is not None:
+        f[step_at:, 2] += 0.1
+    return f
+
+
+def test_a_sliding_reference_ignores_slow_drift_and_catches_a_step():
+    exp = Expectation((), (TOP,))  # a table contact begins: the force rises along -v = +z
+    params = {"force_threshold_n": 0.04, "max_angle_deg": 45.0}
+    # drift alone: from the first sample, 0.2 N along x is outside the cone; a 0.05 N threshold on
+    # any change (no vector) fires on the drift, with a sliding reference of 0.15 s it does not
+    any_change = Expectation()
+    assert detect("E", {"force_threshold_n": 0.05}, any_change, T, _drift_then_step(None)) is not None
+    lagged = {"force_threshold_n": 0.05, "ref_lag_s": 0.15}
+    assert detect("E", lagged, any_change, T, _drift_then_step(None)) is None
+    i = detect("E", {**params, "ref_lag_s": 0.15}, exp, T, _drift_then_step(START))
+    assert i is not None and START <= i <= START + 10
+    # the reference follows the force: a step that came more than ref_lag_s ago no longer counts
+    det = make_detector("E", {**params, "ref_lag_s": 0.15}, exp)
+    f = _drift_then_step(START)
+    det.start(0.0, f[0], np.zeros(3))
+    assert all(det._reference(T[k], f[k]) is not None for k in range(1, START + 100))
+    assert det._reference(T[START + 100], f[START + 100])[2] == pytest.approx(WEIGHT[2] + 0.1)
+
+
+def test_c_and_i_without_contact_vectors_watch_the_demonstrated_step_direction():
+    up = {"dir_x": 0.0, "dir_y": 0.0, "dir_z": 1.0}
+    f = _drift_then_step(START)  # +0.1 N along z at START, drift along x
+    c = {"force_threshold_n": 0.04, "max_angle_deg": 20.0, "ref_lag_s": 0.15}
+    assert detect("C", {**c, **up}, Expectation(), T, f) is not None
+    down = {"dir_x": 0.0, "dir_y": 0.0, "dir_z": -1.0}
+    assert detect("C", {**c, **down}, Expectation(), T, f) is None  # the step points the other way
+    i = {"min_force_n": 0.04, "max_angle_deg": 20.0, "ref_lag_s": 0.15}
+    assert detect("I", {**i, **up}, Expectation(), T, f) is not None
+    assert detect("I", {**i, **down}, Expectation(), T, f) is None

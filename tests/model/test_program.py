@@ -153,7 +153,9 @@ def test_expected_contact_vectors_come_from_the_contacts():
     prog = compile_program([TimedSituation(0, 1, a), TimedSituation(1, 1, b, force=2.0)], straight_track(2))
     m = prog.macros[0]
     assert m.to_contacts[0].vector == (0.0, 0.0, -1.0)
-    assert m.detection[0].params["force_threshold_n"] == 1.0  # half the demonstrated force
+    # no wrench series: the class's defaults, each marked as such
+    assert m.detection[0].params["force_threshold_n"] == 0.5
+    assert m.detection[0].derivation["force_threshold_n"].startswith("default: no wrench signal")
 
 
 def test_program_json_validates_against_the_shipped_schema_and_is_deterministic():

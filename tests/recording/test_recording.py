@@ -71,7 +71,8 @@ def test_replay_detects_a_changed_command_stream(recorded, tmp_path):
     bad = tmp_path / "bad.mcap"
     rewrite_mcap(recorded, bad, message=nudge)
     res = replay(bad, verify=True)
-    assert res.divergence and "checkpoint step 500" in res.divergence
+    # the wrench sampled every 5 steps shows it first (the checkpoint at step 500 would too)
+    assert res.divergence and "wrench sample 60 (t=0.600 s) differs in" in res.divergence
     r = cli("replay", bad, "--verify")
     assert r.exit_code == 1 and "diverged" in r.output
 
@@ -94,6 +95,27 @@ def test_program_of_a_recording(recorded):
     assert prog.macros and prog.macros[0].label == "E"
     assert prog.macros[0].to_situation == "V/G & E/N & V/F[table.F1]"
     assert prog.macros[0].to_contacts[0].vector == pytest.approx((0.0, 0.0, -1.0))
+
+
+def test_detection_parameters_come_from_the_recorded_wrench(recorded, tmp_path):
+    """The recording carries the gripper's wrench every few steps; the compiler derives each macro's
+    thresholds from it, and without the channel (older recordings) falls back to marked defaults."""
+    rec = Recording(recorded)
+    w = rec.wrench()
+    assert w is not None and len(w.t) > 100
+    assert np.allclose(np.diff(w.t), 5 * rec.dt)
+    first = compile_recording(recorded).macros[0].detection[0]
+    assert first.derivation["force_threshold_n"].startswith("derived: ")
+    assert "step along -v" in first.derivation["force_threshold_n"]
+    assert 0 < first.params["force_threshold_n"] != 0.5
+    old = tmp_path / "no_wrench.mcap"
+    rewrite_mcap(recorded, old, keep=lambda topic: topic != "/dlovr/wrench")
+    assert Recording(old).wrench() is None
+    prog = compile_recording(old)
+    for m in prog.macros:
+        for d in m.detection:
+            assert all(v == "default: no wrench signal in the recording" for v in d.derivation.values())
+    assert prog.macros[0].detection[0].params["force_threshold_n"] == 0.5
 
 
 def test_compile_one_and_two_workers_identical_and_failures_reported(recorded, tmp_path):

@@ -1,0 +1,270 @@
+"""Detection parameters derived from the demonstration's force signal (paper §V.B, §VI; docs/model.md).
+
+Pure numpy. A program's detectors (:mod:`dlovr.model.detection`) need thresholds: how large a change
+of the sensed wrench means that the expected transition has happened. They come from the
+demonstration, not from constants: around each transition the recording's wrench series (the force
+the cable exerts on the gripper, N, world frame) gives
+
+- the **baseline** and the **noise**: mean and standard deviation (along the detector's direction) of
+  the force over a window of :attr:`DerivationRules.window_s` before the transition, while the
+  previous situation held (the last :attr:`DerivationRules.gap_s` left out: the transition's own
+  onset);
+- the **step**: the mean force over a window after the transition (while the new situation held)
+  minus the baseline, projected on the direction the class's detector watches (``-v`` of a contact
+  that begins, ``+v`` of one that ends for ``E``; ``v_old - v_new`` for ``C``; the step's own
+  direction for ``T``, ``I`` and ``S``);
+- the **threshold**: :attr:`DerivationRules.fraction` of the step, but at least
+  :attr:`DerivationRules.k_noise` times the noise, :attr:`DerivationRules.quiet_margin` times the
+  largest rise along that direction within :attr:`DerivationRules.window_s` while the previous state
+  held (the quiet level a detector with that sliding reference sees before the transition), and
+  :attr:`DerivationRules.floor_n`.
+
+``step_n`` records the demonstrated step itself: where the threshold is not below it, the force
+signal cannot show the transition (the executor then ends the macro by its motion). Each parameter
+carries a text saying how it was derived (``derived: 40% of the 0.31 N step along -v,
+noise 0.004 N``); a parameter the signal cannot give keeps the class's default, marked ``default: ...``
+with the reason (no wrench samples around the transition, too short a state, no expected vector).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The classes' default parameters (forces N, angles degrees, times s, rates Hz): used where the
+#: demonstration gives no signal (the same values as :data:`dlovr.model.detection.DEFAULTS`).
+DEFAULT_PARAMS: dict[str, dict[str, float]] = {
+    "E": {"force_threshold_n": 0.5, "max_angle_deg": 30.0},
+    "C": {"min_turn_fraction": 0.5, "max_angle_deg": 20.0},
+    "T": {"rise_n": 0.5, "max_angle_deg": 20.0},
+    "I": {"max_angle_deg": 15.0, "min_force_n": 0.05},
+    "S": {"jump_n": 0.5, "min_rate_hz": 500.0},
+}
+#: The threshold parameter of each class (what :func:`derive` derives from the step).
+THRESHOLD_PARAM = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
+                   "I": "min_force_n", "S": "jump_n"}  # fmt: skip
+#: Classes whose cone (``max_angle_deg``) is widened to the demonstrated step's direction.
+CONE_CLASSES = ("E", "C", "I")
+
+Vec = tuple[float, float, float] | None
+
+
+@dataclass(frozen=True)
+class WrenchSeries:
+    """The gripper's wrench as the recording sampled it: times ``t`` (k,) s, ``force`` (k, 3) N,
+    ``torque`` (k, 3) N m, world frame, times increasing."""
+
+    t: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, float).ravel()
+        f = np.asarray(self.force, float).reshape(len(t), 3)
+        tq = np.asarray(self.torque, float).reshape(len(t), 3)
+        if np.any(np.diff(t) < 0):
+            raise ValueError("wrench series times must not decrease")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "force", f)
+        object.__setattr__(self, "torque", tq)
+
+    def window(self, t0: float, t1: float) -> np.ndarray:
+        """The force samples (m, 3) with ``t0 <= t <= t1``."""
+        a, b = np.searchsorted(self.t, t0, side="left"), np.searchsorted(self.t, t1, side="right")
+        return self.force[a:b]
+
+
+@dataclass(frozen=True)
+class DerivationRules:
+    """How thresholds are derived: ``window_s`` before and after the transition (s, cut to the time
+    the states held), ``gap_s`` left out on either side of it, at least ``min_samples`` samples per
+    window; threshold ``fraction`` of the step, at least ``k_noise`` x noise and ``floor_n`` N; the
+    cone widened to the step's angle plus ``cone_margin_deg`` (at most ``max_cone_deg``); and at least
+    ``quiet_margin`` x the largest rise along the watched direction within ``window_s`` while the
+    previous state held, from ``armed_from`` of it on and up to ``window_s`` before the transition
+    (what a detector with that sliding reference, armed after that fraction of the demonstrated
+    motion, would have seen without the transition; the last window holds the transition's onset)."""
+
+    window_s: float = 0.15
+    gap_s: float = 0.01
+    min_samples: int = 3
+    fraction: float = 0.4
+    k_noise: float = 4.0
+    floor_n: float = 0.01
+    quiet_margin: float = 1.25
+    armed_from: float = 0.5
+    cone_margin_deg: float = 15.0
+    max_cone_deg: float = 75.0
+
+
+@dataclass(frozen=True)
+class Derived:
+    """Parameters of one class's detector and, per parameter, how it was derived."""
+
+    params: dict[str, float]
+    derivation: dict[str, str]
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Dot product without BLAS (whose rounding depends on the processor: programs must compile
+    bit for bit the same everywhere)."""
+    return float((np.asarray(a, float) * np.asarray(b, float)).sum())
+
+
+def _norm(a: np.ndarray) -> float:
+    return float(np.sqrt(_dot(a, a)))
+
+
+def _unit(v: Sequence[float] | np.ndarray | None) -> np.ndarray | None:
+    if v is None:
+        return None
+    a = np.asarray(v, float)
+    n = _norm(a)
+    return None if n < 1e-9 else a / n
+
+
+def _angle(a: np.ndarray, u: np.ndarray) -> float:
+    n = _norm(a)
+    if n < 1e-12:
+        return 180.0
+    return float(np.degrees(np.arccos(np.clip(_dot(a, u) / n, -1.0, 1.0))))
+
+
+def _directions(
+    cls: str, released: Sequence[Vec], established: Sequence[Vec]
+) -> list[tuple[np.ndarray, str]]:
+    """The directions the class's detector watches, with a name for the texts."""
+    begins = [(u, "-v") for v in established if v is not None and (u := _unit(-np.asarray(v))) is not None]
+    if cls == "E":
+        return begins + [(u, "+v") for v in released if (u := _unit(v)) is not None]
+    if cls == "I":
+        return begins
+    if cls == "C":
+        old = [np.asarray(v, float) for v in released if v is not None]
+        new = [np.asarray(v, float) for v in established if v is not None]
+        if not old or not new:
+            return []
+        u = _unit(sum(old, np.zeros(3)) / len(old) - sum(new, np.zeros(3)) / len(new))
+        return [] if u is None else [(u, "v_old - v_new")]
+    return []  # T, S: the step's own direction
+
+
+def _quiet(wrench: WrenchSeries, u: np.ndarray, t0: float, t1: float, lag: float) -> float:
+    """The largest rise of the force along ``u`` (N) within ``lag`` s, between ``t0`` and ``t1``."""
+    a, b = np.searchsorted(wrench.t, t0, side="left"), np.searchsorted(wrench.t, t1, side="right")
+    t, x = wrench.t[a:b], (wrench.force[a:b] * u).sum(axis=1)
+    best, j = 0.0, 0
+    for i in range(len(t)):
+        while t[j] < t[i] - lag - 1e-12:
+            j += 1
+        best = max(best, float(x[i] - x[j : i + 1].min()))
+    return best
+
+
+def _default(cls: str, why: str) -> Derived:
+    p = dict(DEFAULT_PARAMS[cls])
+    return Derived(p, {k: f"default: {why}" for k in p})
+
+
+def derive(
+    cls: str,
+    released: Sequence[Vec],
+    established: Sequence[Vec],
+    wrench: WrenchSeries | None,
+    t_prev: float,
+    t: float,
+    t_next: float,
+    rules: DerivationRules | None = None,
+) -> Derived:
+    """The detector parameters of class ``cls`` for a transition at ``t`` (s), the previous situation
+    having held since ``t_prev`` and the new one until ``t_next``; ``released``/``established``: the
+    contact vectors (unit, world) of the principal contacts the transition ends and begins."""
+    if wrench is None or len(wrench.t) == 0:
+        return _default(cls, "no wrench signal in the recording")
+    r = rules or DerivationRules()
+    before = wrench.window(max(t_prev, t - r.window_s), t - r.gap_s)
+    after = wrench.window(t + r.gap_s, min(t_next, t + r.window_s))
+    if len(before) < r.min_samples or len(after) < r.min_samples:
+        which = "before" if len(before) < r.min_samples else "after"
+        why = f"no signal (fewer than {r.min_samples} wrench samples {which} the transition)"
+        d = _default(cls, why)
+        held = (t - t_prev) if which == "before" else (t_next - t)
+        return Derived(
+            {**d.params, "step_n": 0.0},
+            {**d.derivation, "step_n": f"derived: none measurable (the state {which} it held "
+             f"{held * 1000:.0f} ms): the force cannot show this transition"},
+        )  # fmt: skip
+    base = before.mean(axis=0)
+    step = after.mean(axis=0) - base
+    dirs = _directions(cls, released, established)
+    if dirs:
+        u, name = max(dirs, key=lambda d: _dot(step, d[0]))
+        size = _dot(step, u)
+        noise = float((before * u).sum(axis=1).std())
+    else:
+        n = _norm(step)
+        u, name, size = (step / n if n > 1e-12 else None), "its own direction", n
+        noise = _norm(before.std(axis=0))
+    p = dict(DEFAULT_PARAMS[cls])
+    texts = {k: f"default: {cls} keeps it" for k in p}
+    key = THRESHOLD_PARAM[cls]
+    frac = r.fraction * size
+    armed = t_prev + r.armed_from * (t - t_prev) - r.window_s  # the reference reaches back one window
+    # up to one window before the transition: the force may start to change before the contact
+    # label does (the transition's onset belongs to the step, not to the quiet level)
+    quiet_to = t - r.window_s
+    quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), quiet_to, r.window_s) if u is not None else 0.0
+    thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
+    if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
+        texts[key] = (
+            f"derived: {r.quiet_margin:g}x the {quiet:.3g} N largest rise along {name} within "
+            f"{r.window_s:g} s while the previous state held (the step is {size:.3g} N"
+            + (", weak signal)" if thr >= size else ")")
+        )
+    elif size <= 0:
+        texts[key] = (
+            f"derived: {r.k_noise:g}x noise {noise:.3g} N (the demonstrated step along {name} is "
+            f"{size:.3g} N: no rise to detect)"
+        )
+    elif thr == frac:
+        texts[key] = f"derived: {r.fraction:.0%} of the {size:.3g} N step along {name}, noise {noise:.3g} N"
+    elif thr < size:
+        texts[key] = (
+            f"derived: {r.k_noise:g}x noise {noise:.3g} N (above {r.fraction:.0%} of the {size:.3g} N "
+            f"step along {name})"
+        )
+    else:
+        texts[key] = (
+            f"derived: {max(r.k_noise * noise, r.floor_n):.3g} N floor (the {size:.3g} N step along {name} "
+            f"is within {r.k_noise:g}x noise {noise:.3g} N: weak signal)"
+        )
+    p[key] = round(thr, 6)
+    lag_key = "window_s" if cls == "S" else "ref_lag_s"  # S compares over its own window
+    p[lag_key] = r.window_s
+    texts[lag_key] = f"derived: the {r.window_s:g} s windows the step was measured over"
+    if not dirs and cls in ("C", "I") and u is not None:
+        for axis, x in zip("xyz", u, strict=True):
+            p[f"dir_{axis}"] = round(float(x), 6)
+            texts[f"dir_{axis}"] = "derived: the demonstrated step's direction (no contact vector to watch)"
+    p["step_n"] = round(size, 6)
+    texts["step_n"] = (
+        f"derived: the demonstrated step along {name} (mean over {len(after)} samples after minus "
+        f"{len(before)} before); a threshold at or above it means the force cannot show the transition"
+    )
+    if cls == "C":
+        texts.pop("min_turn_fraction", None)
+        p.pop("min_turn_fraction", None)
+    if cls in CONE_CLASSES and dirs and u is not None and size > 0:
+        ang = _angle(step, u)
+        cone = min(max(DEFAULT_PARAMS[cls]["max_angle_deg"], ang + r.cone_margin_deg), r.max_cone_deg)
+        p["max_angle_deg"] = round(cone, 3)
+        texts["max_angle_deg"] = (
+            f"derived: step at {ang:.0f} deg from {name} + {r.cone_margin_deg:g} deg margin "
+            f"(at least the default {DEFAULT_PARAMS[cls]['max_angle_deg']:g}, at most {r.max_cone_deg:g})"
+        )
+    elif cls in CONE_CLASSES:
+        why = "no expected contact vector to compare the step with" if not dirs else "no step along " + name
+        texts["max_angle_deg"] = f"default: {why}"
+    return Derived(p, {k: texts[k] for k in p})
