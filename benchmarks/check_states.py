@@ -27,7 +27,8 @@ from dlovr.scene import load_scene, scenes_dir
 from dlovr.script import load_script
 from dlovr.sim import Simulator
 
-_FIELDS = ("point", "segment", "geom", "obj", "piece", "dist", "normal", "pos", "force", "active", "self_pairs")
+_FIELDS = ("point", "segment", "geom", "obj", "piece", "dist", "normal", "pos", "force", "active",
+           "self_pairs")  # fmt: skip
 
 
 def _step_digest(rec) -> tuple:
@@ -36,7 +37,7 @@ def _step_digest(rec) -> tuple:
     h.update(np.ascontiguousarray(rec.gripper_force).tobytes())
     a = rec.contact_arrays
     for f in _FIELDS:
-        h.update(np.ascontiguousarray(getattr(a, f)).astype(np.float64 if f not in {"active"} else bool).tobytes())
+        h.update(np.ascontiguousarray(getattr(a, f)).astype(bool if f == "active" else np.float64).tobytes())
     return (
         rec.step,
         st.topological.format(),
@@ -105,13 +106,15 @@ def main() -> None:
             bad += 1
             a = want["steps"][diff] if diff < len(want["steps"]) else None
             b = got["steps"][diff] if diff < n else None
-            print(f"{key}: DIFFERS at step index {diff}:\n  ref {a and a[:3] + a[4:]}\n  now {b and b[:3] + b[4:]}")
+            print(f"{key}: DIFFERS at step index {diff}:")
+            print(f"  ref {a and a[:3] + a[4:]}\n  now {b and b[:3] + b[4:]}")
         elif want["end"] != got["end"]:
             bad += 1
             print(f"{key}: steps identical, end differs: ref {want['end'][2:]} now {got['end'][2:]}")
         else:
             ratio = got["wall"] / want["wall"]
-            print(f"{key}: {n} steps identical ({got['wall'] / n * 1e6:.0f} µs/step, {ratio:.2f}x the reference's)")
+            us = got["wall"] / n * 1e6
+            print(f"{key}: {n} steps identical ({us:.0f} µs/step, {ratio:.2f}x the reference's)")
     if args.mode == "save":
         args.ref.write_bytes(pickle.dumps(out, protocol=5))
     sys.exit(1 if bad else 0)
