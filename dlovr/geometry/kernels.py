@@ -48,34 +48,60 @@ def norm3(x: float, y: float, z: float) -> float:
 
 @njit
 def np_sum(a: np.ndarray) -> float:
-    """``a.sum()`` rounded as numpy rounds it (pairwise summation, blocks of 8) for a 1-D array."""
-    return 0.0 + _pairwise(a, 0, a.shape[0])
+    """``a.sum()`` rounded as numpy rounds it for a 1-D array: pairwise summation, halving blocks of
+    more than 128 at a multiple of 8, blocks summed with 8 accumulators (fewer than 8: in order)."""
+    n = a.shape[0]
+    if n <= 128:
+        return 0.0 + _block_sum(a, 0, n)
+    # the halving, without recursion: a stack of (start, length, right half pending, left sum)
+    los, ns = np.empty(64, np.int64), np.empty(64, np.int64)
+    right, part = np.zeros(64, np.bool_), np.empty(64)
+    top = 0
+    los[0], ns[0] = 0, n
+    while True:
+        lo, m = los[top], ns[top]
+        if m > 128:  # split: the left half first
+            half = m // 2
+            half -= half % 8
+            right[top] = False
+            top += 1
+            los[top], ns[top] = lo, half
+            continue
+        v = _block_sum(a, lo, m)
+        while True:  # hand the sum up
+            top -= 1
+            if top < 0:
+                return 0.0 + v
+            if not right[top]:
+                part[top], right[top] = v, True
+                half = ns[top] // 2
+                half -= half % 8
+                los[top + 1], ns[top + 1] = los[top] + half, ns[top] - half
+                top += 1
+                break
+            v = part[top] + v
 
 
 @njit
-def _pairwise(a: np.ndarray, lo: int, n: int) -> float:
+def _block_sum(a: np.ndarray, lo: int, n: int) -> float:
     if n < 8:
         res = 0.0
         for i in range(lo, lo + n):
             res += a[i]
         return res
-    if n <= 128:
-        r = np.empty(8)
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[lo + j]
+    i = 8
+    while i < n - (n % 8):
         for j in range(8):
-            r[j] = a[lo + j]
-        i = 8
-        while i < n - (n % 8):
-            for j in range(8):
-                r[j] += a[lo + i + j]
-            i += 8
-        res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-        while i < n:
-            res += a[lo + i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise(a, lo, n2) + _pairwise(a, lo + n2, n - n2)
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
 
 
 @njit
@@ -514,7 +540,7 @@ def keeps(b: np.ndarray, mx: float, my: float, mz: float) -> bool:
     d2 = dot3(mx, my, mz, mx, my, mz)
     dn = dot3(mx, my, mz, b[0], b[1], b[2])
     dn2 = dn * dn
-    return d2 < b[5] ** 2 and dn2 < b[3] ** 2 and d2 - dn2 < b[4] ** 2
+    return d2 < b[5] * b[5] and dn2 < b[3] * b[3] and d2 - dn2 < b[4] * b[4]
 
 
 @njit

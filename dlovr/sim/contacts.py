@@ -1,4 +1,5 @@
-"""Raw contacts of the rod, read from MuJoCo's arrays once per step (no per-contact Python objects).
+"""Raw contacts of the rod, read from MuJoCo's contact structs in place by the per-step kernel
+(:func:`dlovr.sim.kernels.step_record`; no per-contact Python objects).
 
 Frames and units: world frame, metres, newtons. A contact's ``normal`` points from the obstacle toward
 the rod; its normal force is decoded as ``mj_contactForce`` does.
@@ -6,11 +7,25 @@ the rod; its normal force is decoded as ``mj_contactForce`` does.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
-from typing import Any
+from functools import cached_property
 
 import mujoco
 import numpy as np
+
+from dlovr.sim.kernels import (
+    T_ACTIVE,
+    T_DIST,
+    T_FORCE,
+    T_GEOM,
+    T_NORMAL,
+    T_OBJ,
+    T_PIECE,
+    T_POINT,
+    T_POS,
+    T_SEGMENT,
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -41,26 +56,34 @@ class RodContact:
 class ContactArrays:
     """Raw rod-obstacle contacts of one step, one row per MuJoCo contact (see :class:`RodContact`).
 
-    ``point``/``segment``: -1 where MuJoCo does not report a vertex/element; ``geom``: MuJoCo geom id;
-    ``obj``: index into ``names[0]`` (object names); ``names[1]``: geom names by ``geom`` id.
-    ``self_pairs``: (k, 2) touching segment pairs of the rod itself.
+    ``table``: (n, 14) rows as the kernels write them (:mod:`dlovr.sim.kernels`): point, segment,
+    geom, obj, piece (integers held exactly), dist, normal (3), pos (3), force, active (0/1). The
+    columns are also given as typed arrays: ``point``/``segment`` (-1 where MuJoCo does not report a
+    vertex/element), ``geom`` (MuJoCo geom id), ``obj`` (index into ``names[0]``, the object names),
+    ``piece``, ``dist``, ``normal``, ``pos``, ``force``, ``active``; ``names[1]``: geom names by
+    ``geom`` id. ``self_pairs``: (k, 2) touching segment pairs of the rod itself.
     """
 
-    point: np.ndarray
-    segment: np.ndarray
-    geom: np.ndarray
-    obj: np.ndarray
-    piece: np.ndarray
-    dist: np.ndarray
-    normal: np.ndarray
-    pos: np.ndarray
-    force: np.ndarray
-    active: np.ndarray
+    table: np.ndarray
     self_pairs: np.ndarray
     names: tuple[tuple[str, ...], dict[int, str]]
 
     def __len__(self) -> int:
-        return len(self.dist)
+        return len(self.table)
+
+    def _column(self, col: int) -> np.ndarray:
+        return self.table[:, col].astype(np.int64)
+
+    point = cached_property(lambda self: self._column(T_POINT))
+    segment = cached_property(lambda self: self._column(T_SEGMENT))
+    geom = cached_property(lambda self: self._column(T_GEOM))
+    obj = cached_property(lambda self: self._column(T_OBJ))
+    piece = cached_property(lambda self: self._column(T_PIECE))
+    dist = cached_property(lambda self: self.table[:, T_DIST].copy())
+    normal = cached_property(lambda self: self.table[:, T_NORMAL : T_NORMAL + 3].copy())
+    pos = cached_property(lambda self: self.table[:, T_POS : T_POS + 3].copy())
+    force = cached_property(lambda self: self.table[:, T_FORCE].copy())
+    active = cached_property(lambda self: self.table[:, T_ACTIVE] != 0.0)
 
     @property
     def surface(self) -> np.ndarray:
@@ -84,113 +107,38 @@ class ContactArrays:
                 force=float(self.force[i]),
                 active=bool(self.active[i]),
             )
-            for i in range(len(self.dist))
+            for i in range(len(self.table))
         )
 
 
 _NO_PAIRS = np.zeros((0, 2), int)
-_PYRAMIDAL = int(mujoco.mjtCone.mjCONE_PYRAMIDAL)
-_EDGES = [np.arange(2 * (k - 1)) for k in range(7)]  # a pyramidal cone's edge rows, by contact dim
-
-_EMPTY_CONTACTS = ContactArrays(
-    point=np.zeros(0, int),
-    segment=np.zeros(0, int),
-    geom=np.zeros(0, int),
-    obj=np.zeros(0, int),
-    piece=np.zeros(0, int),
-    dist=np.zeros(0),
-    normal=np.zeros((0, 3)),
-    pos=np.zeros((0, 3)),
-    force=np.zeros(0),
-    active=np.zeros(0, bool),
-    self_pairs=np.zeros((0, 2), int),
-    names=((), {}),
-)
 
 
+def contact_layout(data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """MuJoCo's contact structs as flat arrays, to be read in place by the kernels: a float64 and an
+    int32 view of ``data``'s arena and the layout (row strides and field offsets in their units,
+    indexed by ``dlovr.sim.kernels.L_*``).
 
-def read_contact_arrays(
-    model: mujoco.MjModel,
-    data: mujoco.MjData,
-    flex_id: int,
-    piece_of_geom: np.ndarray,
-    obj_of_geom: np.ndarray,
-    names: tuple[tuple[str, ...], dict[int, str]],
-) -> ContactArrays:
-    """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects).
-
-    ``piece_of_geom`` / ``obj_of_geom``: per MuJoCo geom id, the obstacle piece index and object index
-    (-1 for geoms that are not obstacle pieces); ``names``: see :class:`ContactArrays`.
+    MuJoCo keeps the contacts at the start of the arena (``d->contact = d->arena``) for the life of
+    ``data``, so the views stay valid while ``data`` lives; the field offsets come from the bindings'
+    own views, so they follow MuJoCo's struct layout. Call with at least one contact present (the
+    bindings give an empty contact list no address).
     """
-    d, f = data, flex_id
-    nc = int(d.ncon)
-    if nc == 0:
-        return _EMPTY_CONTACTS
-    c = d.contact
-    flex = c.flex[:nc]
-    geom = c.geom[:nc]
-    gid = geom[:, 0]
-    rows: Any
-    side: Any
-    if (flex[:, 1] == f).all() and (gid >= 0).all() and (piece_of_geom[gid] >= 0).all():
-        # the usual case: every contact has an obstacle piece as side 0 and the rod as side 1
-        rows, side, self_pairs = slice(None), 1, _NO_PAIRS
-        normal = c.frame[:, :3].copy()
-    else:
-        selfm = (flex[:, 0] == f) & (flex[:, 1] == f)
-        side1 = (flex[:, 1] == f) & (geom[:, 0] >= 0)  # obstacle is geom[0], rod is side 1
-        side0 = (flex[:, 0] == f) & (geom[:, 1] >= 0) & ~side1
-        sel = np.nonzero(side0 | side1)[0]
-        s1 = side1[sel]
-        gid = np.where(s1, geom[sel, 0], geom[sel, 1])
-        known = piece_of_geom[gid] >= 0
-        rows, s1, gid = sel[known], s1[known], gid[known]
-        side = np.where(s1, 1, 0)
-        sign = np.where(s1, 1.0, -1.0)[:, None]  # frame normal points from side 0 toward side 1
-        normal = sign * c.frame[rows, :3]
-        self_pairs = np.sort(c.elem[:nc][selfm], axis=1).astype(int)
-    adr = c.efc_address[rows]
-    act = adr >= 0
-    return ContactArrays(
-        point=c.vert[rows, side].astype(int),
-        segment=c.elem[rows, side].astype(int),
-        geom=gid.astype(int),
-        obj=obj_of_geom[gid],
-        piece=piece_of_geom[gid],
-        dist=c.dist[rows].copy(),
-        normal=normal,
-        pos=c.pos[rows].copy(),
-        force=normal_forces(model, data, c.dim[rows], adr, act),
-        active=act,
-        self_pairs=self_pairs,
-        names=names,
-    )
+    c = data.contact
+    base = c.dist.__array_interface__["data"][0]
+    stride = c.dist.strides[0]
 
+    def off(a: np.ndarray, unit: int) -> int:
+        delta = a.__array_interface__["data"][0] - base
+        if delta % unit or stride % unit:
+            raise RuntimeError("unexpected MuJoCo contact layout")
+        return delta // unit
 
-def normal_forces(
-    model: mujoco.MjModel, data: mujoco.MjData, dims: np.ndarray, adr: np.ndarray, act: np.ndarray
-) -> np.ndarray:
-    """Normal force (N) of contacts with constraint rows at ``adr`` (0 where not ``act``ive), as
-    ``mj_contactForce`` decodes it: with pyramidal cones the sum of the 2*(dim-1) edge forces."""
-    ef = data.efc_force
-    every = len(adr) > 0 and bool(act.all())  # the usual: every contact has constraint rows
-    if not every and not act.any():
-        return np.zeros(len(adr))
-    dims, a = (dims, adr) if every else (dims[act], adr[act])
-    k = int(dims[0])
-    if model.opt.cone != _PYRAMIDAL:
-        f = ef[a]
-    elif k > 1 and (dims == k).all():
-        f = ef[a[:, None] + _EDGES[k]].sum(axis=1)
-    else:
-        f = np.array(
-            [
-                float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
-                for i, n in zip(a, dims, strict=True)
-            ]
-        )
-    if every:
-        return f
-    force = np.zeros(len(adr))
-    force[act] = f
-    return force
+    layout = np.array(
+        [stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
+         off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4)],
+        dtype=np.int64,
+    )  # fmt: skip
+    size = int(data.narena)
+    floats = np.ctypeslib.as_array((ctypes.c_double * (size // 8)).from_address(base))
+    return floats, floats.view(np.int32), layout

@@ -1,11 +1,15 @@
 """Per-step contact extraction: a simulation step -> topological and discrete contact situation.
 
-Pure (numpy + the model + geometry; no MuJoCo): it reads the cable points and, when given, the raw
-contact arrays of :class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach
-normal forces). Contacts are labelled geometrically (NOTES.md): a point touches a piece when its
-centerline is within ``radius + enter_tol`` of it, and keeps touching until it is farther than
-``radius + leave_tol`` (hysteresis). The per-step situations are debounced (MODEL.md §4.2) into the
-demonstration's kept situations.
+No MuJoCo: it reads the cable points and, when given, the raw contact arrays of
+:class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach normal forces).
+Contacts are labelled geometrically (NOTES.md): a point touches a piece when its centerline is within
+``radius + enter_tol`` of it, and keeps touching until it is farther than ``radius + leave_tol``
+(hysteresis). The per-step situations are debounced (MODEL.md §4.2) into the demonstration's kept
+situations.
+
+The per-step work up to the touching hits runs in compiled kernels (:mod:`dlovr.sim.kernels`), one
+call on a step that keeps its labels; model objects (topology, discrete situations) are built only on
+the steps where the hits or the tip's decision change.
 """
 
 from __future__ import annotations
@@ -16,10 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.geometry import LabelBudgets, SceneGeometry, primitives_per_point
+from dlovr.geometry import SceneGeometry, primitives_per_point
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
 from dlovr.model.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
+from dlovr.sim import kernels
 
 
 @dataclass(frozen=True)
@@ -76,10 +81,10 @@ class ContactTracker:
 
     ``reuse``: a step that queries the same (point, piece) pairs as the step of the last labelling,
     with every queried point closer to where it was then than its slack
-    (:meth:`dlovr.geometry.SceneGeometry.label_slack`), keeps those labels instead of labelling
-    again: the same result, cheaper; points that moved farther are labelled again alone.
-    ``labellings`` counts the steps that labelled every queried point, ``partial_labellings`` those
-    that labelled some.
+    (:meth:`dlovr.geometry.SceneGeometry.label_slack`), or within its budgets along and across its
+    faces, keeps those labels instead of labelling again: the same result, cheaper; points that moved
+    farther are labelled again alone. ``labellings`` counts the steps that labelled every queried
+    point, ``partial_labellings`` those that labelled some.
     """
 
     geometry: SceneGeometry
@@ -92,16 +97,28 @@ class ContactTracker:
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient)
-        self._touching = np.zeros(0, dtype=np.int64)  # (point << 20 | piece id) in contact
-        self._signature: tuple[Any, ...] | None = None
+        packed = self.geometry.packed()
+        self._gf, self._gi, self._width = packed.floats, packed.ints, packed.width
+        self._n_pieces = len(self.geometry.pieces)
         self._piece_map: tuple[Any, np.ndarray] | None = None
         self._tip: tuple[Any, list[np.ndarray]] | None = None
-        self._situation: Situation | None = None
-        self._labels: _Labels | None = None
-        self._pairs_memo: tuple[np.ndarray, ...] | None = None
+        self._tols: tuple[float, float, np.ndarray] | None = None
+        self._spans: tuple[Any, np.ndarray] | None = None
+        self._n1 = self._cap_c = -1
+        self._forget()
         self.labellings = 0
         self.partial_labellings = 0
         self.current: ContactState | None = None
+
+    def _forget(self) -> None:
+        """No labels, no touching pairs, no hits."""
+        self._labels: tuple[np.ndarray, ...] | None = None
+        self._state = np.zeros(2, np.int64)  # number of touching keys, number of kept hits
+        self._touching = np.zeros(16, np.int64)  # (point << 20 | piece id) in contact, sorted
+        self._emitted = np.zeros((16, 1 + self._width), np.int64)  # kept hits: cable point, face ids
+        self._hits: list[_Hit] = []
+        self._signature: tuple[Any, ...] | None = None
+        self._situation: Situation | None = None
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -109,9 +126,7 @@ class ContactTracker:
         A recording starts this way, and its replay too, so both see the same contact states.
         """
         self._debouncer = Debouncer(self.hold, is_transient)
-        self._touching = np.zeros(0, dtype=np.int64)
-        self._signature = self._situation = None
-        self._labels = self._pairs_memo = None
+        self._forget()
         self.changes = []
         self.current = None
         return self.update(record)
@@ -121,51 +136,11 @@ class ContactTracker:
         return self._debouncer.kept
 
     def classify(
-        self,
-        points: np.ndarray,
-        gripper_z: Sequence[float] | None = None,
-        pairs: tuple[np.ndarray, np.ndarray] | None = None,
-        between: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        self, pts: np.ndarray, gripper_z: Sequence[float] | None, kept_hits: list[_Hit]
     ) -> Situation:
-        """Topological situation of the cable polyline ``points`` (hysteresis applied).
-
-        ``pairs``: (point indices, piece ids) the simulator reports in contact; only those (and the
-        pairs touching at the last step) are classified. ``None``: every point against every piece.
-        ``between``: (centerline positions, owner point, piece id) of contacts the simulator reports
-        between two points (a segment crossing an edge touches it between its end points); their
-        labels count for the nearer point.
-        """
-        pts = np.asarray(points, dtype=float)
+        """Topological situation of the cable polyline ``pts`` from its touching hits (see
+        :meth:`_label_step`) and the end-vertex rule."""
         geom = self.geometry
-        if pairs is None:
-            pi = np.repeat(np.arange(len(pts)), len(geom.pieces))
-            pc = np.tile(np.arange(len(geom.pieces)), len(pts))
-        else:  # the reported pairs and those touching at the last step, once each
-            raw_pi, raw_pc = (np.asarray(a, dtype=np.int64) for a in pairs)
-            memo, touching = self._pairs_memo, self._touching
-            if (
-                memo is not None
-                and _same(raw_pi, memo[0])
-                and _same(raw_pc, memo[1])
-                and _same(touching, memo[2])
-            ):
-                pi, pc = memo[3], memo[4]
-            else:
-                pi, pc = _unique_pairs(
-                    np.concatenate([raw_pi, touching >> 20]), np.concatenate([raw_pc, touching & _LOW])
-                )
-                self._pairs_memo = (raw_pi, raw_pc, touching, pi, pc)
-        owner = np.arange(len(pts))
-        if between is not None and len(between[0]):
-            vpos, vowner, vpiece = between
-            pi = np.concatenate([pi, len(pts) + np.arange(len(vpos))])
-            pc = np.concatenate([pc, vpiece])
-            owner = np.concatenate([owner, vowner])
-            pts_all = np.concatenate([pts, vpos])
-        else:
-            pts_all = pts
-        lab = self._reuse_labels(pts_all, pi, pc) or self._label(pts_all, pi, pc)
-        kept_hits = self._hits(lab, owner)
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
@@ -192,99 +167,76 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
-    @property
-    def _thresholds(self) -> tuple[float, float]:
+    def _thresholds(self) -> np.ndarray:
         """The centerline distances (m) at which a pair enters contact and leaves it."""
-        r = self.geometry.radius
-        return r + self.enter_tol, r + self.leave_tol
+        if self._tols is None or self._tols[:2] != (self.enter_tol, self.leave_tol):
+            r = self.geometry.radius
+            self._tols = (self.enter_tol, self.leave_tol, np.array([r + self.enter_tol, r + self.leave_tol]))
+        return self._tols[2]
 
-    def _label(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels:
-        """Label the queried (point, piece) pairs geometrically (which faces each touches, and on which
-        side of the enter and leave distances)."""
-        self.labellings += 1
-        pt, pid, dist, faces, _ = self.geometry.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
-        t_enter, t_leave = self._thresholds
-        enter, leave = dist <= t_enter, dist <= t_leave
-        lab = _Labels(pi, pc, pts_all.copy(), pt, pid, faces, enter, leave, bool((leave & ~enter).any()))
-        self._labels = lab
-        return lab
-
-    def _hits(self, lab: _Labels, owner: np.ndarray) -> list[_Hit]:
-        """The labelled pairs that touch, by cable point, with hysteresis: a pair within the enter
-        distance touches, one within the leave distance keeps touching."""
-        if lab.owner is not None and not lab.between and _same(owner, lab.owner):
-            return lab.hits  # the same owners, no pair between the distances: the same hits
-        pt = owner[lab.pt]
-        keys = pt << 20 | lab.pid
-        keep = lab.enter | (_member(keys, self._touching) & lab.leave)
-        self._touching = np.unique(keys[keep])
-        if lab.owner is not None and _same(keep, lab.keep) and _same(pt, lab.owner[lab.pt]):
-            lab.owner = owner
-            return lab.hits
-        faces = lab.faces
-        lab.hits = [
-            _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
-        ]
-        lab.owner, lab.keep = owner, keep
-        return lab.hits
-
-    def _reuse_labels(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels | None:
-        """The last labels when the same pairs are queried, brought up to date: points that moved by
-        less than their slack since they were labelled keep their labels (labelling them again would
-        give the same), the others are labelled again. ``None`` when the queried pairs changed."""
+    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, objs: Any) -> list[_Hit]:
+        """The touching hits of this step (:func:`dlovr.sim.kernels.track_step`): the pairs the
+        simulator reports in ``table`` (and those touching at the last step; every point against
+        every piece without a table) keep their last labels while their points stay within their
+        slack or budgets; the others are labelled again (all of them, or the moved points alone)."""
+        has = table is not None
+        table = _NO_TABLE if table is None else table
+        n1, nc = len(pts), len(table)
+        if nc > self._cap_c or n1 != self._n1 or len(self._touching) != self._cap_h:
+            self._scratch(n1, nc)
         lab = self._labels
-        if lab is None or not self.reuse or len(pi) != len(lab.pi) or len(pts_all) != len(lab.pts):
-            return None
-        if not (_same(pi, lab.pi) and _same(pc, lab.pc)):
-            return None
-        if lab.q is None:
-            lab.q = np.unique(lab.pi)
-            *_, slack, budgets = self.geometry.pair_hits_and_slack(
-                lab.pts, lab.pi, lab.pc, self.leave_tol, thresholds=self._thresholds
-            )
-            lab.slack2 = slack[lab.q] ** 2
-            lab.budgets = _own(budgets)
-        if len(lab.q) == 0:
-            return lab
-        dp = pts_all[lab.q] - lab.pts[lab.q]
-        moved = np.einsum("ij,ij->i", dp, dp) >= lab.slack2
-        if not moved.any():
-            return lab
-        # beyond its slack in some direction: within its budgets along and across its faces?
-        rows = _member(pi, lab.q[moved])
-        moving = pi[rows]
-        kept = lab.budgets.keeps(rows, pts_all[moving] - lab.pts[moving])
-        if kept.all():
-            return lab
-        # label the moved points again (a point's labels depend on it alone) and splice them in
-        self.partial_labellings += 1
-        again = np.unique(moving[~kept])
-        rows = _member(pi, again)
-        t_enter, t_leave = self._thresholds
-        pt, pid, dist, faces, _, slack, budgets = self.geometry.pair_hits_and_slack(
-            pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(t_enter, t_leave)
-        )
-        old = ~_member(lab.pt, again)
-        pt_all = np.concatenate([lab.pt[old], pt])
-        pid_all = np.concatenate([lab.pid[old], pid])
-        order = np.lexsort((pid_all, pt_all))
-        old_faces = [f for f, o in zip(lab.faces, old.tolist(), strict=True) if o]
-        all_faces = old_faces + faces
-        enter = np.concatenate([lab.enter[old], dist <= t_enter])[order]
-        leave = np.concatenate([lab.leave[old], dist <= t_leave])[order]
-        lab.pt, lab.pid, lab.enter, lab.leave = pt_all[order], pid_all[order], enter, leave
-        lab.faces = [all_faces[i] for i in order.tolist()]
-        lab.between = bool((leave & ~enter).any())
-        lab.pts[again] = pts_all[again]  # lab.pts and the budgets are the labelling's own
-        lab.slack2[_member(lab.q, again)] = slack[again] ** 2
-        for mine, new in zip(_fields(lab.budgets), _fields(budgets), strict=True):
-            mine[rows] = new
-        lab.owner = None  # the hits must be made again
-        return lab
+        out, k, nq, n_again, bad = kernels.track_step(
+            pts, table, has, self._piece_table(objs) if has else _NO_MAP, self._n_pieces, self.reuse,
+            lab is not None, *(lab or _NO_LABELS), self._state, self._touching, self._emitted, self._pairs,
+            self._owner, self._qpts, self._point_of, self._again,
+        )  # fmt: skip
+        if out >= kernels.FULL:
+            thr, r = self._thresholds(), self.geometry.radius
+            args = (self._gf, self._gi, self._width, r, self.leave_tol, r / 5.0, thr, self._qpts[:nq],
+                    self._pairs[:k])  # fmt: skip
+            if out == kernels.FULL or lab is None:
+                self.labellings += 1
+                lab = kernels.relabel_full(*args)
+            else:
+                self.partial_labellings += 1
+                lab = (*lab[:5], kernels.relabel_partial(*args, self._again[:n_again], *lab[1:]))
+            self._labels = lab
+            if len(lab[5]) > len(self._touching):
+                self._grow_hits(len(lab[5]))
+            changed = kernels.update_hits(lab[5], self._owner, self._state, self._touching, self._emitted)
+        elif out == kernels.BAD_PIECE:
+            obj, piece = int(table[bad, kernels.T_OBJ]), int(table[bad, kernels.T_PIECE])
+            name = objs[obj] if 0 <= obj < len(objs) else obj
+            raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
+        else:
+            changed = out == kernels.CHANGED
+        if changed:
+            face = self.geometry.face_tuple
+            em = self._emitted[: self._state[1]]
+            self._hits = [_Hit(p, face(row)) for p, row in zip(em[:, 0].tolist(), em[:, 1:], strict=True)]
+        return self._hits
 
-    def _piece_ids(self, arrays: Any) -> np.ndarray:
-        """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts."""
-        objs = arrays.names[0]
+    def _scratch(self, n1: int, nc: int) -> None:
+        """Per-step buffers of :func:`dlovr.sim.kernels.track_step` for ``n1`` points and at least
+        ``nc`` contacts."""
+        self._n1, self._cap_c, self._cap_h = n1, max(nc, 2 * self._cap_c, 16), len(self._touching)
+        cap_k = n1 * self._n_pieces + 2 * self._cap_c + self._cap_h
+        self._pairs = np.zeros((cap_k, 2), np.int64)
+        self._owner = np.zeros(n1 + self._cap_c, np.int64)
+        self._qpts = np.zeros((n1 + self._cap_c, 3))
+        self._point_of = np.zeros(self._cap_c, np.int64)
+        self._again = np.zeros(n1 + self._cap_c, np.int64)
+
+    def _grow_hits(self, n: int) -> None:
+        """Room for ``n`` touching keys and kept hits (their contents kept)."""
+        cap = max(n, 2 * len(self._touching))
+        touching, emitted = np.zeros(cap, np.int64), np.zeros((cap, 1 + self._width), np.int64)
+        touching[: len(self._touching)] = self._touching
+        emitted[: len(self._emitted)] = self._emitted
+        self._touching, self._emitted = touching, emitted
+
+    def _piece_table(self, objs: Any) -> np.ndarray:
+        """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
         if self._piece_map is None or self._piece_map[0] is not objs:
             pieces = self.geometry.pieces
             table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
@@ -293,33 +245,21 @@ class ContactTracker:
                 if p.obj in row:
                     table[row[p.obj], p.index] = k
             self._piece_map = (objs, table)
-        table = self._piece_map[1]
-        obj, piece = np.asarray(arrays.obj), np.asarray(arrays.piece)
-        ids = table[obj, np.minimum(piece, table.shape[1] - 1)]
-        bad = (ids < 0) | (piece >= table.shape[1])
-        if bad.any():
-            i = int(np.nonzero(bad)[0][0])
-            raise KeyError(f"the geometry has no piece {int(piece[i])} of object {objs[int(obj[i])]!r}")
-        return ids
+        return self._piece_map[1]
 
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
         arrays = getattr(record, "contact_arrays", None)
-        pts = np.asarray(record.points, dtype=float)
-        pairs = None
-        between = None
-        point_of = np.zeros(0, dtype=np.int64)
-        if arrays is not None and len(arrays.dist):
-            point_of, seg_rows, seg_pos = _locate(arrays, pts)
-            ids = self._piece_ids(arrays)
-            ok = point_of >= 0
-            pairs = (point_of[ok], ids[ok])
-            between = (seg_pos, point_of[seg_rows], ids[seg_rows])
-        elif arrays is not None:
-            pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        pts = record.points
+        if type(pts) is not np.ndarray or pts.dtype != np.float64 or not pts.flags.c_contiguous:
+            pts = np.ascontiguousarray(pts, dtype=float)
+        table = None if arrays is None else getattr(arrays, "table", None)
+        if arrays is not None and table is None:
+            table = _table_of(arrays)
+        hits = self._label_step(pts, table, None if arrays is None else arrays.names[0])
         prev = self.current
-        topo = self.classify(pts, record.gripper_z, pairs, between)
+        topo = self.classify(pts, record.gripper_z, hits)
         if prev is not None and (
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
@@ -327,9 +267,8 @@ class ContactTracker:
             disc = prev.discrete
         else:
             disc = discretize(topo, self.geometry.fact_book(), self.params)
-        forces = _forces(topo, arrays, point_of)
         state = ContactState(
-            int(record.step), float(record.time), topo, disc, forces,
+            int(record.step), float(record.time), topo, disc, self._forces(topo, table),
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
             _tuple(getattr(record, "gripper_force", _ORIGIN)),
@@ -340,45 +279,23 @@ class ContactTracker:
         self._debouncer.push(state.t, disc)
         return state
 
+    def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
+        """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span."""
+        if table is None or len(table) == 0:
+            return tuple(0.0 for _ in topo.contacts)
+        if self._spans is None or self._spans[0] is not topo:
+            spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in topo.contacts]
+            self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
+        out = np.empty(len(topo.contacts))
+        kernels.span_forces(self._spans[1], self._point_of, table, out)
+        return tuple(out.tolist())
+
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
         """The kept situations with the classes of the transition into each (``()`` for the first)."""
         kept = self.kept
         return [
             (k, classify_step(kept[i - 1].situation, k.situation) if i else ()) for i, k in enumerate(kept)
         ]
-
-
-def _same(a: np.ndarray, b: np.ndarray | None) -> bool:
-    """Whether two integer or boolean arrays are equal, shape, dtype and all (cheaper than
-    ``np.array_equal`` for the small arrays here; a dtype mismatch reads as a difference, which
-    only costs a recomputation)."""
-    return b is not None and a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
-
-
-def _fields(b: LabelBudgets) -> tuple[np.ndarray, ...]:
-    return b.normal, b.along, b.across, b.any
-
-
-def _own(b: LabelBudgets) -> LabelBudgets:
-    """Budgets with arrays of their own (a partial relabel writes rows of them in place)."""
-    return LabelBudgets(*(np.array(a, dtype=float) for a in _fields(b)))
-
-
-def _member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
-    """``np.isin(a, sorted_b)`` for a sorted ``sorted_b`` (cheaper for the small arrays here)."""
-    if len(sorted_b) == 0:
-        return np.zeros(len(a), dtype=bool)
-    i = np.minimum(np.searchsorted(sorted_b, a), len(sorted_b) - 1)
-    return sorted_b[i] == a
-
-
-def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique (a, b) pairs of non-negative ints (b < 2**20), sorted by a then b."""
-    u = np.unique(a.astype(np.int64) << 20 | b.astype(np.int64))
-    return u >> 20, u & _LOW
-
-
-_LOW = (1 << 20) - 1
 
 
 _ORIGIN = (0.0, 0.0, 0.0)
@@ -390,31 +307,6 @@ def _tuple(v: Any) -> Any:
     if isinstance(v, np.ndarray) and v.dtype == np.float64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
-
-
-@dataclass(eq=False)
-class _Labels:
-    """One geometric labelling: the queried pairs (``pi``, ``pc``) and query points ``pts`` then; per
-    hit its query point ``pt``, piece ``pid``, ``faces`` and whether it lies within the enter and the
-    leave distance (``between``: some hit lies between the two). Filled in later: the queried points
-    ``q`` with their squared slacks (``pts`` then holds, for each, where it was last labelled), and
-    the kept hits last made from it with the owners and keep mask used."""
-
-    pi: np.ndarray
-    pc: np.ndarray
-    pts: np.ndarray
-    pt: np.ndarray
-    pid: np.ndarray
-    faces: list[tuple[str, ...]]
-    enter: np.ndarray
-    leave: np.ndarray
-    between: bool
-    q: np.ndarray | None = None
-    slack2: np.ndarray | None = None
-    budgets: LabelBudgets | None = None
-    owner: np.ndarray | None = None
-    keep: np.ndarray | None = None
-    hits: list[_Hit] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -429,44 +321,21 @@ def _vector_independent(topo: Situation) -> bool:
     return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
 
 
-def _locate(arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where each raw contact is on the cable.
-
-    Returns the cable point of every contact (its vertex, or the nearer end of its segment; -1 for
-    none), the rows of segment contacts, and their centerline points (the contact projected onto the
-    segment).
-    """
-    point = np.asarray(arrays.point, dtype=np.int64)
-    seg = np.asarray(arrays.segment, dtype=np.int64)
-    pos = np.asarray(arrays.pos, dtype=float)
-    usual = point.max() < 0 and seg.min() >= 0  # every contact is a segment's
-    if usual:
-        rows, s = np.arange(len(seg)), seg
-    else:
-        rows = np.nonzero((point < 0) & (seg >= 0))[0]
-        s, pos = seg[rows], pos[rows]
-    a = pts[s]
-    ab = pts[s + 1] - a
-    t = np.einsum("ij,ij->i", pos - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
-    t = np.minimum(np.maximum(t, 0.0), 1.0)  # on the segment
-    nearer = np.where(t < 0.5, s, s + 1)
-    if usual:
-        out = nearer
-    else:
-        out = point.copy()
-        out[rows] = nearer
-    return out, rows, a + t[:, None] * ab
+def _table_of(arrays: Any) -> np.ndarray:
+    """Contact rows (:mod:`dlovr.sim.kernels`) of raw contact arrays given as columns (``point``,
+    ``segment``, ``obj``, ``piece``, ``pos``, ``force``: what the tracker reads)."""
+    n = len(arrays.point)
+    table = np.zeros((n, kernels.T_WIDTH))
+    for col, name in ((kernels.T_POINT, "point"), (kernels.T_SEGMENT, "segment"), (kernels.T_OBJ, "obj"),
+                      (kernels.T_PIECE, "piece"), (kernels.T_FORCE, "force")):  # fmt: skip
+        table[:, col] = np.asarray(getattr(arrays, name), dtype=float).reshape(n)
+    table[:, kernels.T_POS : kernels.T_POS + 3] = np.asarray(arrays.pos, dtype=float).reshape(n, 3)
+    return table
 
 
-def _forces(topo: Situation, arrays: Any, point_of: np.ndarray) -> tuple[float, ...]:
-    if arrays is None or len(point_of) == 0:
-        return tuple(0.0 for _ in topo.contacts)
-    force = np.asarray(arrays.force, dtype=float)
-    out = []
-    for c in topo.contacts:
-        if c.is_free or c.dlo.span is None:
-            out.append(0.0)
-            continue
-        a, b = c.dlo.span
-        out.append(float(force[(point_of >= a) & (point_of <= b)].sum()))
-    return tuple(out)
+_NO_TABLE = np.zeros((0, kernels.T_WIDTH))
+_NO_MAP = np.full((1, 1), -1, np.int64)
+_NO_LABELS = (
+    np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 6)),
+    np.zeros((0, 4), np.int64),
+)  # fmt: skip
