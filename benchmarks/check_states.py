@@ -42,10 +42,16 @@ def _step_digest(rec) -> tuple:
         rec.step,
         st.topological.format(),
         st.discrete.format(),
-        pickle.dumps((st.topological, st.discrete), protocol=5),
+        (st.topological, st.discrete),
         st.forces,
         h.hexdigest(),
     )
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """Two steps' digests agree (situations compared by value; a saved one may be pickled)."""
+    sa, sb = (pickle.loads(x[3]) if isinstance(x[3], bytes) else x[3] for x in (a, b))
+    return a[:3] == b[:3] and a[4:] == b[4:] and sa == sb
 
 
 def run(name: str, segments: int | None) -> dict:
@@ -98,7 +104,8 @@ def main() -> None:
             print(f"{key}: no reference")
             continue
         diff = next(
-            (i for i, (a, b) in enumerate(zip(want["steps"], got["steps"], strict=False)) if a != b), None
+            (i for i, (a, b) in enumerate(zip(want["steps"], got["steps"], strict=False)) if not _same(a, b)),
+            None,
         )
         if diff is None and len(want["steps"]) != n:
             diff = min(len(want["steps"]), n)

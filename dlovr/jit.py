@@ -66,7 +66,7 @@ def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
     return sig, codegen
 
 
-KERNEL_SOURCES = ("geometry/kernels.py", "sim/kernels.py", "jit.py")
+KERNEL_SOURCES = ("geometry/kernels.py", "sim/kernels.py", "sim/track_kernels.py", "jit.py")
 
 
 def _marker() -> Path:

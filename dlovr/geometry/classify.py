@@ -34,21 +34,29 @@ class PointHit:
 
 
 def primitives_per_point(n_points: int, hits: Iterable[PointHit]) -> list[list[EnvPrimitive]]:
-    """Environment primitives of every point from its hits (one per piece; a primitive whose faces
-    are a subset of another's at the same point adds nothing and is dropped)."""
-    out: list[set[EnvPrimitive]] = [set() for _ in range(n_points)]
-    made: dict[tuple[str, ...], EnvPrimitive] = {}
+    """Environment primitives of every point from its hits (:func:`point_primitives`)."""
+    faces: list[list[tuple[str, ...]]] = [[] for _ in range(n_points)]
     for h in hits:
-        e = made.get(h.faces)
+        faces[h.point].append(h.faces)
+    made: dict[tuple[str, ...], EnvPrimitive] = {}
+    return [point_primitives(f, made) for f in faces]
+
+
+def point_primitives(
+    faces: Iterable[tuple[str, ...]], made: dict[tuple[str, ...], EnvPrimitive]
+) -> list[EnvPrimitive]:
+    """Environment primitives of one point from the face names of its hits (one per piece; a
+    primitive whose faces are a subset of another's at the same point adds nothing and is dropped).
+    ``made``: primitives already made, by face names (filled in)."""
+    s = set()
+    for f in faces:
+        e = made.get(f)
         if e is None:
-            e = made[h.faces] = EnvPrimitive("faces", h.faces)
-        out[h.point].add(e)
-    return [
-        sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s))
-        if len(s) > 1
-        else list(s)
-        for s in out
-    ]
+            e = made[f] = EnvPrimitive("faces", f)
+        s.add(e)
+    if len(s) > 1:
+        return sorted(e for e in s if not any(o != e and set(e.faces) < set(o.faces) for o in s))
+    return list(s)
 
 
 class _Classifier:

@@ -15,6 +15,20 @@ import mujoco
 import numpy as np
 
 from dlovr.sim.kernels import (
+    C_FLEX,
+    C_HEAD,
+    C_LAYOUT,
+    C_NFATAL,
+    C_NGEOM,
+    C_NHOLD,
+    C_NQ,
+    C_NV,
+    C_NVERT,
+    C_PYRAMIDAL,
+    C_QPOS,
+    C_QVEL,
+    C_WARN_BASE,
+    C_XPOS,
     T_ACTIVE,
     T_DIST,
     T_FORCE,
@@ -25,7 +39,7 @@ from dlovr.sim.kernels import (
     T_POINT,
     T_POS,
     T_SEGMENT,
-)  # fmt: skip
+)  # fmt: skip  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -114,31 +128,94 @@ class ContactArrays:
 _NO_PAIRS = np.zeros((0, 2), int)
 
 
-def contact_layout(data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """MuJoCo's contact structs as flat arrays, to be read in place by the kernels: a float64 and an
-    int32 view of ``data``'s arena and the layout (row strides and field offsets in their units,
-    indexed by ``dlovr.sim.kernels.L_*``).
+class MjViews:
+    """MuJoCo's arrays of one ``MjData`` as the per-step kernel reads them in place
+    (:func:`dlovr.sim.kernels.step_record`), views taken once: each attribute access of the bindings
+    makes a new view, and numba checks every argument of a call.
 
-    MuJoCo keeps the contacts at the start of the arena (``d->contact = d->arena``) for the life of
-    ``data``, so the views stay valid while ``data`` lives; the field offsets come from the bindings'
-    own views, so they follow MuJoCo's struct layout. Call with at least one contact present (the
-    bindings give an empty contact list no address).
+    ``mj``: one float64 view over qpos, qvel and the cable points (they lie in ``data``'s buffer, fixed
+    for its life); ``warn``: its warning structs as int32; ``arena``: its contact structs, which
+    MuJoCo keeps at the start of the arena (``d->contact = d->arena``) for the life of ``data`` (taken
+    at the first contact: the bindings give an empty contact list no address); ``cfg``: the kernel's
+    configuration (``dlovr.sim.kernels.C_*``: the warning baseline, the rod's flex id, the cone, where
+    the arrays lie in ``mj``, the contact structs' layout from the bindings' own views, the fatal
+    warnings, the obstacle piece and object of each geom, the holding constraints' rows). Keep
+    ``data`` alive as long as the views.
     """
-    c = data.contact
-    base = c.dist.__array_interface__["data"][0]
-    stride = c.dist.strides[0]
 
-    def off(a: np.ndarray, unit: int) -> int:
-        delta = a.__array_interface__["data"][0] - base
-        if delta % unit or stride % unit:
-            raise RuntimeError("unexpected MuJoCo contact layout")
-        return delta // unit
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        xpos: np.ndarray,
+        flex: int,
+        fatal: np.ndarray,
+        piece_of_geom: np.ndarray,
+        obj_of_geom: np.ndarray,
+    ):
+        arrays = (data.qpos, data.qvel, xpos)
+        ptrs = [_address(a) for a in arrays]
+        lo = min(ptrs)
+        hi = max(p + a.nbytes for p, a in zip(ptrs, arrays, strict=True))
+        if any((p - lo) % 8 for p in ptrs) or not all(a.flags.c_contiguous for a in arrays):
+            raise RuntimeError("unexpected MuJoCo data layout")
+        self.mj = np.ctypeslib.as_array((ctypes.c_double * ((hi - lo) // 8)).from_address(lo))
+        number = data.warning.number  # every other int32 of the warning structs
+        warn = (ctypes.c_int32 * (2 * len(number) - 1)).from_address(_address(number))
+        self.warn = np.ctypeslib.as_array(warn)
+        self.arena = np.zeros(0)
+        self._data = data
+        q, v, x = ((p - lo) // 8 for p in ptrs)
+        self._head = np.zeros(C_HEAD, np.int64)
+        self._head[[C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM]] = (
+            flex, int(model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL), len(fatal), len(piece_of_geom)
+        )
+        self._head[[C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT]] = (
+            x, q, len(data.qpos), v, len(data.qvel), len(xpos)
+        )
+        self._tail = [
+            np.asarray(fatal, np.int64) * (number.strides[0] // 4),
+            np.asarray(piece_of_geom, np.int64),
+            np.asarray(obj_of_geom, np.int64),
+        ]
+        self.cfg = self._pack(np.zeros(0, np.int64))
 
-    layout = np.array(
-        [stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
-         off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4)],
-        dtype=np.int64,
-    )  # fmt: skip
-    size = int(data.narena)
-    floats = np.ctypeslib.as_array((ctypes.c_double * (size // 8)).from_address(base))
-    return floats, floats.view(np.int32), layout
+    def _pack(self, hold_rows: np.ndarray) -> np.ndarray:
+        self._head[C_NHOLD] = len(hold_rows)
+        return np.concatenate([self._head, *self._tail, hold_rows.astype(np.int64)])
+
+    def set_hold_rows(self, rows: np.ndarray) -> None:
+        """The constraint rows of the holding constraints (3 per constraint)."""
+        base = self.cfg[C_WARN_BASE]
+        self.cfg = self._pack(rows)
+        self.cfg[C_WARN_BASE] = base
+
+    def set_warning_base(self, count: int) -> None:
+        """The fatal warnings' count that the divergence check compares with."""
+        self.cfg[C_WARN_BASE] = count
+
+    def contacts(self) -> np.ndarray:
+        """The contact structs (call when the step has contacts)."""
+        if len(self.arena) == 0:
+            c = self._data.contact
+            base = _address(c.dist)
+            stride = c.dist.strides[0]
+
+            def off(a: np.ndarray, unit: int) -> int:
+                delta = _address(a) - base
+                if delta % unit or stride % unit:
+                    raise RuntimeError("unexpected MuJoCo contact layout")
+                return delta // unit
+
+            self._head[C_LAYOUT : C_LAYOUT + 11] = (
+                stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
+                off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4),
+            )  # fmt: skip
+            self.cfg[C_LAYOUT : C_LAYOUT + 11] = self._head[C_LAYOUT : C_LAYOUT + 11]
+            size = int(self._data.narena) // 8
+            self.arena = np.ctypeslib.as_array((ctypes.c_double * size).from_address(base))
+        return self.arena
+
+
+def _address(a: np.ndarray) -> int:
+    return int(a.__array_interface__["data"][0])

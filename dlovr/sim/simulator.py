@@ -15,7 +15,6 @@ Typical use (headless)::
 
 from __future__ import annotations
 
-import ctypes
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -28,7 +27,7 @@ import numpy as np
 from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
-from dlovr.sim.contacts import ContactArrays, RodContact, contact_layout
+from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
 from dlovr.transforms import dot, norm, quat_normalize, quat_rotate, slerp
 
 # --------------------------------------------------------------------------------------------------
@@ -104,7 +103,6 @@ class SimState:
 # Simulator
 
 _NO_PAIRS = np.zeros((0, 2), np.int64)
-_NO_CONTACT_VIEWS = (np.zeros(0), np.zeros(0, np.int32), np.zeros(11, np.int64))
 
 
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
@@ -188,15 +186,7 @@ class Simulator:
         # views of MuJoCo's fixed arrays, taken once (each attribute access makes a new view)
         b = built
         self._xpos = d.flexvert_xpos[b.vert_adr : b.vert_adr + b.nvert]
-        self._qpos, self._qvel = d.qpos, d.qvel
         self._mocap_pos, self._mocap_quat = d.mocap_pos[b.mocap_id], d.mocap_quat[b.mocap_id]
-        number = d.warning.number  # every other int32 of MuJoCo's warning structs: read them flat
-        self._warn = np.ctypeslib.as_array(
-            (ctypes.c_int32 * (2 * len(number) - 1)).from_address(number.__array_interface__["data"][0])
-        )
-        self._warn_index = self._fatal * (number.strides[0] // 4)
-        self._contact_views: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._pyramidal = m.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
         self._dt = float(m.opt.timestep)
         self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
         objs = tuple(dict.fromkeys(o for o, _ in built.geom_piece.values()))
@@ -206,6 +196,9 @@ class Simulator:
             self._obj_of_geom[g] = objs.index(o)
             self._piece_of_geom[g] = k
         self._names = (objs, self._geom_names)
+        self._views = MjViews(
+            m, d, self._xpos, b.flex_id, self._fatal, self._piece_of_geom, self._obj_of_geom
+        )
         eq = mujoco.mjtObj.mjOBJ_EQUALITY
         self._hold_rows: tuple[int, np.ndarray] = (-1, np.zeros(0, np.int64))
         self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
@@ -320,7 +313,7 @@ class Simulator:
     def _reset_warnings(self) -> None:
         """Take MuJoCo's current warning counts as the baseline of the divergence checks."""
         self._warnings_each = self.data.warning.number[self._fatal].copy()
-        self._warnings = int(self._warnings_each.sum())
+        self._views.set_warning_base(int(self._warnings_each.sum()))
 
     def contact_arrays(self) -> ContactArrays:
         """Raw rod contacts of the current step as arrays (no per-contact Python objects)."""
@@ -335,30 +328,27 @@ class Simulator:
         SimulationDiverged): the warnings counted since the last reset, NaN/inf in the state or the
         cable points, a segment stretched beyond ``max_stretch``. One kernel call
         (:func:`dlovr.sim.kernels.step_record`) reads MuJoCo's arrays once."""
-        d = self.data
+        d, views = self.data, self._views
         ncon = d.ncon
-        if ncon and self._contact_views is None:
-            self._contact_views = contact_layout(d)  # fixed for the life of self.data
-        cf, ci, layout = self._contact_views or _NO_CONTACT_VIEWS
         ne = d.ne  # equality constraint rows come first, in a fixed layout while ne is unchanged
         if self._hold_rows[0] != ne:
             ids = d.efc_id[:ne]
-            rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0].astype(np.int64)
+            rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
             self._hold_rows = (ne, rows)
+            views.set_hold_rows(rows)
         pts = np.empty((self.built.nvert, 3))
         table = np.empty((ncon, kernels.T_WIDTH))
         grip = np.empty(3)
+        arena = views.contacts() if ncon else views.arena
         code, index, value, rows, nself = kernels.step_record(
-            self._xpos, self._qpos, self._qvel, self._warn, self._warn_index, self._warnings, self._bounds,
-            ncon, cf, ci, layout, d.efc_force, self.built.flex_id, self._piece_of_geom, self._obj_of_geom,
-            self._pyramidal, self._hold_rows[1], pts, table, grip,
-        )  # fmt: skip
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, pts, table, grip
+        )
         if check and code:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS
         if nself:
             pairs = np.empty((nself, 2), np.int64)
-            kernels.self_pairs(ncon, ci, layout, self.built.flex_id, pairs)
+            kernels.self_pairs(ncon, arena, views.cfg, pairs)
         return StepRecord(
             self.step_index,
             d.time,

@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.geometry import SceneGeometry, primitives_per_point
+from dlovr.geometry import SceneGeometry, point_primitives
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
 from dlovr.model.transitions import DEFAULT_HOLD_S, Debouncer, Kept, classify_step, is_transient
-from dlovr.sim import kernels
+from dlovr.sim import track_kernels as tk
+from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT, T_WIDTH
 
 
 @dataclass(frozen=True)
@@ -101,10 +102,8 @@ class ContactTracker:
         self._gf, self._gi, self._width = packed.floats, packed.ints, packed.width
         self._n_pieces = len(self.geometry.pieces)
         self._piece_map: tuple[Any, np.ndarray] | None = None
-        self._tip: tuple[Any, list[np.ndarray]] | None = None
         self._tols: tuple[float, float, np.ndarray] | None = None
-        self._spans: tuple[Any, np.ndarray] | None = None
-        self._n1 = self._cap_c = -1
+        self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
         self._forget()
         self.labellings = 0
         self.partial_labellings = 0
@@ -112,11 +111,10 @@ class ContactTracker:
 
     def _forget(self) -> None:
         """No labels, no touching pairs, no hits."""
-        self._labels: tuple[np.ndarray, ...] | None = None
-        self._state = np.zeros(2, np.int64)  # number of touching keys, number of kept hits
-        self._touching = np.zeros(16, np.int64)  # (point << 20 | piece id) in contact, sorted
-        self._emitted = np.zeros((16, 1 + self._width), np.int64)  # kept hits: cable point, face ids
-        self._hits: list[_Hit] = []
+        self._lab: tuple[np.ndarray, np.ndarray] | None = None
+        self._n1 = -1  # the work arrays are made afresh at the next step
+        self._spans: tuple[Any, np.ndarray] = (None, _NO_SPANS)
+        self._tip: tuple[int, list[list[float]]] | None = None
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
 
@@ -135,30 +133,27 @@ class ContactTracker:
     def kept(self) -> list[Kept[DiscreteSituation]]:
         return self._debouncer.kept
 
-    def classify(
-        self, pts: np.ndarray, gripper_z: Sequence[float] | None, kept_hits: list[_Hit]
-    ) -> Situation:
-        """Topological situation of the cable polyline ``pts`` from its touching hits (see
+    def classify(self, pts: np.ndarray, gripper_z: Sequence[float] | None) -> Situation:
+        """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
         :meth:`_label_step`) and the end-vertex rule."""
         geom = self.geometry
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
-        if self._tip is None or self._tip[0] is not kept_hits:  # the tip's faces, per labelling
-            tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
+        if self._tip is None or self._tip[0] != self._version:  # the tip's faces, per labelling
+            tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
             normals = [np.asarray(geom.face_normal(f), dtype=float).tolist() for f in tip_faces]
-            self._tip = (kept_hits, normals)
+            self._tip = (self._version, normals)
         tip_normals = self._tip[1]
         tip = None
         if tip_normals:
             tip = tip_touches((pts[n] - pts[n - 1]).tolist(), tip_normals, self.params.tip_angle_deg)
-        signature = (len(pts), tuple(kept_hits), tip)
+        signature = (len(pts), self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
-        env = primitives_per_point(len(pts), kept_hits)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
-            env,
+            self._env,
             np.diff(pts, axis=0),
             self.geometry.face_normal,
             tip_angle_deg=self.params.tip_angle_deg,
@@ -174,66 +169,92 @@ class ContactTracker:
             self._tols = (self.enter_tol, self.leave_tol, np.array([r + self.enter_tol, r + self.leave_tol]))
         return self._tols[2]
 
-    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, objs: Any) -> list[_Hit]:
-        """The touching hits of this step (:func:`dlovr.sim.kernels.track_step`): the pairs the
-        simulator reports in ``table`` (and those touching at the last step; every point against
-        every piece without a table) keep their last labels while their points stay within their
-        slack or budgets; the others are labelled again (all of them, or the moved points alone)."""
+    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, objs: Any) -> None:
+        """This step's touching hits (:func:`dlovr.sim.track_kernels.track_step`), and the forces on
+        the last situation's contact spans: the pairs the simulator reports in ``table`` (and those
+        touching at the last step; every point against every piece without a table) keep their last
+        labels while their points stay within their slack or budgets; the others are labelled again
+        (all of them, or the moved points alone). The environment primitives of the points whose hits
+        changed are made again (``_env``, ``_point_faces``, ``_version``)."""
         has = table is not None
         table = _NO_TABLE if table is None else table
         n1, nc = len(pts), len(table)
-        if nc > self._cap_c or n1 != self._n1 or len(self._touching) != self._cap_h:
-            self._scratch(n1, nc)
-        lab = self._labels
-        out, k, nq, n_again, bad = kernels.track_step(
-            pts, table, has, self._piece_table(objs) if has else _NO_MAP, self._n_pieces, self.reuse,
-            lab is not None, *(lab or _NO_LABELS), self._state, self._touching, self._emitted, self._pairs,
-            self._owner, self._qpts, self._point_of, self._again,
+        lab_i, lab_f = self._lab or _NO_LABELS
+        if n1 != self._n1:
+            self._alloc(n1, nc, 0)
+        elif nc > self._cap_c:
+            self._alloc(n1, max(nc, 2 * self._cap_c), self._cap_h)
+        wi, wf, spans = self._work_i, self._work_f, self._spans[1]
+        out, k, nq, n_again, bad = tk.track_step(
+            pts, table, has, self._piece_table(objs) if has else _NO_MAP, self._n_pieces, spans, self.reuse,
+            lab_i, lab_f, wi, wf,
         )  # fmt: skip
-        if out >= kernels.FULL:
-            thr, r = self._thresholds(), self.geometry.radius
-            args = (self._gf, self._gi, self._width, r, self.leave_tol, r / 5.0, thr, self._qpts[:nq],
-                    self._pairs[:k])  # fmt: skip
-            if out == kernels.FULL or lab is None:
+        if out >= tk.FULL:
+            r = self.geometry.radius
+            thr = self._thresholds()
+            args = (self._gf, self._gi, self._width, r, self.leave_tol, r / 5.0, thr, wi, wf, k, nq)
+            if out == tk.FULL:
                 self.labellings += 1
-                lab = kernels.relabel_full(*args)
+                lab_i, lab_f = tk.relabel_full(*args)
             else:
                 self.partial_labellings += 1
-                lab = (*lab[:5], kernels.relabel_partial(*args, self._again[:n_again], *lab[1:]))
-            self._labels = lab
-            if len(lab[5]) > len(self._touching):
-                self._grow_hits(len(lab[5]))
-            changed = kernels.update_hits(lab[5], self._owner, self._state, self._touching, self._emitted)
-        elif out == kernels.BAD_PIECE:
-            obj, piece = int(table[bad, kernels.T_OBJ]), int(table[bad, kernels.T_PIECE])
+                lab_i = tk.relabel_partial(*args, n_again, lab_i, lab_f)
+            self._lab = (lab_i, lab_f)
+            if lab_i[2] > self._cap_h:
+                self._alloc(n1, self._cap_c, max(int(lab_i[2]), 2 * self._cap_h))
+            changed = tk.after_relabel(lab_i, lab_f, self._work_i, self._work_f, spans, table)
+        elif out == tk.BAD_PIECE:
+            obj, piece = int(table[bad, T_OBJ]), int(table[bad, T_PIECE])
             name = objs[obj] if 0 <= obj < len(objs) else obj
             raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
         else:
-            changed = out == kernels.CHANGED
+            changed = out == tk.CHANGED
         if changed:
-            face = self.geometry.face_tuple
-            em = self._emitted[: self._state[1]]
-            self._hits = [_Hit(p, face(row)) for p, row in zip(em[:, 0].tolist(), em[:, 1:], strict=True)]
-        return self._hits
+            face, made = self.geometry.face_tuple, self._made
+            group, start = self._group, self._start
+            for p in self._changed[: self._work_i[tk.W_CHANGED_N]].tolist():
+                faces = [face(row) for row in group[start[p] : start[p + 1]]]
+                self._point_faces[p] = faces
+                self._env[p] = point_primitives(faces, made)
+            self._version += 1
 
-    def _scratch(self, n1: int, nc: int) -> None:
-        """Per-step buffers of :func:`dlovr.sim.kernels.track_step` for ``n1`` points and at least
-        ``nc`` contacts."""
-        self._n1, self._cap_c, self._cap_h = n1, max(nc, 2 * self._cap_c, 16), len(self._touching)
-        cap_k = n1 * self._n_pieces + 2 * self._cap_c + self._cap_h
-        self._pairs = np.zeros((cap_k, 2), np.int64)
-        self._owner = np.zeros(n1 + self._cap_c, np.int64)
-        self._qpts = np.zeros((n1 + self._cap_c, 3))
-        self._point_of = np.zeros(self._cap_c, np.int64)
-        self._again = np.zeros(n1 + self._cap_c, np.int64)
-
-    def _grow_hits(self, n: int) -> None:
-        """Room for ``n`` touching keys and kept hits (their contents kept)."""
-        cap = max(n, 2 * len(self._touching))
-        touching, emitted = np.zeros(cap, np.int64), np.zeros((cap, 1 + self._width), np.int64)
-        touching[: len(self._touching)] = self._touching
-        emitted[: len(self._emitted)] = self._emitted
-        self._touching, self._emitted = touching, emitted
+    def _alloc(self, n1: int, nc: int, cap_h: int) -> None:
+        """Work arrays of :mod:`dlovr.sim.track_kernels` for ``n1`` points, at least ``nc`` contacts and
+        ``cap_h`` kept hits; what a step keeps (the touching keys, the grouped hits, this step's query
+        points, owners and contacts' points) is copied over when the points stay the same."""
+        old = (self._work_i, self._work_f) if n1 == self._n1 else None
+        w = self._width
+        cap_c, cap_h = max(nc, 16), max(cap_h, 16)
+        cap_q = n1 + cap_c
+        cap_k = n1 * self._n_pieces + 2 * cap_c + cap_h
+        sizes = (cap_h, cap_h * w, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
+        offsets = np.cumsum((tk.W_HEAD, *sizes))
+        wi = np.zeros(int(offsets[-1]), np.int64)
+        wi[[tk.W_POINTS, tk.W_WIDTH, tk.W_CAP_H]] = n1, w, cap_h
+        wi[[tk.W_TOUCH, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF,
+            tk.W_AGAIN]] = offsets[:-1]  # fmt: skip
+        wi[tk.W_QPTS], wi[tk.W_FORCES] = 0, 3 * cap_q
+        wf = np.zeros(3 * cap_q + 2 * n1 + 8)
+        if old is not None:  # copy every section over, at its new place
+            oi, of = old
+            wi[: tk.W_CAP_H] = oi[: tk.W_CAP_H]
+            for sec, nxt in zip(_SECTIONS, (*_SECTIONS[1:], None), strict=True):
+                a = oi[oi[sec] : oi[nxt] if nxt is not None else len(oi)]
+                if sec == tk.W_GROUP:
+                    a = a.reshape(-1, w)
+                    wi[wi[sec] : wi[sec] + a.size] = a.ravel()
+                else:
+                    wi[wi[sec] : wi[sec] + len(a)] = a
+            wf[: oi[tk.W_FORCES]] = of[: oi[tk.W_FORCES]]  # the query points
+        else:
+            self._env: list[list[Any]] = [[] for _ in range(n1)]
+            self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
+            self._version = 0
+        self._work_i, self._work_f, self._n1, self._cap_c, self._cap_h = wi, wf, n1, cap_c, cap_h
+        self._group = wi[wi[tk.W_GROUP] : wi[tk.W_START]].reshape(cap_h, w)
+        self._start = wi[wi[tk.W_START] : wi[tk.W_START] + n1 + 1]
+        self._changed = wi[wi[tk.W_CHANGED] : wi[tk.W_CHANGED] + n1]
+        self._forces_out = wf[3 * cap_q :]
 
     def _piece_table(self, objs: Any) -> np.ndarray:
         """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
@@ -257,9 +278,9 @@ class ContactTracker:
         table = None if arrays is None else getattr(arrays, "table", None)
         if arrays is not None and table is None:
             table = _table_of(arrays)
-        hits = self._label_step(pts, table, None if arrays is None else arrays.names[0])
+        self._label_step(pts, table, None if arrays is None else arrays.names[0])
         prev = self.current
-        topo = self.classify(pts, record.gripper_z, hits)
+        topo = self.classify(pts, record.gripper_z)
         if prev is not None and (
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
@@ -280,15 +301,18 @@ class ContactTracker:
         return state
 
     def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
-        """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span."""
+        """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span
+        (summed by the kernels on the last situation's spans; again here when the situation changed)."""
         if table is None or len(table) == 0:
             return tuple(0.0 for _ in topo.contacts)
-        if self._spans is None or self._spans[0] is not topo:
+        if self._spans[0] is not topo:
             spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in topo.contacts]
             self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
-        out = np.empty(len(topo.contacts))
-        kernels.span_forces(self._spans[1], self._point_of, table, out)
-        return tuple(out.tolist())
+            if len(spans) > len(self._forces_out):
+                raise RuntimeError("more contacts than the cable has points")
+            wi = self._work_i
+            tk.span_forces(self._spans[1], wi[wi[tk.W_POINT_OF] : wi[tk.W_AGAIN]], table, self._forces_out)
+        return tuple(self._forces_out[: len(topo.contacts)].tolist())
 
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
         """The kept situations with the classes of the transition into each (``()`` for the first)."""
@@ -325,17 +349,18 @@ def _table_of(arrays: Any) -> np.ndarray:
     """Contact rows (:mod:`dlovr.sim.kernels`) of raw contact arrays given as columns (``point``,
     ``segment``, ``obj``, ``piece``, ``pos``, ``force``: what the tracker reads)."""
     n = len(arrays.point)
-    table = np.zeros((n, kernels.T_WIDTH))
-    for col, name in ((kernels.T_POINT, "point"), (kernels.T_SEGMENT, "segment"), (kernels.T_OBJ, "obj"),
-                      (kernels.T_PIECE, "piece"), (kernels.T_FORCE, "force")):  # fmt: skip
+    table = np.zeros((n, T_WIDTH))
+    for col, name in ((T_POINT, "point"), (T_SEGMENT, "segment"), (T_OBJ, "obj"), (T_PIECE, "piece"),
+                      (T_FORCE, "force")):  # fmt: skip
         table[:, col] = np.asarray(getattr(arrays, name), dtype=float).reshape(n)
-    table[:, kernels.T_POS : kernels.T_POS + 3] = np.asarray(arrays.pos, dtype=float).reshape(n, 3)
+    table[:, T_POS : T_POS + 3] = np.asarray(arrays.pos, dtype=float).reshape(n, 3)
     return table
 
 
-_NO_TABLE = np.zeros((0, kernels.T_WIDTH))
+_NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
-_NO_LABELS = (
-    np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 6)),
-    np.zeros((0, 4), np.int64),
+_NO_LABELS = (np.zeros(0, np.int64), np.zeros(0))
+_NO_SPANS = np.zeros((0, 2), np.int64)
+_SECTIONS = (
+    tk.W_TOUCH, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF, tk.W_AGAIN
 )  # fmt: skip
