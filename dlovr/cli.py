@@ -213,6 +213,13 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
     return scene, tracker
 
 
+def _warm_up() -> None:
+    """Compile the per-step kernels on the first run, saying so (on stderr)."""
+    from dlovr.sim.warmup import warm_up
+
+    warm_up(lambda notice: click.echo(notice, err=True))
+
+
 def _states_table(rows: list[dict]) -> str:
     lines = [f"{'step':>4}  {'t [s]':>8}  {'class':<5}  topological  |  discrete"]
     for i, r in enumerate(rows, 1):
@@ -258,6 +265,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
+    _warm_up()
     _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
@@ -514,6 +522,7 @@ def scene_export_cmd(ref: str, out: str) -> None:
 def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None:
     """Serve the browser teleoperation UI (viser) with the simulation running in real time."""
     scene = _scene(scene_ref)
+    _warm_up()
     from dlovr.ui import serve
 
     try:

@@ -9,8 +9,9 @@ the same on every x86-64 processor (their labels go into recordings that replay 
 :func:`fma` is the one explicit fused multiply-add, correctly rounded everywhere.
 
 :func:`kernels_warm` tells whether this installation has compiled them already (a marker file keyed
-by the versions of Python, numba and dlovr and the kernels' sources), so that commands can say
-"compiling kernels (first run only)" while :func:`dlovr.sim.warm_up` compiles them.
+by the versions of Python, numba and dlovr and the kernels' sources, beside numba's cache), so that
+commands can say "compiling kernels (first run only)" while :func:`dlovr.sim.warm_up` compiles them;
+:func:`check_cache` drops cached kernels compiled from other sources.
 """
 
 from __future__ import annotations
@@ -47,9 +48,14 @@ if os.environ.get("NUMBA_CACHE_DIR") and numba.config.CACHE_DIR != os.environ["N
     numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba was imported before dlovr
 
 
+_KERNELS: dict[str, list[Any]] = {}  # the kernels of each module
+
+
 def njit(fn: Callable[..., Any]) -> Any:
     """``numba.njit`` as dlovr's kernels use it: cached on disk, no fastmath, no Python fallback."""
-    return numba.njit(cache=True, nogil=True)(fn)
+    kernel = numba.njit(cache=True, nogil=True)(fn)
+    _KERNELS.setdefault(fn.__module__, []).append(kernel)
+    return kernel
 
 
 @intrinsic
@@ -69,16 +75,57 @@ def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
 KERNEL_SOURCES = ("geometry/kernels.py", "sim/kernels.py", "sim/track_kernels.py", "jit.py")
 
 
-def _marker() -> Path:
+def _key() -> str:
+    """The versions and the kernels' sources, hashed: compiled kernels are valid for one key."""
     h = hashlib.sha256(f"{sys.version}|{numba.__version__}|{__version__}".encode())
     for rel in KERNEL_SOURCES:
         h.update((_PACKAGE / rel).read_bytes())
-    return cache_dir() / "numba-warm" / h.hexdigest()[:24]
+    return h.hexdigest()[:24]
+
+
+def _cache_path(module: str) -> Path | None:
+    """Where numba caches ``module``'s kernels (None if it cannot tell)."""
+    kernels = _KERNELS.get(module)
+    try:
+        return Path(kernels[0]._cache._cache_path) if kernels else None
+    except AttributeError:
+        return None
+
+
+def check_cache(module: str) -> None:
+    """Drop ``module``'s cached kernels if they were compiled from other kernel sources.
+
+    numba checks a cached kernel against its own source file only, while kernels call kernels of
+    other modules (compiled into them): after any kernel source changes, every module's cache is
+    flushed once, so nothing stale runs. Called at the end of each kernel module."""
+    path = _cache_path(module)
+    if path is None:
+        return
+    stamp = path / f"dlovr-{module.rpartition('.')[2]}.key"
+    key = _key()
+    try:
+        if stamp.is_file() and stamp.read_text() == key:
+            return
+        for kernel in _KERNELS[module]:
+            kernel._cache.flush()
+        path.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(key)
+    except (OSError, AttributeError):
+        pass
+
+
+def _marker() -> Path:
+    path = _cache_path("dlovr.sim.track_kernels") or cache_dir() / "numba"
+    return path / "dlovr-kernels.warm"
 
 
 def kernels_warm() -> bool:
-    """Whether this installation has compiled the current kernels already (see the module docstring)."""
-    return _marker().is_file()
+    """Whether this installation has compiled the current kernels already (see the module docstring;
+    import the kernel modules first)."""
+    try:
+        return _marker().read_text() == _key()
+    except OSError:
+        return False
 
 
 def mark_kernels_warm() -> None:
@@ -86,6 +133,6 @@ def mark_kernels_warm() -> None:
     path = _marker()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(f"dlovr {__version__}, numba {numba.__version__}\n")
+        path.write_text(_key())
     except OSError:
         pass

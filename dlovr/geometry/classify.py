@@ -121,11 +121,12 @@ class _Classifier:
         r = self.radius if radius is None else float(radius)
         ttol = r / 5.0 if tangential_tol is None else float(tangential_tol)
         pk = self.packed()
+        every = np.arange(len(pts), dtype=np.int64)
         hit_i = np.empty((len(pts) * max(len(self.pieces), 1), 2 + pk.width), np.int64)
         hit_f = np.empty((len(hit_i), 4))
-        h = kernels.classify_points(
-            pk.floats, pk.ints, pts, r, self.radius, float(contact_tol), ttol, _NO_THRESHOLDS, False,
-            hit_i, hit_f, np.empty(len(pts)),
+        h = kernels.pair_hits(
+            pk.floats, pk.ints, pts, every, every, r, self.radius, float(contact_tol), ttol, _NO_THRESHOLDS,
+            False, True, hit_i, hit_f, np.empty(len(pts)), np.empty((0, 6)),
         )  # fmt: skip
         hits = [
             PointHit(int(hit_i[j, 0]), self.pieces[int(hit_i[j, 1])], hit_f[j, 1:].copy(), float(hit_f[j, 0]),

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from dlovr.geometry.packing import E_, EXTERNAL, F_, HEAD, INTERNAL, MIXED, O_, P_, T_
-from dlovr.jit import fma, njit
+from dlovr.jit import check_cache, fma, njit
 
 _FO = HEAD  # float section offsets
 _IO = HEAD + 12  # integer section offsets
@@ -50,14 +50,11 @@ def norm3(x: float, y: float, z: float) -> float:
 def np_sum(a: np.ndarray) -> float:
     """``a.sum()`` rounded as numpy rounds it for a 1-D array: pairwise summation, halving blocks of
     more than 128 at a multiple of 8, blocks summed with 8 accumulators (fewer than 8: in order)."""
-    n = a.shape[0]
-    if n <= 128:
-        return 0.0 + _block_sum(a, 0, n)
     # the halving, without recursion: a stack of (start, length, right half pending, left sum)
     los, ns = np.empty(64, np.int64), np.empty(64, np.int64)
     right, part = np.zeros(64, np.bool_), np.empty(64)
     top = 0
-    los[0], ns[0] = 0, n
+    los[0], ns[0] = 0, a.shape[0]
     while True:
         lo, m = los[top], ns[top]
         if m > 128:  # split: the left half first
@@ -138,23 +135,26 @@ def unpack(gf: np.ndarray, gi: np.ndarray):
 
 
 @njit
-def closest_on_segment(px: float, py: float, pz: float, a: np.ndarray, b: np.ndarray):
-    """Closest point (x, y, z) on segment ``a``-``b`` to ``p`` and its distance."""
-    abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+def closest_on_segment(px: float, py: float, pz: float, a: np.ndarray, b: np.ndarray, e: int):
+    """Closest point (x, y, z) on segment ``a[e]``-``b[e]`` to ``p`` and its distance."""
+    ax, ay, az = a[e, 0], a[e, 1], a[e, 2]
+    abx, aby, abz = b[e, 0] - ax, b[e, 1] - ay, b[e, 2] - az
     den = dot3(abx, aby, abz, abx, aby, abz)
     if den == 0.0:
         den = 1.0
-    t = dot3(px - a[0], py - a[1], pz - a[2], abx, aby, abz) / den
+    t = dot3(px - ax, py - ay, pz - az, abx, aby, abz) / den
     t = min(max(t, 0.0), 1.0)
-    qx, qy, qz = a[0] + t * abx, a[1] + t * aby, a[2] + t * abz
+    qx, qy, qz = ax + t * abx, ay + t * aby, az + t * abz
     return qx, qy, qz, norm3(px - qx, py - qy, pz - qz)
 
 
 @njit
-def in_triangles(qx: float, qy: float, qz: float, g, j: int, tol: float) -> bool:
-    """Whether ``q`` (near their plane) lies in one of the exposed triangles of packed face ``j``."""
-    starts, inwards, rng = g[7], g[8], g[17]
-    for t in range(rng[j], rng[j + 1]):
+def in_triangles(
+    qx: float, qy: float, qz: float, starts: np.ndarray, inwards: np.ndarray, t0: int, t1: int, tol: float
+) -> bool:
+    """Whether ``q`` (near their plane) lies in one of triangles ``t0``..``t1`` (edge start points and
+    inward in-plane edge normals)."""
+    for t in range(t0, t1):
         ok = True
         for e in range(3):
             s, w = starts[t, e], inwards[t, e]
@@ -167,22 +167,23 @@ def in_triangles(qx: float, qy: float, qz: float, g, j: int, tol: float) -> bool
 
 
 @njit
-def outline_slack(qx: float, qy: float, qz: float, g, j: int) -> float:
-    """How far ``q`` on mixed face ``j`` may move before it crosses its exposed part's outline,
-    less the tolerance of the in-triangle test (0 for a face without outline)."""
-    a, b, rng = g[9], g[10], g[18]
-    if rng[j + 1] == rng[j]:
+def outline_slack(qx: float, qy: float, qz: float, a: np.ndarray, b: np.ndarray, s0: int, s1: int) -> float:
+    """How far ``q`` on a mixed face may move before it crosses its exposed part's outline (segments
+    ``s0``..``s1``), less the tolerance of the in-triangle test (0 for a face without outline)."""
+    if s1 == s0:
         return 0.0
     d = _INF
-    for s in range(rng[j], rng[j + 1]):
-        d = min(d, closest_on_segment(qx, qy, qz, a[s], b[s])[3])
+    for s in range(s0, s1):
+        d = min(d, closest_on_segment(qx, qy, qz, a, b, s)[3])
     return max(d - 1e-8, 0.0)
 
 
 @njit
-def inside_other(qx: float, qy: float, qz: float, obj: int, margin: float, g) -> bool:
+def inside_other(
+    qx: float, qy: float, qz: float, obj: int, margin: float, normals: np.ndarray, offsets: np.ndarray,
+    nfaces: np.ndarray, owner: np.ndarray,
+) -> bool:  # fmt: skip
     """Whether ``q`` lies inside (deeper than ``margin``) a piece of an object other than ``obj``."""
-    normals, offsets, nfaces, owner = g[0], g[1], g[11], g[14]
     for k in range(nfaces.shape[0]):
         if owner[k] == obj:
             continue
@@ -198,10 +199,12 @@ def inside_other(qx: float, qy: float, qz: float, obj: int, margin: float, g) ->
 
 
 @njit
-def cover_margin(qx: float, qy: float, qz: float, obj: int, g):
+def cover_margin(
+    qx: float, qy: float, qz: float, obj: int, normals: np.ndarray, offsets: np.ndarray, nfaces: np.ndarray,
+    owner: np.ndarray,
+):  # fmt: skip
     """For a free-side probe ``q`` of a face of object ``obj``: whether a piece of another object
     covers it (its largest plane residual below -1e-9) and how far it may move before that changes."""
-    normals, offsets, nfaces, owner = g[0], g[1], g[11], g[14]
     covered = False
     margin = _INF
     for k in range(nfaces.shape[0]):
@@ -226,7 +229,8 @@ def classify_point(
     py: float,
     pz: float,
     point: int,
-    g,
+    gf: np.ndarray,
+    gi: np.ndarray,
     r: float,
     radius: float,
     contact_tol: float,
@@ -241,8 +245,11 @@ def classify_point(
     from row ``h`` on; returns the next free row and the slack of the decisions (inf without
     ``with_slack``). Active faces: the closest feature's and those of every edge within ``ttol`` of
     the closest point; internal faces, a mixed face's internal part and covered faces are dropped."""
+    g = unpack(gf, gi)
     normals, offsets, lo, hi, eps_, edge_a, edge_b = g[0], g[1], g[2], g[3], g[4], g[5], g[6]
+    starts, inwards, out_a, out_b = g[7], g[8], g[9], g[10]
     nfaces, label, name, owner, edge_range, edge_faces = g[11], g[12], g[13], g[14], g[15], g[16]
+    tri_range, out_range = g[17], g[18]
     n_f = normals.shape[1]
     reach = r + contact_tol
     slack = _INF
@@ -278,7 +285,7 @@ def classify_point(
         be = _INF  # the nearest edge (the first of equals) and its closest point
         qex = qey = qez = 0.0
         for e in range(edge_range[k], edge_range[k + 1]):
-            x, y, z, d = closest_on_segment(px, py, pz, edge_a[e], edge_b[e])
+            x, y, z, d = closest_on_segment(px, py, pz, edge_a, edge_b, e)
             if d < be:
                 be, qex, qey, qez = d, x, y, z
         use_face = bf <= be
@@ -307,7 +314,7 @@ def classify_point(
             active[best_f] = True
         mc = margin
         for e in range(edge_range[k], edge_range[k + 1]):
-            dq = closest_on_segment(qx, qy, qz, edge_a[e], edge_b[e])[3]
+            dq = closest_on_segment(qx, qy, qz, edge_a, edge_b, e)[3]
             if dq <= ttol:
                 active[edge_faces[e, 0]] = True
                 active[edge_faces[e, 1]] = True
@@ -320,14 +327,14 @@ def classify_point(
             n = normals[k, f]
             ok = True
             if label[k, f] == MIXED:
-                ok = in_triangles(qx, qy, qz, g, j, max(eps, 1e-9))
+                ok = in_triangles(qx, qy, qz, starts, inwards, tri_range[j], tri_range[j + 1], max(eps, 1e-9))
             two_r = 2.0 * radius
             bx, by, bz = qx + two_r * n[0], qy + two_r * n[1], qz + two_r * n[2]
-            ok = ok and not inside_other(bx, by, bz, owner[k], 1e-9, g)
+            ok = ok and not inside_other(bx, by, bz, owner[k], 1e-9, normals, offsets, nfaces, owner)
             if with_slack:
                 if label[k, f] == MIXED:
-                    mc = min(mc, outline_slack(qx, qy, qz, g, j))
-                mc = min(mc, cover_margin(bx, by, bz, owner[k], g)[1])
+                    mc = min(mc, outline_slack(qx, qy, qz, out_a, out_b, out_range[j], out_range[j + 1]))
+                mc = min(mc, cover_margin(bx, by, bz, owner[k], normals, offsets, nfaces, owner)[1])
             if ok:
                 h = _add_face(hit_i, start, h, width, name[k, f], point, k)
         if h > start:  # one hit row, its faces sorted and once each
@@ -359,34 +366,6 @@ def _add_face(hit_i: np.ndarray, row: int, h: int, width: int, face: int, point:
     return row + 1
 
 
-@njit
-def classify_points(
-    gf: np.ndarray,
-    gi: np.ndarray,
-    pts: np.ndarray,
-    r: float,
-    radius: float,
-    contact_tol: float,
-    ttol: float,
-    thresholds: np.ndarray,
-    with_slack: bool,
-    hit_i: np.ndarray,
-    hit_f: np.ndarray,
-    slack: np.ndarray,
-) -> int:
-    """:func:`classify_point` for every point of ``pts`` (hit rows by point, then piece); ``slack``
-    gets each point's slack. Returns the number of hits (``hit_i`` needs a row per point and piece)."""
-    g = unpack(gf, gi)
-    h = 0
-    for i in range(pts.shape[0]):
-        h, s = classify_point(
-            pts[i, 0], pts[i, 1], pts[i, 2], i, g, r, radius, contact_tol, ttol, thresholds, with_slack,
-            hit_i, hit_f, h,
-        )  # fmt: skip
-        slack[i] = s
-    return h
-
-
 # --------------------------------------------------------------------------------------------------
 # labels of given (point, piece) pairs
 
@@ -398,17 +377,22 @@ def pair_hits(
     pts: np.ndarray,
     pi: np.ndarray,
     pc: np.ndarray,
+    r: float,
     radius: float,
     contact_tol: float,
     ttol: float,
     thresholds: np.ndarray,
     with_slack: bool,
+    every_piece: bool,
     hit_i: np.ndarray,
     hit_f: np.ndarray,
     slack: np.ndarray,
     budgets: np.ndarray,
 ) -> int:
     """Hits of the (point ``pi``, piece ``pc``) pairs, sorted by point then piece; returns their count.
+    ``radius``: the cable's (its free-side probes); ``r``: the one the contact distance
+    ``r + contact_tol`` is measured with; ``every_piece``: classify each point of ``pi`` against
+    every piece (:func:`classify_point`) instead.
 
     A pair whose closest point lies inside one face, at least ``ttol`` from its other planes, is
     decided here: a contact with that face when it is exposed there (external, or the exposed part
@@ -424,9 +408,10 @@ def pair_hits(
     """
     g = unpack(gf, gi)
     normals, offsets, label, name, owner, nfaces = g[0], g[1], g[12], g[13], g[14], g[11]
+    starts, inwards, out_a, out_b, tri_range, out_range = g[7], g[8], g[9], g[10], g[17], g[18]
     n_f = normals.shape[1]
-    k_n = pi.shape[0]
-    reach = radius + contact_tol
+    k_n = 0 if every_piece else pi.shape[0]
+    reach = r + contact_tol
     width = hit_i.shape[1] - 2
     res = np.empty(n_f)
     rb = np.empty(k_n)
@@ -436,6 +421,9 @@ def pair_hits(
     amb = np.zeros(pts.shape[0], np.bool_)
     if with_slack:
         slack[:] = _INF
+    if every_piece:
+        for i in pi:
+            amb[i] = True
     for j in range(k_n):
         k, p = pc[j], pts[pi[j]]
         fk = nfaces[k]
@@ -461,13 +449,14 @@ def pair_hits(
         mixed = False
         if interior and lab != EXTERNAL:
             mixed = lab == MIXED
-            exposed = mixed and in_triangles(qx, qy, qz, g, k * n_f + b, 1e-9)
+            t0, t1 = tri_range[k * n_f + b], tri_range[k * n_f + b + 1]
+            exposed = mixed and in_triangles(qx, qy, qz, starts, inwards, t0, t1, 1e-9)
         probed = interior and (lab == EXTERNAL or mixed) if with_slack else exposed
         cover = _INF
         if probed:
             two_r = 2.0 * radius
             bx, by, bz = qx + two_r * nb[0], qy + two_r * nb[1], qz + two_r * nb[2]
-            covered, cover = cover_margin(bx, by, bz, owner[k], g)
+            covered, cover = cover_margin(bx, by, bz, owner[k], normals, offsets, nfaces, owner)
             exposed = exposed and not covered
         if not (far or interior):
             amb[pi[j]] = True
@@ -479,7 +468,8 @@ def pair_hits(
             across = _INF if far else abs(rq + ttol)
             whole = rbj - reach if far else (rbj - second) / 2.0
             if interior and mixed:
-                across = min(across, outline_slack(qx, qy, qz, g, k * n_f + b))
+                s0, s1 = out_range[k * n_f + b], out_range[k * n_f + b + 1]
+                across = min(across, outline_slack(qx, qy, qz, out_a, out_b, s0, s1))
             if probed:
                 across = min(across, cover)
                 for t in thresholds:
@@ -487,7 +477,7 @@ def pair_hits(
             budgets[j, 0], budgets[j, 1], budgets[j, 2] = nb[0], nb[1], nb[2]
             budgets[j, 3], budgets[j, 4], budgets[j, 5] = along, across, whole
             slack[pi[j]] = min(slack[pi[j]], min(min(along, across), whole))
-    h = 0
+    h = np.int64(0)  # not a literal: a literal would compile the callees twice
     for j in range(k_n):
         if take[j] and not amb[pi[j]]:
             hit_i[h, 0], hit_i[h, 1] = pi[j], pc[j]
@@ -495,15 +485,14 @@ def pair_hits(
             hit_i[h, 2] = name[pc[j], best[j]]
             hit_f[h, 0], hit_f[h, 1], hit_f[h, 2], hit_f[h, 3] = rb[j], q[j, 0], q[j, 1], q[j, 2]
             h += 1
-    r = radius
     for i in range(pts.shape[0]):
         if amb[i]:
-            h, s = classify_point(
-                pts[i, 0], pts[i, 1], pts[i, 2], i, g, r, radius, contact_tol, ttol, thresholds, with_slack,
-                hit_i, hit_f, h,
+            h, si = classify_point(
+                pts[i, 0], pts[i, 1], pts[i, 2], i, gf, gi, r, radius, contact_tol, ttol, thresholds,
+                with_slack, hit_i, hit_f, h,
             )  # fmt: skip
             if with_slack:
-                slack[i] = min(slack[i], s)
+                slack[i] = min(slack[i], si)
     if with_slack:  # near an edge or vertex: the point's slack, in every direction
         for j in range(k_n):
             if amb[pi[j]]:
@@ -514,16 +503,16 @@ def pair_hits(
 
 @njit
 def _sort_hits(hit_i: np.ndarray, hit_f: np.ndarray, h: int, width: int) -> None:
-    """Sort the first ``h`` hit rows by point, then piece (stable)."""
-    if h < 2:
-        return
-    keys = hit_i[:h, 0] * (1 << 20) + hit_i[:h, 1]
-    order = np.argsort(keys, kind="mergesort")
-    ii = hit_i[:h].copy()
-    ff = hit_f[:h].copy()
-    for a in range(h):
-        hit_i[a] = ii[order[a]]
-        hit_f[a] = ff[order[a]]
+    """Sort the first ``h`` hit rows by point, then piece (stable; an insertion sort: the rows come
+    nearly sorted)."""
+    for a in range(1, h):
+        b = a
+        while b > 0 and (hit_i[b - 1, 0], hit_i[b - 1, 1]) > (hit_i[b, 0], hit_i[b, 1]):
+            for c in range(2 + width):
+                hit_i[b - 1, c], hit_i[b, c] = hit_i[b, c], hit_i[b - 1, c]
+            for c in range(4):
+                hit_f[b - 1, c], hit_f[b, c] = hit_f[b, c], hit_f[b - 1, c]
+            b -= 1
 
 
 @njit
@@ -550,4 +539,7 @@ def inside_other_points(
     """:func:`inside_other` for every point of ``q`` (into ``out``)."""
     g = unpack(gf, gi)
     for i in range(q.shape[0]):
-        out[i] = inside_other(q[i, 0], q[i, 1], q[i, 2], obj, margin, g)
+        out[i] = inside_other(q[i, 0], q[i, 1], q[i, 2], obj, margin, g[0], g[1], g[11], g[14])
+
+
+check_cache(__name__)

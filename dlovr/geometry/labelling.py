@@ -155,8 +155,8 @@ class _Labelling(_Classifier):
         slack = np.full(len(pts), np.inf)
         table = np.empty((len(pi), 6))
         h = kernels.pair_hits(
-            pk.floats, pk.ints, pts, pi, pc, r, float(contact_tol), ttol,
-            np.asarray(thresholds or (), dtype=float), with_slack, hit_i, hit_f, slack, table,
+            pk.floats, pk.ints, pts, pi, pc, r, r, float(contact_tol), ttol,
+            np.asarray(thresholds or (), dtype=float), with_slack, False, hit_i, hit_f, slack, table,
         )  # fmt: skip
         faces = [self.face_tuple(hit_i[j, 2:]) for j in range(h)]
         out = (hit_i[:h, 0].copy(), hit_i[:h, 1].copy(), hit_f[:h, 0].copy(), faces, hit_f[:h, 1:].copy())

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from dlovr.geometry.kernels import dot3, np_sum
-from dlovr.jit import njit
+from dlovr.jit import check_cache, njit
 
 T_POINT, T_SEGMENT, T_GEOM, T_OBJ, T_PIECE, T_DIST = 0, 1, 2, 3, 4, 5
 T_NORMAL, T_POS, T_FORCE, T_ACTIVE, T_WIDTH = 6, 9, 12, 13, 14
@@ -162,3 +162,6 @@ def self_pairs(ncon: int, arena: np.ndarray, cfg: np.ndarray, out: np.ndarray) -
             a, b = ci[bi + layout[L_ELEM]], ci[bi + layout[L_ELEM] + 1]
             out[k, 0], out[k, 1] = min(a, b), max(a, b)
             k += 1
+
+
+check_cache(__name__)

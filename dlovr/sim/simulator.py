@@ -236,20 +236,25 @@ class Simulator:
 
     def _move_mocap(self) -> None:
         dt = self._dt
-        pos = self._mocap_pos
+        pos, target = self._mocap_pos, self.target_pos
+        p, t = pos.tolist(), target.tolist()
         # a gripper already at its target stays put (the general formulas below give the same values)
-        if pos.tolist() != self.target_pos.tolist():
-            delta = self.target_pos - pos
-            dist = norm(delta)  # not np.linalg.norm: this feeds MuJoCo (see dlovr.script.dot)
+        if p != t:
+            # in Python floats (as dlovr.transforms.norm; not np.linalg.norm: this feeds MuJoCo), the
+            # roundings of target - pos and pos + delta * (vmax / dist)
+            delta = [t[0] - p[0], t[1] - p[1], t[2] - p[2]]
+            dist = norm(delta)
             vmax = self.max_speed * dt
-            pos[:] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
-        q = self._mocap_quat
-        tq = self.target_quat
-        if q.tolist() != tq.tolist():
-            q = q.copy()
+            if dist <= vmax:
+                pos[:] = target
+            else:
+                f = vmax / dist
+                pos[:] = [p[0] + delta[0] * f, p[1] + delta[1] * f, p[2] + delta[2] * f]
+        q, tq = self._mocap_quat.tolist(), self.target_quat.tolist()
+        if q != tq:
             angle = 2.0 * math.acos(min(1.0, abs(dot(q, tq))))
             wmax = self.max_angular_speed * dt
-            self._mocap_quat[:] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
+            self._mocap_quat[:] = self.target_quat if angle <= wmax else slerp(q, tq, wmax / angle)
 
     # -- stepping -----------------------------------------------------------------------------------
 

@@ -1,19 +1,19 @@
-"""Compiled per-step kernels of the contact tracker (:class:`dlovr.sim.tracker.ContactTracker`):
+"""Compiled per-step kernel of the contact tracker (:class:`dlovr.sim.tracker.ContactTracker`):
 world frame, metres, newtons.
 
-:func:`track_step` is the common step, one call: where each contact lies on the cable, the pairs to
-label (merged with the touching ones), whether the last labels still hold (slack and budgets), the
-touching hits with hysteresis grouped by cable point (which points changed), and the normal forces
-per contact span. :func:`relabel_full` / :func:`relabel_partial` label the pairs or the moved points
-again (through :func:`dlovr.geometry.kernels.pair_hits`); :func:`update_hits` and
-:func:`span_forces` are also called alone after them.
+:func:`track_step` is one call per step: where each contact lies on the cable, the pairs to label
+(merged with the touching ones), whether the last labels still hold (slack and budgets), labelling
+the pairs or the moved points again when not (:func:`dlovr.geometry.kernels.pair_hits`), the touching
+hits with hysteresis grouped by cable point (which points changed), and the normal forces per
+contact span (:func:`span_forces`, also called alone when the situation changed).
 
-The tracker's arrays are packed to keep the calls cheap (numba checks every argument's type):
+The tracker's arrays are packed, with room to grow, to keep the call cheap (numba checks every
+argument's type, and returning arrays costs more than passing them):
 
-- labels ``lab_i`` (int64): header (pairs K, queried points Q, hits H, query points N), the queried
-  pairs (K,2: query point, piece id), the queried points (Q), the hit rows (H, 4 + W: query point,
-  piece id, within enter, within leave, face ids); ``lab_f`` (float64): where each query point was
-  labelled (N,3), the queried points' squared slacks (Q), the pairs' budgets (K,6);
+- labels ``lab_i`` (int64): header (``L_*``: pairs K, queried points Q, hits H, query points N), the
+  queried pairs (K,2: query point, piece id), the queried points (Q), the hit rows (H, 4 + W: query
+  point, piece id, within enter, within leave, face ids); ``lab_f`` (float64): where each query point
+  was labelled (N,3), the queried points' squared slacks (Q), the pairs' budgets (K,6);
 - work ``work_i`` (int64): header (``W_*``: counts, capacities and section offsets), the touching
   keys (cable point << 20 | piece id, sorted), the kept hits' face rows grouped by cable point and
   where each point's group starts, the points whose group changed at the last step, the queried
@@ -27,18 +27,23 @@ from __future__ import annotations
 import numpy as np
 
 from dlovr.geometry.kernels import dot3, keeps, np_sum, pair_hits
-from dlovr.jit import njit
+from dlovr.jit import check_cache, njit
 from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT
 
 # track_step's outcome
-REUSED, CHANGED, FULL, PARTIAL, BAD_PIECE = 0, 1, 2, 3, -1
+KEPT, PARTIAL, FULL, GROW, BAD_PIECE = 0, 1, 2, 3, -1
 _LOW = (1 << 20) - 1
 
-# work_i header: counts, then section offsets (in work_i; qpts and forces in work_f)
-W_TOUCH_N, W_KEPT_N, W_CHANGED_N, W_POINTS, W_WIDTH, W_CAP_H = 0, 1, 2, 3, 4, 5
-W_TOUCH, W_GROUP, W_START, W_CHANGED, W_PAIRS, W_OWNER, W_POINT_OF, W_AGAIN = 6, 7, 8, 9, 10, 11, 12, 13
-W_QPTS, W_FORCES, W_HEAD = 14, 15, 16
-L_HEAD = 4
+# work_i header: counts, capacities, then section offsets (in work_i; the query points and forces in
+# work_f), and the room asked for by GROW
+W_TOUCH_N, W_CHANGED_N, W_POINTS, W_WIDTH, W_CAP_H = 0, 1, 2, 3, 4
+W_TOUCH, W_GROUP, W_START, W_CHANGED, W_PAIRS, W_OWNER, W_POINT_OF, W_AGAIN = 5, 6, 7, 8, 9, 10, 11, 12
+W_QPTS, W_FORCES, W_NEED_H, W_NEED_I, W_NEED_F, W_AGAIN_N, W_HEAD = 13, 14, 15, 16, 17, 18, 19
+# lab_i header
+L_K, L_Q, L_H, L_N, L_HEAD = 0, 1, 2, 3, 4
+# parameters (float64): radius, contact tolerance of the labels (leave), tangential tolerance, enter
+# and leave distances
+P_RADIUS, P_TOL, P_TTOL, P_ENTER, P_LEAVE = 0, 1, 2, 3, 4
 
 
 @njit
@@ -60,7 +65,7 @@ def _work(work_i: np.ndarray, work_f: np.ndarray):
 
 @njit
 def _labels(lab_i: np.ndarray, lab_f: np.ndarray, width: int):
-    k, q, h, n = lab_i[0], lab_i[1], lab_i[2], lab_i[3]
+    k, q, h, n = lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N]
     a, b = L_HEAD + 2 * k, L_HEAD + 2 * k + q
     return (
         lab_i[L_HEAD:a].reshape((k, 2)),
@@ -78,33 +83,38 @@ def track_step(
     table: np.ndarray,
     has_arrays: bool,
     piece_map: np.ndarray,
-    n_pieces: int,
     spans: np.ndarray,
     reuse: bool,
+    gf: np.ndarray,
+    gi: np.ndarray,
+    params: np.ndarray,
     lab_i: np.ndarray,
     lab_f: np.ndarray,
     work_i: np.ndarray,
     work_f: np.ndarray,
 ):
-    """One step of the tracker up to its touching hits and forces.
+    """One step of the tracker: its touching hits and the forces on ``spans``.
 
     From the cable ``pts`` and the contact ``table``: each contact's cable point (its vertex, or the
     nearer end of its segment; -1 for none), the queried pairs (query point, piece id; the reported
     pairs and the touching ones, unique and sorted, then one per segment contact at its centerline
     point) with their query points and owner cable points. Without ``has_arrays`` every point is
-    queried against every piece.
+    queried against every piece (``gi`` holds their number).
 
-    The last labels (``lab_*``; an empty ``lab_i`` for none) are kept when the same pairs are queried
-    and every query point moved by less than its slack, or within its budgets; then the hits are
-    made with hysteresis (:func:`update_hits`) and the forces summed over ``spans``
-    (:func:`span_forces`). Returns (outcome, pairs, query points, points to label again, bad row):
-    ``REUSED``/``CHANGED`` (the kept hits changed), ``FULL`` (label every pair again), ``PARTIAL``
-    (label the points to label again), ``BAD_PIECE`` (row ``bad row`` names a piece that
-    ``piece_map`` lacks).
+    The last labels (``lab_*``; an empty header for none) are kept when the same pairs are queried
+    and every query point moved by less than its slack, or within its budgets; else every pair
+    (``FULL``), or the pairs of the points that moved beyond (``PARTIAL``), are labelled again and
+    spliced in. Then the hits are made with hysteresis (:func:`update_hits`) and the forces summed.
+
+    Returns (outcome, whether the kept hits changed, bad row): ``KEPT``/``PARTIAL``/``FULL``,
+    ``GROW`` (the labels or the work arrays need the room in the work header's ``W_NEED_*``: grow
+    them, keeping their contents, and call again; nothing was changed) or ``BAD_PIECE`` (row
+    ``bad row`` of the table names a piece that ``piece_map`` lacks).
     """
     touching, _, _, _, pairs, owner, point_of, again, qpts, forces = _work(work_i, work_f)
+    width, n_pieces = work_i[W_WIDTH], gi[0]
     n1 = pts.shape[0]
-    k = 0
+    k = np.int64(0)  # not a literal: a literal would compile the callees twice
     nq = n1
     for i in range(n1):
         owner[i] = i
@@ -117,13 +127,13 @@ def track_step(
                 k += 1
     else:
         nc = table.shape[0]
-        width = piece_map.shape[1]
+        width_map = piece_map.shape[1]
         keys = np.empty(nc + nt, np.int64)
         nk = 0
         for i in range(nc):
             obj, piece = int(table[i, T_OBJ]), int(table[i, T_PIECE])
-            if not (0 <= obj < piece_map.shape[0] and 0 <= piece < width) or piece_map[obj, piece] < 0:
-                return BAD_PIECE, 0, 0, 0, i
+            if not (0 <= obj < piece_map.shape[0] and 0 <= piece < width_map) or piece_map[obj, piece] < 0:
+                return BAD_PIECE, False, i
             point, seg = int(table[i, T_POINT]), int(table[i, T_SEGMENT])
             if point < 0 and seg >= 0:  # on a segment: the contact projected onto it
                 a, b = pts[seg], pts[seg + 1]
@@ -142,8 +152,8 @@ def track_step(
                 keys[nk] = (point << 20) | piece_map[obj, piece]
                 nk += 1
         keys[nk : nk + nt] = touching[:nt]
-        keys = np.sort(keys[: nk + nt])
-        for j in range(keys.shape[0]):
+        _sort(keys, nk + nt)
+        for j in range(nk + nt):
             if j == 0 or keys[j] != keys[j - 1]:
                 pairs[k, 0], pairs[k, 1] = keys[j] >> 20, keys[j] & _LOW
                 k += 1
@@ -153,14 +163,29 @@ def track_step(
                 pairs[k, 0], pairs[k, 1] = n1 + nb, piece_map[int(table[i, T_OBJ]), int(table[i, T_PIECE])]
                 k += 1
                 nb += 1
-    # the last labels, if the same pairs are queried and their points stayed within their slack
-    if not (reuse and lab_i.shape[0] and k == lab_i[0] and nq == lab_i[3]):
-        return FULL, k, nq, 0, -1
-    lab_pairs, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, work_i[W_WIDTH])
+    outcome = _outcome(reuse, k, nq, lab_i, lab_f, work_i, pairs, qpts, again)
+    if outcome == FULL or outcome == PARTIAL:
+        if not _relabel(outcome == FULL, k, nq, n_pieces, gf, gi, params, lab_i, lab_f, work_i, work_f):
+            return GROW, False, -1
+    changed = update_hits(_labels(lab_i, lab_f, width)[2], work_i, work_f)
+    span_forces(spans, point_of, table, forces)
+    return outcome, changed, -1
+
+
+@njit
+def _outcome(
+    reuse: bool, k: int, nq: int, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray,
+    pairs: np.ndarray, qpts: np.ndarray, again: np.ndarray,
+) -> int:  # fmt: skip
+    """KEPT when the last labels hold for the step's ``k`` pairs at its ``nq`` query points (the same
+    pairs, every point within its slack or its budgets), PARTIAL with the points to label again in
+    ``again`` (their number in the work header), or FULL."""
+    if not (reuse and lab_i[L_K] >= 0 and k == lab_i[L_K] and nq == lab_i[L_N]):
+        return FULL
+    lab_pairs, lab_q, _, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, work_i[W_WIDTH])
     for j in range(k):
         if pairs[j, 0] != lab_pairs[j, 0] or pairs[j, 1] != lab_pairs[j, 1]:
-            return FULL, k, nq, 0, -1
-    n_again = 0
+            return FULL
     moved = np.zeros(nq, np.bool_)
     any_moved = False
     for m in range(lab_q.shape[0]):
@@ -169,23 +194,144 @@ def track_step(
         if dot3(dx, dy, dz, dx, dy, dz) >= lab_s2[m]:
             moved[i] = True
             any_moved = True
-    if any_moved:  # beyond its slack in some direction: within its budgets along and across its faces?
-        redo = np.zeros(nq, np.bool_)
-        for j in range(k):
-            i = pairs[j, 0]
-            if moved[i]:
-                m, o = qpts[i], lab_pts[i]
-                if not keeps(lab_budgets[j], m[0] - o[0], m[1] - o[1], m[2] - o[2]):
-                    redo[i] = True
-        for i in range(nq):
-            if redo[i]:
-                again[n_again] = i
-                n_again += 1
-        if n_again:
-            return PARTIAL, k, nq, n_again, -1
-    changed = update_hits(lab_hits, work_i, work_f)
-    span_forces(spans, point_of, table, forces)
-    return (CHANGED if changed else REUSED), k, nq, 0, -1
+    if not any_moved:
+        return KEPT
+    # beyond its slack in some direction: within its budgets along and across its faces?
+    redo = np.zeros(nq, np.bool_)
+    for j in range(k):
+        i = pairs[j, 0]
+        if moved[i]:
+            m, o = qpts[i], lab_pts[i]
+            if not keeps(lab_budgets[j], m[0] - o[0], m[1] - o[1], m[2] - o[2]):
+                redo[i] = True
+    n_again = 0
+    for i in range(nq):
+        if redo[i]:
+            again[n_again] = i
+            n_again += 1
+    work_i[W_AGAIN_N] = n_again
+    return PARTIAL if n_again else KEPT
+
+
+@njit
+def _relabel(
+    full: bool, k: int, nq: int, n_pieces: int, gf: np.ndarray, gi: np.ndarray,
+    params: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray, work_f: np.ndarray,
+) -> bool:  # fmt: skip
+    """Label every queried pair (``full``) or the pairs of the points to label again (a point's
+    labels depend on it alone) and splice them into the labels, in place; False (nothing changed)
+    when the labels or the work arrays lack room (the room needed goes into the work header)."""
+    _, _, _, _, pairs, _, _, again, qpts, _ = _work(work_i, work_f)
+    width = work_i[W_WIDTH]
+    redo = np.zeros(nq, np.bool_)
+    if full:
+        redo[:] = True
+    else:
+        for i in again[: work_i[W_AGAIN_N]]:
+            redo[i] = True
+    n_sub = 0
+    for j in range(k):
+        if redo[pairs[j, 0]]:
+            n_sub += 1
+    pi, pc = np.empty(n_sub, np.int64), np.empty(n_sub, np.int64)
+    sub = np.empty(n_sub, np.int64)
+    s = 0
+    for j in range(k):
+        if redo[pairs[j, 0]]:
+            pi[s], pc[s], sub[s] = pairs[j, 0], pairs[j, 1], j
+            s += 1
+    # room: the new hits at most one per pair plus one per piece for each point labelled again
+    n_redo = 0
+    for i in range(nq):
+        if redo[i]:
+            n_redo += 1
+    cap = n_sub + min(n_redo, n_sub) * n_pieces
+    h_old = 0 if full else lab_i[L_H]
+    q_n = k if full else lab_i[L_Q]
+    need_i = L_HEAD + 3 * k + (h_old + cap) * (4 + width)
+    need_f = 3 * nq + q_n + 6 * k
+    if need_i > lab_i.shape[0] or need_f > lab_f.shape[0] or h_old + cap > work_i[W_CAP_H]:
+        work_i[W_NEED_I], work_i[W_NEED_F], work_i[W_NEED_H] = need_i, need_f, h_old + cap
+        return False
+    hit_i = np.empty((cap, 2 + width), np.int64)
+    hit_f = np.empty((cap, 4))
+    slack = np.empty(nq)
+    budgets = np.empty((n_sub, 6))
+    qp = qpts[:nq].copy()  # arguments of the types the geometry passes (one compiled pair_hits)
+    enter, leave = params[P_ENTER], params[P_LEAVE]
+    thresholds = np.empty(2)
+    thresholds[0], thresholds[1] = enter, leave
+    h = pair_hits(
+        gf, gi, qp, pi, pc, params[P_RADIUS], params[P_RADIUS], params[P_TOL], params[P_TTOL], thresholds,
+        True, False, hit_i, hit_f, slack, budgets,
+    )  # fmt: skip
+    if full:
+        q = _unique(pi)
+        lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N] = k, q.shape[0], h, nq
+        lab_pairs, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
+        lab_pairs[:, :] = pairs[:k]
+        lab_q[:] = q
+        lab_pts[:, :] = qp
+        for m in range(q.shape[0]):
+            lab_s2[m] = slack[q[m]] * slack[q[m]]
+        lab_budgets[:, :] = budgets
+        for r in range(h):
+            _hit_row(lab_hits[r], hit_i[r], hit_f[r, 0], enter, leave)
+        return True
+    _, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
+    for s in range(n_sub):
+        lab_budgets[sub[s]] = budgets[s]
+    for i in range(nq):
+        if redo[i]:
+            lab_pts[i] = qpts[i]
+    for m in range(lab_q.shape[0]):
+        if redo[lab_q[m]]:
+            lab_s2[m] = slack[lab_q[m]] * slack[lab_q[m]]
+    # the kept old hits and the new ones, merged by (query point, piece): the old ones come first
+    # among equals (there are none: a point's hits are all old or all new)
+    old = lab_hits.copy()
+    n_new = h
+    a = b = r = 0
+    while a < old.shape[0] or b < n_new:
+        if a < old.shape[0] and redo[old[a, 0]]:
+            a += 1
+            continue
+        take_old = b >= n_new or (
+            a < old.shape[0] and old[a, 0] * (1 << 20) + old[a, 1] <= hit_i[b, 0] * (1 << 20) + hit_i[b, 1]
+        )
+        r += 1
+        if take_old:
+            a += 1
+        else:
+            b += 1
+    lab_i[L_H] = r
+    lab_hits = _labels(lab_i, lab_f, width)[2]
+    a = b = r = 0
+    while a < old.shape[0] or b < n_new:
+        if a < old.shape[0] and redo[old[a, 0]]:
+            a += 1
+            continue
+        take_old = b >= n_new or (
+            a < old.shape[0] and old[a, 0] * (1 << 20) + old[a, 1] <= hit_i[b, 0] * (1 << 20) + hit_i[b, 1]
+        )
+        if take_old:
+            lab_hits[r] = old[a]
+            a += 1
+        else:
+            _hit_row(lab_hits[r], hit_i[b], hit_f[b, 0], enter, leave)
+            b += 1
+        r += 1
+    return True
+
+
+@njit
+def _hit_row(row: np.ndarray, hit: np.ndarray, dist: float, enter: float, leave: float) -> None:
+    """A label's hit row from a :func:`pair_hits` row: query point, piece id, within the enter and
+    the leave distance, face ids."""
+    row[0], row[1] = hit[0], hit[1]
+    row[2] = 1 if dist <= enter else 0
+    row[3] = 1 if dist <= leave else 0
+    row[4:] = hit[2:]
 
 
 @njit
@@ -201,14 +347,13 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     kept = np.zeros(h, np.bool_)
     count = np.zeros(n1 + 1, np.int64)
     keys = np.empty(h, np.int64)
-    n_keep = 0
+    n_keep = np.int64(0)
     for r in range(h):
         point = owner[hits[r, 0]]
         key = (point << 20) | hits[r, 1]
         keep = hits[r, 2] != 0
         if not keep and hits[r, 3] != 0:  # between the distances: touching if it touched
-            j = np.searchsorted(touching[:nt], key)
-            keep = j < nt and touching[j] == key
+            keep = _contains(touching, nt, key)
         if keep:
             kept[r] = True
             count[point + 1] += 1
@@ -237,8 +382,7 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     group[:n_keep] = new
     start[:] = count
     work_i[W_CHANGED_N] = n_changed
-    work_i[W_KEPT_N] = n_keep
-    keys = np.sort(keys[:n_keep])
+    _sort(keys, n_keep)
     nt = 0
     for j in range(n_keep):
         if j == 0 or keys[j] != keys[j - 1]:
@@ -248,135 +392,42 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     return n_changed > 0
 
 
-# --------------------------------------------------------------------------------------------------
-# labelling again
+@njit
+def _sort(a: np.ndarray, n: int) -> None:
+    """Sort ``a[:n]`` in place (an insertion sort: the keys here come nearly sorted and few)."""
+    for i in range(1, n):
+        v = a[i]
+        j = i
+        while j > 0 and a[j - 1] > v:
+            a[j] = a[j - 1]
+            j -= 1
+        a[j] = v
 
 
 @njit
-def relabel_full(
-    gf: np.ndarray,
-    gi: np.ndarray,
-    width: int,
-    radius: float,
-    contact_tol: float,
-    ttol: float,
-    thresholds: np.ndarray,
-    work_i: np.ndarray,
-    work_f: np.ndarray,
-    k: int,
-    nq: int,
-):
-    """Label the step's ``k`` queried pairs at its ``nq`` query points: the new labels (``lab_i``,
-    ``lab_f``; see the module docstring)."""
-    _, _, _, _, pairs, _, _, _, qpts, _ = _work(work_i, work_f)
-    pi, pc, qp = pairs[:k, 0].copy(), pairs[:k, 1].copy(), qpts[:nq]
-    slack = np.empty(nq)
-    budgets = np.empty((k, 6))
-    hits = _label(gf, gi, width, radius, contact_tol, ttol, thresholds, qp, pi, pc, slack, budgets)
-    q = np.unique(pi)
-    lab_i = np.empty(L_HEAD + 2 * k + q.shape[0] + hits.size, np.int64)
-    lab_i[0], lab_i[1], lab_i[2], lab_i[3] = k, q.shape[0], hits.shape[0], nq
-    lab_i[L_HEAD : L_HEAD + 2 * k] = pairs[:k].ravel()
-    lab_i[L_HEAD + 2 * k : L_HEAD + 2 * k + q.shape[0]] = q
-    lab_i[L_HEAD + 2 * k + q.shape[0] :] = hits.ravel()
-    lab_f = np.empty(3 * nq + q.shape[0] + 6 * k)
-    lab_f[: 3 * nq] = qp.ravel()
-    for m in range(q.shape[0]):
-        lab_f[3 * nq + m] = slack[q[m]] * slack[q[m]]
-    lab_f[3 * nq + q.shape[0] :] = budgets.ravel()
-    return lab_i, lab_f
+def _contains(sorted_a: np.ndarray, n: int, v: int) -> bool:
+    """Whether ``v`` is among ``sorted_a[:n]`` (a binary search)."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_a[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < n and sorted_a[lo] == v
 
 
 @njit
-def relabel_partial(
-    gf: np.ndarray,
-    gi: np.ndarray,
-    width: int,
-    radius: float,
-    contact_tol: float,
-    ttol: float,
-    thresholds: np.ndarray,
-    work_i: np.ndarray,
-    work_f: np.ndarray,
-    k: int,
-    nq: int,
-    n_again: int,
-    lab_i: np.ndarray,
-    lab_f: np.ndarray,
-) -> np.ndarray:
-    """Label the points to label again (a point's labels depend on it alone) and splice them into
-    the last labels: their points, slacks and budgets in ``lab_f`` in place; returns the new
-    ``lab_i`` (its hit rows changed)."""
-    _, _, _, _, pairs, _, _, again, qpts, _ = _work(work_i, work_f)
-    _, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
-    redo = np.zeros(nq, np.bool_)
-    for i in again[:n_again]:
-        redo[i] = True
-    rows = np.zeros(k, np.bool_)
-    for j in range(k):
-        rows[j] = redo[pairs[j, 0]]
-    sub = np.nonzero(rows)[0]
-    pi, pc = pairs[sub, 0].copy(), pairs[sub, 1].copy()
-    slack = np.empty(nq)
-    budgets = np.empty((sub.shape[0], 6))
-    new = _label(gf, gi, width, radius, contact_tol, ttol, thresholds, qpts[:nq], pi, pc, slack, budgets)
-    for s in range(sub.shape[0]):
-        lab_budgets[sub[s]] = budgets[s]
-    for i in again[:n_again]:
-        lab_pts[i] = qpts[i]
-    for m in range(lab_q.shape[0]):
-        if redo[lab_q[m]]:
-            lab_s2[m] = slack[lab_q[m]] * slack[lab_q[m]]
-    n_old = 0
-    for r in range(lab_hits.shape[0]):
-        if not redo[lab_hits[r, 0]]:
-            n_old += 1
-    hits = np.empty((n_old + new.shape[0], lab_hits.shape[1]), np.int64)
-    a = 0
-    for r in range(lab_hits.shape[0]):
-        if not redo[lab_hits[r, 0]]:
-            hits[a] = lab_hits[r]
-            a += 1
-    hits[a:] = new
-    hits = hits[np.argsort(hits[:, 0] * (1 << 20) + hits[:, 1], kind="mergesort")]
-    head = L_HEAD + 2 * k + lab_q.shape[0]
-    out = np.empty(head + hits.size, np.int64)
-    out[:head] = lab_i[:head]
-    out[2] = hits.shape[0]
-    out[head:] = hits.ravel()
-    return out
-
-
-@njit
-def _label(
-    gf: np.ndarray,
-    gi: np.ndarray,
-    width: int,
-    radius: float,
-    contact_tol: float,
-    ttol: float,
-    thresholds: np.ndarray,
-    qpts: np.ndarray,
-    pi: np.ndarray,
-    pc: np.ndarray,
-    slack: np.ndarray,
-    budgets: np.ndarray,
-) -> np.ndarray:
-    """Hit rows (query point, piece id, within enter, within leave, face ids) of pairs ``pi``/``pc``."""
-    n_pieces = gi[0]
-    cap = pi.shape[0] + min(qpts.shape[0], pi.shape[0]) * n_pieces
-    hit_i = np.empty((cap, 2 + width), np.int64)
-    hit_f = np.empty((cap, 4))
-    h = pair_hits(
-        gf, gi, qpts, pi, pc, radius, contact_tol, ttol, thresholds, True, hit_i, hit_f, slack, budgets
-    )
-    out = np.empty((h, 4 + width), np.int64)
-    for r in range(h):
-        out[r, 0], out[r, 1] = hit_i[r, 0], hit_i[r, 1]
-        out[r, 2] = 1 if hit_f[r, 0] <= thresholds[0] else 0
-        out[r, 3] = 1 if hit_f[r, 0] <= thresholds[1] else 0
-        out[r, 4:] = hit_i[r, 2:]
-    return out
+def _unique(a: np.ndarray) -> np.ndarray:
+    """The sorted distinct values of ``a``."""
+    b = a.copy()
+    _sort(b, b.shape[0])
+    n = 0
+    for i in range(b.shape[0]):
+        if i == 0 or b[i] != b[n - 1]:
+            b[n] = b[i]
+            n += 1
+    return b[:n]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -402,14 +453,4 @@ def span_forces(spans: np.ndarray, point_of: np.ndarray, table: np.ndarray, out:
         out[c] = np_sum(buf[:m])
 
 
-@njit
-def after_relabel(
-    lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray, work_f: np.ndarray, spans: np.ndarray,
-    table: np.ndarray,
-) -> bool:  # fmt: skip
-    """:func:`update_hits` and :func:`span_forces` on new labels (what :func:`track_step` does after
-    keeping the last ones); returns whether the kept hits changed."""
-    _, _, _, _, _, _, point_of, _, _, forces = _work(work_i, work_f)
-    changed = update_hits(_labels(lab_i, lab_f, work_i[W_WIDTH])[2], work_i, work_f)
-    span_forces(spans, point_of, table, forces)
-    return changed
+check_cache(__name__)

@@ -111,8 +111,7 @@ class ContactTracker:
 
     def _forget(self) -> None:
         """No labels, no touching pairs, no hits."""
-        self._lab: tuple[np.ndarray, np.ndarray] | None = None
-        self._n1 = -1  # the work arrays are made afresh at the next step
+        self._n1 = -1  # the work and label arrays are made afresh at the next step
         self._spans: tuple[Any, np.ndarray] = (None, _NO_SPANS)
         self._tip: tuple[int, list[list[float]]] | None = None
         self._signature: tuple[Any, ...] | None = None
@@ -133,9 +132,10 @@ class ContactTracker:
     def kept(self) -> list[Kept[DiscreteSituation]]:
         return self._debouncer.kept
 
-    def classify(self, pts: np.ndarray, gripper_z: Sequence[float] | None) -> Situation:
+    def classify(self, pts: np.ndarray, record: Any) -> Situation:
         """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
-        :meth:`_label_step`) and the end-vertex rule."""
+        :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
+        situation is made again) is the gripper's z axis."""
         geom = self.geometry
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
@@ -151,6 +151,7 @@ class ContactTracker:
         signature = (len(pts), self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
+        gripper_z = getattr(record, "gripper_z", None)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
             self._env,
@@ -162,14 +163,17 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
-    def _thresholds(self) -> np.ndarray:
-        """The centerline distances (m) at which a pair enters contact and leaves it."""
+    def _params(self) -> np.ndarray:
+        """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
+        the labels' contact tolerance (the leave one), the tangential tolerance and the centerline
+        distances at which a pair enters contact and leaves it."""
         if self._tols is None or self._tols[:2] != (self.enter_tol, self.leave_tol):
             r = self.geometry.radius
-            self._tols = (self.enter_tol, self.leave_tol, np.array([r + self.enter_tol, r + self.leave_tol]))
+            params = np.array([r, self.leave_tol, r / 5.0, r + self.enter_tol, r + self.leave_tol])
+            self._tols = (self.enter_tol, self.leave_tol, params)
         return self._tols[2]
 
-    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, objs: Any) -> None:
+    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, arrays: Any) -> None:
         """This step's touching hits (:func:`dlovr.sim.track_kernels.track_step`), and the forces on
         the last situation's contact spans: the pairs the simulator reports in ``table`` (and those
         touching at the last step; every point against every piece without a table) keep their last
@@ -179,36 +183,30 @@ class ContactTracker:
         has = table is not None
         table = _NO_TABLE if table is None else table
         n1, nc = len(pts), len(table)
-        lab_i, lab_f = self._lab or _NO_LABELS
         if n1 != self._n1:
             self._alloc(n1, nc, 0)
         elif nc > self._cap_c:
             self._alloc(n1, max(nc, 2 * self._cap_c), self._cap_h)
-        wi, wf, spans = self._work_i, self._work_f, self._spans[1]
-        out, k, nq, n_again, bad = tk.track_step(
-            pts, table, has, self._piece_table(objs) if has else _NO_MAP, self._n_pieces, spans, self.reuse,
-            lab_i, lab_f, wi, wf,
-        )  # fmt: skip
-        if out >= tk.FULL:
-            r = self.geometry.radius
-            thr = self._thresholds()
-            args = (self._gf, self._gi, self._width, r, self.leave_tol, r / 5.0, thr, wi, wf, k, nq)
-            if out == tk.FULL:
-                self.labellings += 1
-                lab_i, lab_f = tk.relabel_full(*args)
-            else:
-                self.partial_labellings += 1
-                lab_i = tk.relabel_partial(*args, n_again, lab_i, lab_f)
-            self._lab = (lab_i, lab_f)
-            if lab_i[2] > self._cap_h:
-                self._alloc(n1, self._cap_c, max(int(lab_i[2]), 2 * self._cap_h))
-            changed = tk.after_relabel(lab_i, lab_f, self._work_i, self._work_f, spans, table)
-        elif out == tk.BAD_PIECE:
-            obj, piece = int(table[bad, T_OBJ]), int(table[bad, T_PIECE])
+        pm = self._piece_map
+        if has and (pm is None or pm[0] is not arrays.names[0]):
+            pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
+        pmap = pm[1] if has else _NO_MAP
+        while True:
+            out, changed, bad = tk.track_step(
+                pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
+                self._lab_i, self._lab_f, self._work_i, self._work_f,
+            )  # fmt: skip
+            if out != tk.GROW:
+                break
+            self._grow()
+        if out == tk.BAD_PIECE:
+            obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
             name = objs[obj] if 0 <= obj < len(objs) else obj
             raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
-        else:
-            changed = out == tk.CHANGED
+        if out == tk.FULL:
+            self.labellings += 1
+        elif out == tk.PARTIAL:
+            self.partial_labellings += 1
         if changed:
             face, made = self.geometry.face_tuple, self._made
             group, start = self._group, self._start
@@ -218,11 +216,24 @@ class ContactTracker:
                 self._env[p] = point_primitives(faces, made)
             self._version += 1
 
+    def _grow(self) -> None:
+        """Room for what :func:`dlovr.sim.track_kernels.track_step` asked (``GROW``)."""
+        wi = self._work_i
+        need_i, need_f, need_h = int(wi[tk.W_NEED_I]), int(wi[tk.W_NEED_F]), int(wi[tk.W_NEED_H])
+        for name, need in (("_lab_i", need_i), ("_lab_f", need_f)):
+            old = getattr(self, name)
+            if need > len(old):
+                new = np.zeros(max(need, 2 * len(old)), old.dtype)
+                new[: len(old)] = old
+                setattr(self, name, new)
+        if need_h > self._cap_h:
+            self._alloc(self._n1, self._cap_c, max(need_h, 2 * self._cap_h))
+
     def _alloc(self, n1: int, nc: int, cap_h: int) -> None:
         """Work arrays of :mod:`dlovr.sim.track_kernels` for ``n1`` points, at least ``nc`` contacts and
-        ``cap_h`` kept hits; what a step keeps (the touching keys, the grouped hits, this step's query
-        points, owners and contacts' points) is copied over when the points stay the same."""
-        old = (self._work_i, self._work_f) if n1 == self._n1 else None
+        ``cap_h`` kept hits; what a step keeps (the touching keys, the grouped hits) is copied over when
+        the points stay the same, else the labels and hits start afresh."""
+        old = self._work_i if n1 == self._n1 else None
         w = self._width
         cap_c, cap_h = max(nc, 16), max(cap_h, 16)
         cap_q = n1 + cap_c
@@ -231,42 +242,35 @@ class ContactTracker:
         offsets = np.cumsum((tk.W_HEAD, *sizes))
         wi = np.zeros(int(offsets[-1]), np.int64)
         wi[[tk.W_POINTS, tk.W_WIDTH, tk.W_CAP_H]] = n1, w, cap_h
-        wi[[tk.W_TOUCH, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF,
-            tk.W_AGAIN]] = offsets[:-1]  # fmt: skip
+        wi[list(_SECTIONS)] = offsets[:-1]
         wi[tk.W_QPTS], wi[tk.W_FORCES] = 0, 3 * cap_q
-        wf = np.zeros(3 * cap_q + 2 * n1 + 8)
-        if old is not None:  # copy every section over, at its new place
-            oi, of = old
-            wi[: tk.W_CAP_H] = oi[: tk.W_CAP_H]
-            for sec, nxt in zip(_SECTIONS, (*_SECTIONS[1:], None), strict=True):
-                a = oi[oi[sec] : oi[nxt] if nxt is not None else len(oi)]
-                if sec == tk.W_GROUP:
-                    a = a.reshape(-1, w)
-                    wi[wi[sec] : wi[sec] + a.size] = a.ravel()
-                else:
-                    wi[wi[sec] : wi[sec] + len(a)] = a
-            wf[: oi[tk.W_FORCES]] = of[: oi[tk.W_FORCES]]  # the query points
+        if old is not None:  # what lasts from step to step: the counts, the touching keys, the groups
+            wi[tk.W_TOUCH_N], wi[tk.W_CHANGED_N] = old[tk.W_TOUCH_N], old[tk.W_CHANGED_N]
+            old_h = old[tk.W_CAP_H]
+            for sec, n in ((tk.W_TOUCH, old_h), (tk.W_GROUP, old_h * w), (tk.W_START, n1 + 1)):
+                wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
         else:
+            self._lab_i = np.full(64, -1, np.int64)  # no labels
+            self._lab_f = np.zeros(64)
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
             self._version = 0
-        self._work_i, self._work_f, self._n1, self._cap_c, self._cap_h = wi, wf, n1, cap_c, cap_h
+        self._work_i, self._work_f = wi, np.zeros(3 * cap_q + 2 * n1 + 8)
+        self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
         self._group = wi[wi[tk.W_GROUP] : wi[tk.W_START]].reshape(cap_h, w)
         self._start = wi[wi[tk.W_START] : wi[tk.W_START] + n1 + 1]
         self._changed = wi[wi[tk.W_CHANGED] : wi[tk.W_CHANGED] + n1]
-        self._forces_out = wf[3 * cap_q :]
+        self._forces_out = self._work_f[3 * cap_q :]
 
     def _piece_table(self, objs: Any) -> np.ndarray:
         """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
-        if self._piece_map is None or self._piece_map[0] is not objs:
-            pieces = self.geometry.pieces
-            table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
-            row = {o: i for i, o in enumerate(objs)}
-            for k, p in enumerate(pieces):
-                if p.obj in row:
-                    table[row[p.obj], p.index] = k
-            self._piece_map = (objs, table)
-        return self._piece_map[1]
+        pieces = self.geometry.pieces
+        table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
+        row = {o: i for i, o in enumerate(objs)}
+        for k, p in enumerate(pieces):
+            if p.obj in row:
+                table[row[p.obj], p.index] = k
+        return table
 
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
@@ -278,9 +282,9 @@ class ContactTracker:
         table = None if arrays is None else getattr(arrays, "table", None)
         if arrays is not None and table is None:
             table = _table_of(arrays)
-        self._label_step(pts, table, None if arrays is None else arrays.names[0])
+        self._label_step(pts, table, arrays)
         prev = self.current
-        topo = self.classify(pts, record.gripper_z)
+        topo = self.classify(pts, record)
         if prev is not None and (
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
@@ -294,7 +298,9 @@ class ContactTracker:
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
             _tuple(getattr(record, "gripper_force", _ORIGIN)),
         )  # fmt: skip
-        if prev is None or prev.discrete != disc or prev.topological != topo:
+        if prev is None or (prev.discrete is not disc and prev.discrete != disc) or (
+            prev.topological is not topo and prev.topological != topo
+        ):
             self.changes.append(state)
         self.current = state
         self._debouncer.push(state.t, disc)
@@ -359,7 +365,6 @@ def _table_of(arrays: Any) -> np.ndarray:
 
 _NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
-_NO_LABELS = (np.zeros(0, np.int64), np.zeros(0))
 _NO_SPANS = np.zeros((0, 2), np.int64)
 _SECTIONS = (
     tk.W_TOUCH, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF, tk.W_AGAIN
