@@ -15,8 +15,9 @@ argument's type, and returning arrays costs more than passing them):
   point, piece id, within enter, within leave, face ids); ``lab_f`` (float64): where each query point
   was labelled (N,3), the queried points' squared slacks (Q), the pairs' budgets (K,6);
 - work ``work_i`` (int64): header (``W_*``: counts, capacities and section offsets), the touching
-  keys (cable point << 20 | piece id, sorted), the kept hits' face rows grouped by cable point and
-  where each point's group starts, the points whose group changed at the last step, the queried
+  keys (cable point << 20 | piece id, sorted), the kept hits (cable point, face ids; in hit order),
+  their face rows grouped by cable point and where each point's group starts, the points whose
+  group changed when the kept hits last changed, the queried
   pairs, each query point's cable point (``owner``), each contact's cable point (``point_of``) and
   the points to label again; ``work_f`` (float64): the query points (cable points, then one per
   segment contact) and the forces per span.
@@ -36,9 +37,9 @@ _LOW = (1 << 20) - 1
 
 # work_i header: counts, capacities, then section offsets (in work_i; the query points and forces in
 # work_f), and the room asked for by GROW
-W_TOUCH_N, W_CHANGED_N, W_POINTS, W_WIDTH, W_CAP_H = 0, 1, 2, 3, 4
-W_TOUCH, W_GROUP, W_START, W_CHANGED, W_PAIRS, W_OWNER, W_POINT_OF, W_AGAIN = 5, 6, 7, 8, 9, 10, 11, 12
-W_QPTS, W_FORCES, W_NEED_H, W_NEED_I, W_NEED_F, W_AGAIN_N, W_HEAD = 13, 14, 15, 16, 17, 18, 19
+W_TOUCH_N, W_CHANGED_N, W_POINTS, W_WIDTH, W_CAP_H, W_KEPT_N = 0, 1, 2, 3, 4, 5
+W_TOUCH, W_KEPT, W_GROUP, W_START, W_CHANGED, W_PAIRS, W_OWNER, W_POINT_OF, W_AGAIN = range(6, 15)
+W_QPTS, W_FORCES, W_NEED_H, W_NEED_I, W_NEED_F, W_AGAIN_N, W_HEAD = range(15, 22)
 # lab_i header
 L_K, L_Q, L_H, L_N, L_HEAD = 0, 1, 2, 3, 4
 # parameters (float64): radius, contact tolerance of the labels (leave), tangential tolerance, enter
@@ -51,6 +52,7 @@ def _work(work_i: np.ndarray, work_f: np.ndarray):
     n1, w, cap_h = work_i[W_POINTS], work_i[W_WIDTH], work_i[W_CAP_H]
     return (
         work_i[work_i[W_TOUCH] : work_i[W_TOUCH] + cap_h],
+        work_i[work_i[W_KEPT] : work_i[W_GROUP]].reshape((cap_h, w + 1)),
         work_i[work_i[W_GROUP] : work_i[W_START]].reshape((cap_h, w)),
         work_i[work_i[W_START] : work_i[W_START] + n1 + 1],
         work_i[work_i[W_CHANGED] : work_i[W_CHANGED] + n1],
@@ -111,7 +113,7 @@ def track_step(
     them, keeping their contents, and call again; nothing was changed) or ``BAD_PIECE`` (row
     ``bad row`` of the table names a piece that ``piece_map`` lacks).
     """
-    touching, _, _, _, pairs, owner, point_of, again, qpts, forces = _work(work_i, work_f)
+    touching, _, _, _, _, pairs, owner, point_of, again, qpts, forces = _work(work_i, work_f)
     width, n_pieces = work_i[W_WIDTH], gi[0]
     n1 = pts.shape[0]
     k = np.int64(0)  # not a literal: a literal would compile the callees twice
@@ -221,7 +223,7 @@ def _relabel(
     """Label every queried pair (``full``) or the pairs of the points to label again (a point's
     labels depend on it alone) and splice them into the labels, in place; False (nothing changed)
     when the labels or the work arrays lack room (the room needed goes into the work header)."""
-    _, _, _, _, pairs, _, _, again, qpts, _ = _work(work_i, work_f)
+    _, _, _, _, _, pairs, _, _, again, qpts, _ = _work(work_i, work_f)
     width = work_i[W_WIDTH]
     redo = np.zeros(nq, np.bool_)
     if full:
@@ -338,14 +340,14 @@ def _hit_row(row: np.ndarray, hit: np.ndarray, dist: float, enter: float, leave:
 def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> bool:
     """The labelled pairs that touch, with hysteresis: a hit within the enter distance touches, one
     within the leave distance keeps touching if it touched. Hit rows: query point, piece id, within
-    enter, within leave, face ids. Updates the touching keys, the kept hits' face rows grouped by
-    cable point (in hit order) and the list of points whose group changed; returns whether any did."""
-    touching, group, start, changed, _, owner, _, _, _, _ = _work(work_i, work_f)
+    enter, within leave, face ids. Updates the touching keys and the kept hits (cable point, face
+    ids; in hit order) and returns whether those changed; then also their face rows grouped by cable
+    point and the list of points whose group changed."""
+    touching, kept, group, start, changed, _, owner, _, _, _, _ = _work(work_i, work_f)
     n1 = start.shape[0] - 1
-    h = hits.shape[0]
-    nt = work_i[W_TOUCH_N]
-    kept = np.zeros(h, np.bool_)
-    count = np.zeros(n1 + 1, np.int64)
+    h, w = hits.shape[0], group.shape[1]
+    nt, n_old = work_i[W_TOUCH_N], work_i[W_KEPT_N]
+    new = np.empty((h, w + 1), np.int64)
     keys = np.empty(h, np.int64)
     n_keep = np.int64(0)
     for r in range(h):
@@ -355,33 +357,10 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
         if not keep and hits[r, 3] != 0:  # between the distances: touching if it touched
             keep = _contains(touching, nt, key)
         if keep:
-            kept[r] = True
-            count[point + 1] += 1
+            new[n_keep, 0] = point
+            new[n_keep, 1:] = hits[r, 4:]
             keys[n_keep] = key
             n_keep += 1
-    for p in range(n1):
-        count[p + 1] += count[p]
-    new = np.empty((n_keep, group.shape[1]), np.int64)
-    fill = count[:n1].copy()
-    for r in range(h):
-        if kept[r]:
-            p = owner[hits[r, 0]]
-            new[fill[p]] = hits[r, 4:]
-            fill[p] += 1
-    n_changed = 0
-    for p in range(n1):
-        same = count[p + 1] - count[p] == start[p + 1] - start[p]
-        if same:
-            for a in range(count[p + 1] - count[p]):
-                for c in range(group.shape[1]):
-                    if new[count[p] + a, c] != group[start[p] + a, c]:
-                        same = False
-        if not same:
-            changed[n_changed] = p
-            n_changed += 1
-    group[:n_keep] = new
-    start[:] = count
-    work_i[W_CHANGED_N] = n_changed
     _sort(keys, n_keep)
     nt = 0
     for j in range(n_keep):
@@ -389,7 +368,41 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
             touching[nt] = keys[j]
             nt += 1
     work_i[W_TOUCH_N] = nt
-    return n_changed > 0
+    same = n_keep == n_old
+    for r in range(n_keep if same else 0):
+        for c in range(w + 1):
+            if new[r, c] != kept[r, c]:
+                same = False
+    if same:
+        return False
+    # grouped by cable point, in hit order: the points whose group differs from the last one
+    count = np.zeros(n1 + 1, np.int64)
+    for r in range(n_keep):
+        count[new[r, 0] + 1] += 1
+    for p in range(n1):
+        count[p + 1] += count[p]
+    fill = count[:n1].copy()
+    grouped = np.empty((n_keep, w), np.int64)
+    for r in range(n_keep):
+        p = new[r, 0]
+        grouped[fill[p]] = new[r, 1:]
+        fill[p] += 1
+    n_changed = 0
+    for p in range(n1):
+        differs = count[p + 1] - count[p] != start[p + 1] - start[p]
+        for a in range(0 if differs else count[p + 1] - count[p]):
+            for c in range(w):
+                if grouped[count[p] + a, c] != group[start[p] + a, c]:
+                    differs = True
+        if differs:
+            changed[n_changed] = p
+            n_changed += 1
+    group[:n_keep] = grouped
+    start[:] = count
+    kept[:n_keep] = new[:n_keep]
+    work_i[W_KEPT_N] = n_keep
+    work_i[W_CHANGED_N] = n_changed
+    return True
 
 
 @njit

@@ -238,16 +238,18 @@ class ContactTracker:
         cap_c, cap_h = max(nc, 16), max(cap_h, 16)
         cap_q = n1 + cap_c
         cap_k = n1 * self._n_pieces + 2 * cap_c + cap_h
-        sizes = (cap_h, cap_h * w, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
+        sizes = (cap_h, cap_h * (w + 1), cap_h * w, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
         offsets = np.cumsum((tk.W_HEAD, *sizes))
         wi = np.zeros(int(offsets[-1]), np.int64)
         wi[[tk.W_POINTS, tk.W_WIDTH, tk.W_CAP_H]] = n1, w, cap_h
         wi[list(_SECTIONS)] = offsets[:-1]
         wi[tk.W_QPTS], wi[tk.W_FORCES] = 0, 3 * cap_q
         if old is not None:  # what lasts from step to step: the counts, the touching keys, the groups
-            wi[tk.W_TOUCH_N], wi[tk.W_CHANGED_N] = old[tk.W_TOUCH_N], old[tk.W_CHANGED_N]
+            for slot in (tk.W_TOUCH_N, tk.W_CHANGED_N, tk.W_KEPT_N):
+                wi[slot] = old[slot]
             old_h = old[tk.W_CAP_H]
-            for sec, n in ((tk.W_TOUCH, old_h), (tk.W_GROUP, old_h * w), (tk.W_START, n1 + 1)):
+            for sec, n in ((tk.W_TOUCH, old_h), (tk.W_KEPT, old_h * (w + 1)), (tk.W_GROUP, old_h * w),
+                           (tk.W_START, n1 + 1)):  # fmt: skip
                 wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
         else:
             self._lab_i = np.full(64, -1, np.int64)  # no labels
@@ -367,5 +369,6 @@ _NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
 _NO_SPANS = np.zeros((0, 2), np.int64)
 _SECTIONS = (
-    tk.W_TOUCH, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF, tk.W_AGAIN
+    tk.W_TOUCH, tk.W_KEPT, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF,
+    tk.W_AGAIN,
 )  # fmt: skip
