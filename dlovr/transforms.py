@@ -86,7 +86,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
 
 def _unit4(q: Sequence[float] | np.ndarray) -> list[float]:
     """``quat_normalize(q)`` as a list of Python floats."""
-    v = np.asarray(q, dtype=float).tolist()
+    v = q if type(q) is list else np.asarray(q, dtype=float).tolist()
     n = norm(v)
     return [x / n for x in v]
 

@@ -309,7 +309,8 @@ def classify_point(
         if not dist <= reach:
             slack = min(slack, margin)
             continue
-        active[:] = False
+        for f in range(n_f):
+            active[f] = False
         if use_face:
             active[best_f] = True
         mc = margin
@@ -353,7 +354,8 @@ def _add_face(hit_i: np.ndarray, row: int, h: int, width: int, face: int, point:
     started); returns ``row + 1``."""
     if h == row:
         hit_i[row, 0], hit_i[row, 1] = point, piece
-        hit_i[row, 2:] = -1
+        for c in range(2, hit_i.shape[1]):
+            hit_i[row, c] = -1
     faces = hit_i[row, 2:]
     for i in range(width):
         if faces[i] == face:
@@ -420,7 +422,8 @@ def pair_hits(
     take = np.zeros(k_n, np.bool_)
     amb = np.zeros(pts.shape[0], np.bool_)
     if with_slack:
-        slack[:] = _INF
+        for i in range(slack.shape[0]):
+            slack[i] = _INF
     if every_piece:
         for i in pi:
             amb[i] = True
@@ -481,7 +484,8 @@ def pair_hits(
     for j in range(k_n):
         if take[j] and not amb[pi[j]]:
             hit_i[h, 0], hit_i[h, 1] = pi[j], pc[j]
-            hit_i[h, 2:] = -1
+            for c in range(3, hit_i.shape[1]):
+                hit_i[h, c] = -1
             hit_i[h, 2] = name[pc[j], best[j]]
             hit_f[h, 0], hit_f[h, 1], hit_f[h, 2], hit_f[h, 3] = rb[j], q[j, 0], q[j, 1], q[j, 2]
             h += 1

@@ -188,6 +188,7 @@ class Simulator:
         self._xpos = d.flexvert_xpos[b.vert_adr : b.vert_adr + b.nvert]
         self._mocap_pos, self._mocap_quat = d.mocap_pos[b.mocap_id], d.mocap_quat[b.mocap_id]
         self._dt = float(m.opt.timestep)
+        self._pts_shape = (b.nvert, 3)
         self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
         objs = tuple(dict.fromkeys(o for o, _ in built.geom_piece.values()))
         self._obj_of_geom = np.full(m.ngeom, -1, dtype=np.int64)
@@ -341,7 +342,7 @@ class Simulator:
             rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
             self._hold_rows = (ne, rows)
             views.set_hold_rows(rows)
-        pts = np.empty((self.built.nvert, 3))
+        pts = np.empty(self._pts_shape)
         table = np.empty((ncon, kernels.T_WIDTH))
         grip = np.empty(3)
         arena = views.contacts() if ncon else views.arena

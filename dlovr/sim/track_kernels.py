@@ -153,7 +153,8 @@ def track_step(
             if point >= 0:
                 keys[nk] = (point << 20) | piece_map[obj, piece]
                 nk += 1
-        keys[nk : nk + nt] = touching[:nt]
+        for j in range(nt):
+            keys[nk + j] = touching[j]
         _sort(keys, nk + nt)
         for j in range(nk + nt):
             if j == 0 or keys[j] != keys[j - 1]:
@@ -227,7 +228,8 @@ def _relabel(
     width = work_i[W_WIDTH]
     redo = np.zeros(nq, np.bool_)
     if full:
-        redo[:] = True
+        for i in range(nq):
+            redo[i] = True
     else:
         for i in again[: work_i[W_AGAIN_N]]:
             redo[i] = True
@@ -263,29 +265,34 @@ def _relabel(
     enter, leave = params[P_ENTER], params[P_LEAVE]
     thresholds = np.empty(2)
     thresholds[0], thresholds[1] = enter, leave
+    yes = k >= 0  # True, as a value: literal flags would compile another pair_hits than Python calls
     h = pair_hits(
         gf, gi, qp, pi, pc, params[P_RADIUS], params[P_RADIUS], params[P_TOL], params[P_TTOL], thresholds,
-        True, False, hit_i, hit_f, slack, budgets,
+        yes, not yes, hit_i, hit_f, slack, budgets,
     )  # fmt: skip
     if full:
         q = _unique(pi)
         lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N] = k, q.shape[0], h, nq
         lab_pairs, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
-        lab_pairs[:, :] = pairs[:k]
-        lab_q[:] = q
-        lab_pts[:, :] = qp
+        for j in range(k):
+            lab_pairs[j, 0], lab_pairs[j, 1] = pairs[j, 0], pairs[j, 1]
+            for c in range(6):
+                lab_budgets[j, c] = budgets[j, c]
+        for i in range(nq):
+            lab_pts[i, 0], lab_pts[i, 1], lab_pts[i, 2] = qp[i, 0], qp[i, 1], qp[i, 2]
         for m in range(q.shape[0]):
+            lab_q[m] = q[m]
             lab_s2[m] = slack[q[m]] * slack[q[m]]
-        lab_budgets[:, :] = budgets
         for r in range(h):
-            _hit_row(lab_hits[r], hit_i[r], hit_f[r, 0], enter, leave)
+            _hit_row(lab_hits, r, hit_i, r, hit_f[r, 0], enter, leave)
         return True
     _, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
     for s in range(n_sub):
-        lab_budgets[sub[s]] = budgets[s]
+        for c in range(6):
+            lab_budgets[sub[s], c] = budgets[s, c]
     for i in range(nq):
         if redo[i]:
-            lab_pts[i] = qpts[i]
+            lab_pts[i, 0], lab_pts[i, 1], lab_pts[i, 2] = qpts[i, 0], qpts[i, 1], qpts[i, 2]
     for m in range(lab_q.shape[0]):
         if redo[lab_q[m]]:
             lab_s2[m] = slack[lab_q[m]] * slack[lab_q[m]]
@@ -293,7 +300,7 @@ def _relabel(
     # among equals (there are none: a point's hits are all old or all new)
     old = lab_hits.copy()
     n_new = h
-    a = b = r = 0
+    a, b, r = np.int64(0), np.int64(0), np.int64(0)
     while a < old.shape[0] or b < n_new:
         if a < old.shape[0] and redo[old[a, 0]]:
             a += 1
@@ -308,7 +315,7 @@ def _relabel(
             b += 1
     lab_i[L_H] = r
     lab_hits = _labels(lab_i, lab_f, width)[2]
-    a = b = r = 0
+    a, b, r = np.int64(0), np.int64(0), np.int64(0)  # not literals (see track_step)
     while a < old.shape[0] or b < n_new:
         if a < old.shape[0] and redo[old[a, 0]]:
             a += 1
@@ -317,23 +324,27 @@ def _relabel(
             a < old.shape[0] and old[a, 0] * (1 << 20) + old[a, 1] <= hit_i[b, 0] * (1 << 20) + hit_i[b, 1]
         )
         if take_old:
-            lab_hits[r] = old[a]
+            for c in range(old.shape[1]):
+                lab_hits[r, c] = old[a, c]
             a += 1
         else:
-            _hit_row(lab_hits[r], hit_i[b], hit_f[b, 0], enter, leave)
+            _hit_row(lab_hits, r, hit_i, b, hit_f[b, 0], enter, leave)
             b += 1
         r += 1
     return True
 
 
 @njit
-def _hit_row(row: np.ndarray, hit: np.ndarray, dist: float, enter: float, leave: float) -> None:
-    """A label's hit row from a :func:`pair_hits` row: query point, piece id, within the enter and
-    the leave distance, face ids."""
-    row[0], row[1] = hit[0], hit[1]
-    row[2] = 1 if dist <= enter else 0
-    row[3] = 1 if dist <= leave else 0
-    row[4:] = hit[2:]
+def _hit_row(
+    rows: np.ndarray, r: int, hits: np.ndarray, b: int, dist: float, enter: float, leave: float
+) -> None:
+    """Label hit row ``r`` from :func:`pair_hits` row ``b``: query point, piece id, within the enter
+    and the leave distance, face ids."""
+    rows[r, 0], rows[r, 1] = hits[b, 0], hits[b, 1]
+    rows[r, 2] = 1 if dist <= enter else 0
+    rows[r, 3] = 1 if dist <= leave else 0
+    for c in range(2, hits.shape[1]):
+        rows[r, c + 2] = hits[b, c]
 
 
 @njit
@@ -358,7 +369,8 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
             keep = _contains(touching, nt, key)
         if keep:
             new[n_keep, 0] = point
-            new[n_keep, 1:] = hits[r, 4:]
+            for c in range(w):
+                new[n_keep, c + 1] = hits[r, c + 4]
             keys[n_keep] = key
             n_keep += 1
     _sort(keys, n_keep)
@@ -385,7 +397,8 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     grouped = np.empty((n_keep, w), np.int64)
     for r in range(n_keep):
         p = new[r, 0]
-        grouped[fill[p]] = new[r, 1:]
+        for c in range(w):
+            grouped[fill[p], c] = new[r, c + 1]
         fill[p] += 1
     n_changed = 0
     for p in range(n1):
@@ -397,9 +410,13 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
         if differs:
             changed[n_changed] = p
             n_changed += 1
-    group[:n_keep] = grouped
-    start[:] = count
-    kept[:n_keep] = new[:n_keep]
+    for r in range(n_keep):
+        for c in range(w):
+            group[r, c] = grouped[r, c]
+        for c in range(w + 1):
+            kept[r, c] = new[r, c]
+    for p in range(n1 + 1):
+        start[p] = count[p]
     work_i[W_KEPT_N] = n_keep
     work_i[W_CHANGED_N] = n_changed
     return True
