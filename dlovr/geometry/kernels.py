@@ -50,6 +50,9 @@ def norm3(x: float, y: float, z: float) -> float:
 def np_sum(a: np.ndarray) -> float:
     """``a.sum()`` rounded as numpy rounds it for a 1-D array: pairwise summation, halving blocks of
     more than 128 at a multiple of 8, blocks summed with 8 accumulators (fewer than 8: in order)."""
+    start = np.int64(0)  # not a literal: one compilation of _block_sum
+    if a.shape[0] <= 128:
+        return 0.0 + block_sum(a, start, a.shape[0])
     # the halving, without recursion: a stack of (start, length, right half pending, left sum)
     los, ns = np.empty(64, np.int64), np.empty(64, np.int64)
     right, part = np.zeros(64, np.bool_), np.empty(64)
@@ -64,7 +67,7 @@ def np_sum(a: np.ndarray) -> float:
             top += 1
             los[top], ns[top] = lo, half
             continue
-        v = _block_sum(a, lo, m)
+        v = block_sum(a, lo, m)
         while True:  # hand the sum up
             top -= 1
             if top < 0:
@@ -80,7 +83,8 @@ def np_sum(a: np.ndarray) -> float:
 
 
 @njit
-def _block_sum(a: np.ndarray, lo: int, n: int) -> float:
+def block_sum(a: np.ndarray, lo: int, n: int) -> float:
+    """numpy's sum of ``a[lo : lo + n]`` for ``n`` up to 128 (without the initial 0.0 it adds)."""
     if n < 8:
         res = 0.0
         for i in range(lo, lo + n):
@@ -524,16 +528,17 @@ def budgets_keep(budgets: np.ndarray, rows: np.ndarray, moves: np.ndarray, out: 
     """Whether moving the points of pairs ``rows`` by ``moves`` keeps their labels (under the
     budgets along the pair's normal, across it and in all; see :class:`dlovr.geometry.LabelBudgets`)."""
     for i in range(rows.shape[0]):
-        out[i] = keeps(budgets[rows[i]], moves[i, 0], moves[i, 1], moves[i, 2])
+        out[i] = keeps(budgets, rows[i], moves[i, 0], moves[i, 1], moves[i, 2])
 
 
 @njit
-def keeps(b: np.ndarray, mx: float, my: float, mz: float) -> bool:
-    """Whether a move ``m`` keeps the labels of a pair with budget row ``b``."""
+def keeps(budgets: np.ndarray, j: int, mx: float, my: float, mz: float) -> bool:
+    """Whether a move ``m`` keeps the labels of the pair with budget row ``j``."""
     d2 = dot3(mx, my, mz, mx, my, mz)
-    dn = dot3(mx, my, mz, b[0], b[1], b[2])
+    dn = dot3(mx, my, mz, budgets[j, 0], budgets[j, 1], budgets[j, 2])
     dn2 = dn * dn
-    return d2 < b[5] * b[5] and dn2 < b[3] * b[3] and d2 - dn2 < b[4] * b[4]
+    any_, along, across = budgets[j, 5], budgets[j, 3], budgets[j, 4]
+    return d2 < any_ * any_ and dn2 < along * along and d2 - dn2 < across * across
 
 
 @njit

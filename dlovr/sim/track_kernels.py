@@ -138,15 +138,14 @@ def track_step(
                 return BAD_PIECE, False, i
             point, seg = int(table[i, T_POINT]), int(table[i, T_SEGMENT])
             if point < 0 and seg >= 0:  # on a segment: the contact projected onto it
-                a, b = pts[seg], pts[seg + 1]
-                abx, aby, abz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-                p = table[i, T_POS : T_POS + 3]
-                t = dot3(p[0] - a[0], p[1] - a[1], p[2] - a[2], abx, aby, abz) / max(
-                    dot3(abx, aby, abz, abx, aby, abz), 1e-18
-                )
+                ax, ay, az = pts[seg, 0], pts[seg, 1], pts[seg, 2]
+                abx, aby, abz = pts[seg + 1, 0] - ax, pts[seg + 1, 1] - ay, pts[seg + 1, 2] - az
+                px, py, pz = table[i, T_POS], table[i, T_POS + 1], table[i, T_POS + 2]
+                den = max(dot3(abx, aby, abz, abx, aby, abz), 1e-18)
+                t = dot3(px - ax, py - ay, pz - az, abx, aby, abz) / den
                 t = min(max(t, 0.0), 1.0)
                 point = seg if t < 0.5 else seg + 1
-                qpts[nq, 0], qpts[nq, 1], qpts[nq, 2] = a[0] + t * abx, a[1] + t * aby, a[2] + t * abz
+                qpts[nq, 0], qpts[nq, 1], qpts[nq, 2] = ax + t * abx, ay + t * aby, az + t * abz
                 owner[nq] = point
                 nq += 1
             point_of[i] = point
@@ -155,7 +154,7 @@ def track_step(
                 nk += 1
         for j in range(nt):
             keys[nk + j] = touching[j]
-        _sort(keys, nk + nt)
+        _sort_keys(keys, nk + nt, n1)
         for j in range(nk + nt):
             if j == 0 or keys[j] != keys[j - 1]:
                 pairs[k, 0], pairs[k, 1] = keys[j] >> 20, keys[j] & _LOW
@@ -204,8 +203,8 @@ def _outcome(
     for j in range(k):
         i = pairs[j, 0]
         if moved[i]:
-            m, o = qpts[i], lab_pts[i]
-            if not keeps(lab_budgets[j], m[0] - o[0], m[1] - o[1], m[2] - o[2]):
+            mx, my, mz = qpts[i, 0] - lab_pts[i, 0], qpts[i, 1] - lab_pts[i, 1], qpts[i, 2] - lab_pts[i, 2]
+            if not keeps(lab_budgets, j, mx, my, mz):
                 redo[i] = True
     n_again = 0
     for i in range(nq):
@@ -432,6 +431,25 @@ def _sort(a: np.ndarray, n: int) -> None:
             a[j] = a[j - 1]
             j -= 1
         a[j] = v
+
+
+@njit
+def _sort_keys(keys: np.ndarray, n: int, n_points: int) -> None:
+    """Sort ``keys[:n]`` (cable point << 20 | piece id, points below ``n_points``) in place: a
+    counting sort by point, then by piece within each point."""
+    count = np.zeros(n_points + 1, np.int64)
+    for j in range(n):
+        count[(keys[j] >> 20) + 1] += 1
+    for p in range(n_points):
+        count[p + 1] += count[p]
+    out = np.empty(n, np.int64)
+    for j in range(n):
+        p = keys[j] >> 20
+        out[count[p]] = keys[j]
+        count[p] += 1
+    for j in range(n):
+        keys[j] = out[j]
+    _sort(keys, n)  # now only pieces of one point out of order: an insertion sort finishes it
 
 
 @njit
