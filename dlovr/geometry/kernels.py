@@ -4,13 +4,14 @@ how far it may move before that changes (world frame, metres).
 They read the pieces packed by :func:`dlovr.geometry.packing.pack_pieces` (``gf``: floats, ``gi``:
 integers) and write hits as rows: ``hit_i`` (point, piece id, face ids sorted, -1 padded) and
 ``hit_f`` (distance, closest point). :class:`dlovr.geometry.SceneGeometry` wraps them
-(``classify_points``, ``pair_hits``, ``label_slack``); the contact tracker calls them on the steps
-that label points again.
+(``classify_points``, ``pair_hits``, ``label_slack``); the contact tracker's kernel calls
+:func:`pair_hits` on the steps that label points again.
 
 Rounding: every dot product of three rounds as the numpy code these kernels replaced did, so that
 they label exactly as it did: :func:`dot3` as ``np.einsum`` (the products of x and z summed first),
-:func:`dot3f` as the BLAS matrix product (fused multiply-adds, x first), :func:`norm3` as
-``np.linalg.norm``. Sums of forces round as numpy's pairwise ``sum`` (:func:`np_sum`).
+:func:`dot3f` as its matrix products did through the development machine's BLAS (fused
+multiply-adds, x first; BLAS rounds differently on other processors, these kernels do not),
+:func:`norm3` as ``np.linalg.norm``. Sums of forces round as numpy's pairwise ``sum`` (:func:`np_sum`).
 """
 
 from __future__ import annotations
