@@ -16,6 +16,7 @@ from dlovr.cli_common import (
     _os_errors,
     _plural,
     _scene,
+    _warm_up,
 )
 
 
@@ -308,6 +309,7 @@ def scene_export_cmd(ref: str, out: str) -> None:
 def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None:
     """Serve the browser teleoperation UI (viser) with the simulation running in real time."""
     scene = _scene(scene_ref)
+    _warm_up()
     from dlovr.ui import serve
 
     try:

@@ -102,3 +102,10 @@ def _refuse_existing(out: str, force: bool) -> None:
         raise UserError(f"{out}: exists; give --force to overwrite it")
 
 
+
+
+def _warm_up() -> None:
+    """Compile the per-step kernels on the first run, saying so (on stderr)."""
+    from dlovr.sim.warmup import warm_up
+
+    warm_up(lambda notice: click.echo(notice, err=True))

@@ -18,6 +18,7 @@ from dlovr.cli_common import (
     _scene,
     _script,
     _t,
+    _warm_up,
 )
 
 
@@ -137,6 +138,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
         _refuse_existing(out, force)
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
+    _warm_up()
     _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))

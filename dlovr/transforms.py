@@ -23,7 +23,9 @@ def dot(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> flo
     last bit differently on another.
     """
     total = 0.0
-    for x, y in zip(np.asarray(a, dtype=float).tolist(), np.asarray(b, dtype=float).tolist(), strict=True):
+    xs = a if type(a) is list else np.asarray(a, dtype=float).tolist()  # a list: Python floats already
+    ys = b if type(b) is list else np.asarray(b, dtype=float).tolist()
+    for x, y in zip(xs, ys, strict=True):
         total += x * y
     return total
 
@@ -66,17 +68,27 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
-    """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz."""
-    q0 = quat_normalize(q0)
-    q1 = quat_normalize(q1)
-    c = dot(q0, q1)
+    """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz.
+
+    In Python floats, element by element: the same roundings as the numpy expressions
+    ``q / norm(q)``, ``q0 + s * (q1 - q0)`` and ``a * q0 + b * q1``, without their overhead."""
+    a, b = _unit4(q0), _unit4(q1)
+    c = dot(a, b)
     if c < 0.0:
-        q1, c = -q1, -c
+        b, c = [-x for x in b], -c
     if c > 0.9995:
-        return quat_normalize(q0 + s * (q1 - q0))
+        return quat_normalize(np.array([x + s * (y - x) for x, y in zip(a, b, strict=True)]))
     th = math.acos(min(1.0, c))
     sin = math.sin(th)
-    return (math.sin((1 - s) * th) / sin) * q0 + (math.sin(s * th) / sin) * q1
+    wa, wb = math.sin((1 - s) * th) / sin, math.sin(s * th) / sin
+    return np.array([wa * x + wb * y for x, y in zip(a, b, strict=True)])
+
+
+def _unit4(q: Sequence[float] | np.ndarray) -> list[float]:
+    """``quat_normalize(q)`` as a list of Python floats."""
+    v = q if type(q) is list else np.asarray(q, dtype=float).tolist()
+    n = norm(v)
+    return [x / n for x in v]
 
 
 def quat_to_matrix(q: Sequence[float]) -> np.ndarray:

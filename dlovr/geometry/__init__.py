@@ -29,7 +29,7 @@ Typical use by the simulation::
     disc = geom.discrete_situation(points)       # discrete.DiscreteSituation
 """
 
-from dlovr.geometry.classify import PointHit, primitives_per_point
+from dlovr.geometry.classify import PointHit, point_primitives, primitives_per_point
 from dlovr.geometry.decomposition import DecompositionError, cache_dir, decompose, decompose_exact
 from dlovr.geometry.faces import ObjectFace, object_faces
 from dlovr.geometry.facts import SceneFactBook
@@ -59,6 +59,7 @@ __all__ = [
     "decompose_exact",
     "object_faces",
     "object_local_mesh",
+    "point_primitives",
     "primitives_per_point",
     "prism_mesh",
     "scene_pieces",

@@ -11,11 +11,11 @@ from __future__ import annotations
 import hashlib
 import io
 import os
-from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from dlovr.cache import cache_dir
 from dlovr.geometry.faces import _clean, object_faces
 from dlovr.geometry.mesh import _to_trimesh, to_manifold
 
@@ -166,14 +166,6 @@ def decompose_approx(mesh: trimesh.Trimesh) -> list[np.ndarray]:
     out = [np.asarray(v, dtype=float) for v, _ in parts]
     out.sort(key=lambda v: tuple(np.round(v.mean(axis=0), 9)))
     return out
-
-
-def cache_dir() -> Path:
-    env = os.environ.get("DLOVR_CACHE_DIR")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "dlovr"
 
 
 def mesh_hash(mesh: trimesh.Trimesh) -> str:

@@ -24,6 +24,7 @@ from dlovr.geometry.facts import SceneFactBook, _PairFacts
 from dlovr.geometry.labelling import _Labelling
 from dlovr.geometry.mesh import object_local_mesh
 from dlovr.geometry.objects import GeomObject, build_object
+from dlovr.geometry.packing import PackedPieces
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.model.topology import Situation, situation_from_points
 from dlovr.transforms import pose_matrix
@@ -46,9 +47,8 @@ class SceneGeometry(_Labelling, _PairFacts):
         self._face_owner = {n: (o, k) for o in self.objects for k, n in enumerate(o.face_names)}
         self._book: SceneFactBook | None = None
         self._piece_ids: dict[tuple[str, int], int] | None = None
-        self._pad: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._outlines: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._box: tuple[np.ndarray, np.ndarray] | None = None
+        self._packed: PackedPieces | None = None
+        self._face_rows: dict[bytes, tuple[str, ...]] = {}
 
     # ---------------------------------------------------------------- construction
     @classmethod

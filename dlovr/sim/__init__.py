@@ -3,6 +3,8 @@
 - :mod:`dlovr.sim.build`: the MuJoCo model (obstacles as convex pieces, the cable rod, the gripper)
   and its MJCF export;
 - :mod:`dlovr.sim.contacts`: the rod's raw contacts with normal forces, read from MuJoCo's arrays;
+- :mod:`dlovr.sim.kernels`, :mod:`dlovr.sim.track_kernels`: the compiled per-step kernels of the
+  simulator and the tracker; :mod:`dlovr.sim.warmup`: compiling them on the first run;
 - :mod:`dlovr.sim.simulator`: :class:`Simulator`, stepping, bounded gripper motion, divergence checks,
   per-step records;
 - :mod:`dlovr.sim.tracker`: :class:`ContactTracker`, each step's contacts -> topological and discrete
@@ -27,7 +29,7 @@ from dlovr.sim.build import (
     edge_solimp,
     export_xml,
 )
-from dlovr.sim.contacts import ContactArrays, RodContact, read_contact_arrays
+from dlovr.sim.contacts import ContactArrays, RodContact
 from dlovr.sim.simulator import (
     DEFAULT_MAX_STRETCH,
     SimState,
@@ -57,5 +59,4 @@ __all__ = [
     "edge_solimp",
     "export_xml",
     "obstacles_from_scene",
-    "read_contact_arrays",
 ]

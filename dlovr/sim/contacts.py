@@ -1,4 +1,5 @@
-"""Raw contacts of the rod, read from MuJoCo's arrays once per step (no per-contact Python objects).
+"""Raw contacts of the rod, read from MuJoCo's contact structs in place by the per-step kernel
+(:func:`dlovr.sim.kernels.step_record`; no per-contact Python objects).
 
 Frames and units: world frame, metres, newtons. A contact's ``normal`` points from the obstacle toward
 the rod; its normal force is decoded as ``mj_contactForce`` does.
@@ -6,11 +7,39 @@ the rod; its normal force is decoded as ``mj_contactForce`` does.
 
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
-from typing import Any
+from functools import cached_property
 
 import mujoco
 import numpy as np
+
+from dlovr.sim.kernels import (
+    C_FLEX,
+    C_HEAD,
+    C_LAYOUT,
+    C_NFATAL,
+    C_NGEOM,
+    C_NHOLD,
+    C_NQ,
+    C_NV,
+    C_NVERT,
+    C_PYRAMIDAL,
+    C_QPOS,
+    C_QVEL,
+    C_WARN_BASE,
+    C_XPOS,
+    T_ACTIVE,
+    T_DIST,
+    T_FORCE,
+    T_GEOM,
+    T_NORMAL,
+    T_OBJ,
+    T_PIECE,
+    T_POINT,
+    T_POS,
+    T_SEGMENT,
+)  # fmt: skip  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -41,26 +70,34 @@ class RodContact:
 class ContactArrays:
     """Raw rod-obstacle contacts of one step, one row per MuJoCo contact (see :class:`RodContact`).
 
-    ``point``/``segment``: -1 where MuJoCo does not report a vertex/element; ``geom``: MuJoCo geom id;
-    ``obj``: index into ``names[0]`` (object names); ``names[1]``: geom names by ``geom`` id.
-    ``self_pairs``: (k, 2) touching segment pairs of the rod itself.
+    ``table``: (n, 14) rows as the kernels write them (:mod:`dlovr.sim.kernels`): point, segment,
+    geom, obj, piece (integers held exactly), dist, normal (3), pos (3), force, active (0/1). The
+    columns are also given as typed arrays: ``point``/``segment`` (-1 where MuJoCo does not report a
+    vertex/element), ``geom`` (MuJoCo geom id), ``obj`` (index into ``names[0]``, the object names),
+    ``piece``, ``dist``, ``normal``, ``pos``, ``force``, ``active``; ``names[1]``: geom names by
+    ``geom`` id. ``self_pairs``: (k, 2) touching segment pairs of the rod itself.
     """
 
-    point: np.ndarray
-    segment: np.ndarray
-    geom: np.ndarray
-    obj: np.ndarray
-    piece: np.ndarray
-    dist: np.ndarray
-    normal: np.ndarray
-    pos: np.ndarray
-    force: np.ndarray
-    active: np.ndarray
+    table: np.ndarray
     self_pairs: np.ndarray
     names: tuple[tuple[str, ...], dict[int, str]]
 
     def __len__(self) -> int:
-        return len(self.dist)
+        return len(self.table)
+
+    def _column(self, col: int) -> np.ndarray:
+        return self.table[:, col].astype(np.int64)
+
+    point = cached_property(lambda self: self._column(T_POINT))
+    segment = cached_property(lambda self: self._column(T_SEGMENT))
+    geom = cached_property(lambda self: self._column(T_GEOM))
+    obj = cached_property(lambda self: self._column(T_OBJ))
+    piece = cached_property(lambda self: self._column(T_PIECE))
+    dist = cached_property(lambda self: self.table[:, T_DIST].copy())
+    normal = cached_property(lambda self: self.table[:, T_NORMAL : T_NORMAL + 3].copy())
+    pos = cached_property(lambda self: self.table[:, T_POS : T_POS + 3].copy())
+    force = cached_property(lambda self: self.table[:, T_FORCE].copy())
+    active = cached_property(lambda self: self.table[:, T_ACTIVE] != 0.0)
 
     @property
     def surface(self) -> np.ndarray:
@@ -84,113 +121,101 @@ class ContactArrays:
                 force=float(self.force[i]),
                 active=bool(self.active[i]),
             )
-            for i in range(len(self.dist))
+            for i in range(len(self.table))
         )
 
 
 _NO_PAIRS = np.zeros((0, 2), int)
-_PYRAMIDAL = int(mujoco.mjtCone.mjCONE_PYRAMIDAL)
-_EDGES = [np.arange(2 * (k - 1)) for k in range(7)]  # a pyramidal cone's edge rows, by contact dim
-
-_EMPTY_CONTACTS = ContactArrays(
-    point=np.zeros(0, int),
-    segment=np.zeros(0, int),
-    geom=np.zeros(0, int),
-    obj=np.zeros(0, int),
-    piece=np.zeros(0, int),
-    dist=np.zeros(0),
-    normal=np.zeros((0, 3)),
-    pos=np.zeros((0, 3)),
-    force=np.zeros(0),
-    active=np.zeros(0, bool),
-    self_pairs=np.zeros((0, 2), int),
-    names=((), {}),
-)
 
 
+class MjViews:
+    """MuJoCo's arrays of one ``MjData`` as the per-step kernel reads them in place
+    (:func:`dlovr.sim.kernels.step_record`), views taken once: each attribute access of the bindings
+    makes a new view, and numba checks every argument of a call.
 
-def read_contact_arrays(
-    model: mujoco.MjModel,
-    data: mujoco.MjData,
-    flex_id: int,
-    piece_of_geom: np.ndarray,
-    obj_of_geom: np.ndarray,
-    names: tuple[tuple[str, ...], dict[int, str]],
-) -> ContactArrays:
-    """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects).
-
-    ``piece_of_geom`` / ``obj_of_geom``: per MuJoCo geom id, the obstacle piece index and object index
-    (-1 for geoms that are not obstacle pieces); ``names``: see :class:`ContactArrays`.
+    ``mj``: one float64 view over qpos, qvel and the cable points (they lie in ``data``'s buffer, fixed
+    for its life); ``warn``: its warning structs as int32; ``arena``: its contact structs, which
+    MuJoCo keeps at the start of the arena (``d->contact = d->arena``) for the life of ``data`` (taken
+    at the first contact: the bindings give an empty contact list no address); ``cfg``: the kernel's
+    configuration (``dlovr.sim.kernels.C_*``: the warning baseline, the rod's flex id, the cone, where
+    the arrays lie in ``mj``, the contact structs' layout from the bindings' own views, the fatal
+    warnings, the obstacle piece and object of each geom, the holding constraints' rows). Keep
+    ``data`` alive as long as the views.
     """
-    d, f = data, flex_id
-    nc = int(d.ncon)
-    if nc == 0:
-        return _EMPTY_CONTACTS
-    c = d.contact
-    flex = c.flex[:nc]
-    geom = c.geom[:nc]
-    gid = geom[:, 0]
-    rows: Any
-    side: Any
-    if (flex[:, 1] == f).all() and (gid >= 0).all() and (piece_of_geom[gid] >= 0).all():
-        # the usual case: every contact has an obstacle piece as side 0 and the rod as side 1
-        rows, side, self_pairs = slice(None), 1, _NO_PAIRS
-        normal = c.frame[:, :3].copy()
-    else:
-        selfm = (flex[:, 0] == f) & (flex[:, 1] == f)
-        side1 = (flex[:, 1] == f) & (geom[:, 0] >= 0)  # obstacle is geom[0], rod is side 1
-        side0 = (flex[:, 0] == f) & (geom[:, 1] >= 0) & ~side1
-        sel = np.nonzero(side0 | side1)[0]
-        s1 = side1[sel]
-        gid = np.where(s1, geom[sel, 0], geom[sel, 1])
-        known = piece_of_geom[gid] >= 0
-        rows, s1, gid = sel[known], s1[known], gid[known]
-        side = np.where(s1, 1, 0)
-        sign = np.where(s1, 1.0, -1.0)[:, None]  # frame normal points from side 0 toward side 1
-        normal = sign * c.frame[rows, :3]
-        self_pairs = np.sort(c.elem[:nc][selfm], axis=1).astype(int)
-    adr = c.efc_address[rows]
-    act = adr >= 0
-    return ContactArrays(
-        point=c.vert[rows, side].astype(int),
-        segment=c.elem[rows, side].astype(int),
-        geom=gid.astype(int),
-        obj=obj_of_geom[gid],
-        piece=piece_of_geom[gid],
-        dist=c.dist[rows].copy(),
-        normal=normal,
-        pos=c.pos[rows].copy(),
-        force=normal_forces(model, data, c.dim[rows], adr, act),
-        active=act,
-        self_pairs=self_pairs,
-        names=names,
-    )
 
-
-def normal_forces(
-    model: mujoco.MjModel, data: mujoco.MjData, dims: np.ndarray, adr: np.ndarray, act: np.ndarray
-) -> np.ndarray:
-    """Normal force (N) of contacts with constraint rows at ``adr`` (0 where not ``act``ive), as
-    ``mj_contactForce`` decodes it: with pyramidal cones the sum of the 2*(dim-1) edge forces."""
-    ef = data.efc_force
-    every = len(adr) > 0 and bool(act.all())  # the usual: every contact has constraint rows
-    if not every and not act.any():
-        return np.zeros(len(adr))
-    dims, a = (dims, adr) if every else (dims[act], adr[act])
-    k = int(dims[0])
-    if model.opt.cone != _PYRAMIDAL:
-        f = ef[a]
-    elif k > 1 and (dims == k).all():
-        f = ef[a[:, None] + _EDGES[k]].sum(axis=1)
-    else:
-        f = np.array(
-            [
-                float(ef[i : i + 2 * (n - 1)].sum()) if n > 1 else float(ef[i])
-                for i, n in zip(a, dims, strict=True)
-            ]
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        xpos: np.ndarray,
+        flex: int,
+        fatal: np.ndarray,
+        piece_of_geom: np.ndarray,
+        obj_of_geom: np.ndarray,
+    ):
+        arrays = (data.qpos, data.qvel, xpos)
+        ptrs = [_address(a) for a in arrays]
+        lo = min(ptrs)
+        hi = max(p + a.nbytes for p, a in zip(ptrs, arrays, strict=True))
+        if any((p - lo) % 8 for p in ptrs) or not all(a.flags.c_contiguous for a in arrays):
+            raise RuntimeError("unexpected MuJoCo data layout")
+        self.mj = np.ctypeslib.as_array((ctypes.c_double * ((hi - lo) // 8)).from_address(lo))
+        number = data.warning.number  # every other int32 of the warning structs
+        warn = (ctypes.c_int32 * (2 * len(number) - 1)).from_address(_address(number))
+        self.warn = np.ctypeslib.as_array(warn)
+        self.arena = np.zeros(0)
+        self._data = data
+        q, v, x = ((p - lo) // 8 for p in ptrs)
+        self._head = np.zeros(C_HEAD, np.int64)
+        self._head[[C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM]] = (
+            flex, int(model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL), len(fatal), len(piece_of_geom)
         )
-    if every:
-        return f
-    force = np.zeros(len(adr))
-    force[act] = f
-    return force
+        self._head[[C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT]] = (
+            x, q, len(data.qpos), v, len(data.qvel), len(xpos)
+        )
+        self._tail = [
+            np.asarray(fatal, np.int64) * (number.strides[0] // 4),
+            np.asarray(piece_of_geom, np.int64),
+            np.asarray(obj_of_geom, np.int64),
+        ]
+        self.cfg = self._pack(np.zeros(0, np.int64))
+
+    def _pack(self, hold_rows: np.ndarray) -> np.ndarray:
+        self._head[C_NHOLD] = len(hold_rows)
+        return np.concatenate([self._head, *self._tail, hold_rows.astype(np.int64)])
+
+    def set_hold_rows(self, rows: np.ndarray) -> None:
+        """The constraint rows of the holding constraints (3 per constraint)."""
+        base = self.cfg[C_WARN_BASE]
+        self.cfg = self._pack(rows)
+        self.cfg[C_WARN_BASE] = base
+
+    def set_warning_base(self, count: int) -> None:
+        """The fatal warnings' count that the divergence check compares with."""
+        self.cfg[C_WARN_BASE] = count
+
+    def contacts(self) -> np.ndarray:
+        """The contact structs (call when the step has contacts)."""
+        if len(self.arena) == 0:
+            c = self._data.contact
+            base = _address(c.dist)
+            stride = c.dist.strides[0]
+
+            def off(a: np.ndarray, unit: int) -> int:
+                delta = _address(a) - base
+                if delta % unit or stride % unit:
+                    raise RuntimeError("unexpected MuJoCo contact layout")
+                return delta // unit
+
+            self._head[C_LAYOUT : C_LAYOUT + 11] = (
+                stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
+                off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4),
+            )  # fmt: skip
+            self.cfg[C_LAYOUT : C_LAYOUT + 11] = self._head[C_LAYOUT : C_LAYOUT + 11]
+            size = int(self._data.narena) // 8
+            self.arena = np.ctypeslib.as_array((ctypes.c_double * size).from_address(base))
+        return self.arena
+
+
+def _address(a: np.ndarray) -> int:
+    return int(a.__array_interface__["data"][0])

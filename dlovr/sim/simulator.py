@@ -25,8 +25,9 @@ import mujoco
 import numpy as np
 
 from dlovr.script import Script
+from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
-from dlovr.sim.contacts import ContactArrays, RodContact, read_contact_arrays
+from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
 from dlovr.transforms import dot, norm, quat_normalize, quat_rotate, slerp
 
 # --------------------------------------------------------------------------------------------------
@@ -103,6 +104,8 @@ class SimState:
 
 # --------------------------------------------------------------------------------------------------
 # Simulator
+
+_NO_PAIRS = np.zeros((0, 2), np.int64)
 
 
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
@@ -182,22 +185,31 @@ class Simulator:
         self.step_index = 0
         m = self.model
         self._fatal = np.array([int(getattr(mujoco.mjtWarning, w)) for w in _WARNINGS_FATAL])
+        d = self.data
+        # views of MuJoCo's fixed arrays, taken once (each attribute access makes a new view)
+        b = built
+        self._xpos = d.flexvert_xpos[b.vert_adr : b.vert_adr + b.nvert]
+        self._mocap_pos, self._mocap_quat = d.mocap_pos[b.mocap_id], d.mocap_quat[b.mocap_id]
+        self._dt = float(m.opt.timestep)
+        self._pts_shape = (b.nvert, 3)
         self._geom_names = {g: mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) for g in built.geom_piece}
         objs = tuple(dict.fromkeys(o for o, _ in built.geom_piece.values()))
-        self._obj_of_geom = np.full(m.ngeom, -1, dtype=int)
-        self._piece_of_geom = np.full(m.ngeom, -1, dtype=int)
+        self._obj_of_geom = np.full(m.ngeom, -1, dtype=np.int64)
+        self._piece_of_geom = np.full(m.ngeom, -1, dtype=np.int64)
         for g, (o, k) in built.geom_piece.items():
             self._obj_of_geom[g] = objs.index(o)
             self._piece_of_geom[g] = k
         self._names = (objs, self._geom_names)
+        self._views = MjViews(
+            m, d, self._xpos, b.flex_id, self._fatal, self._piece_of_geom, self._obj_of_geom
+        )
         eq = mujoco.mjtObj.mjOBJ_EQUALITY
-        self._hold_rows: tuple[int, np.ndarray] | None = None
+        self._hold_rows: tuple[int, np.ndarray] = (-1, np.zeros(0, np.int64))
         self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
         mujoco.mj_forward(m, self.data)
         self._reset_warnings()
-        mid = built.mocap_id
-        self.target_pos = self.data.mocap_pos[mid].copy()
-        self.target_quat = self.data.mocap_quat[mid].copy()
+        self.target_pos = self._mocap_pos.copy()
+        self.target_quat = self._mocap_quat.copy()
         deep = [c for c in self.contacts() if c.dist < -0.5 * float(m.flex_radius[built.flex_id])]
         if deep:
             c = min(deep, key=lambda c: c.dist)
@@ -227,21 +239,26 @@ class Simulator:
             self.target_quat = quat_normalize(q)
 
     def _move_mocap(self) -> None:
-        d, mid, dt = self.data, self.built.mocap_id, self.model.opt.timestep
-        pos = d.mocap_pos[mid]
+        dt = self._dt
+        pos, target = self._mocap_pos, self.target_pos
+        p, t = pos.tolist(), target.tolist()
         # a gripper already at its target stays put (the general formulas below give the same values)
-        if pos.tolist() != self.target_pos.tolist():
-            delta = self.target_pos - pos
-            dist = norm(delta)  # not np.linalg.norm: this feeds MuJoCo (see dlovr.script.dot)
+        if p != t:
+            # in Python floats (as dlovr.transforms.norm; not np.linalg.norm: this feeds MuJoCo), the
+            # roundings of target - pos and pos + delta * (vmax / dist)
+            delta = [t[0] - p[0], t[1] - p[1], t[2] - p[2]]
+            dist = norm(delta)
             vmax = self.max_speed * dt
-            d.mocap_pos[mid] = self.target_pos if dist <= vmax else pos + delta * (vmax / dist)
-        q = d.mocap_quat[mid]
-        tq = self.target_quat
-        if q.tolist() != tq.tolist():
-            q = q.copy()
+            if dist <= vmax:
+                pos[:] = target
+            else:
+                f = vmax / dist
+                pos[:] = [p[0] + delta[0] * f, p[1] + delta[1] * f, p[2] + delta[2] * f]
+        q, tq = self._mocap_quat.tolist(), self.target_quat.tolist()
+        if q != tq:
             angle = 2.0 * math.acos(min(1.0, abs(dot(q, tq))))
             wmax = self.max_angular_speed * dt
-            d.mocap_quat[mid] = tq if angle <= wmax else slerp(q, tq, wmax / angle)
+            self._mocap_quat[:] = self.target_quat if angle <= wmax else slerp(q, tq, wmax / angle)
 
     # -- stepping -----------------------------------------------------------------------------------
 
@@ -255,9 +272,13 @@ class Simulator:
         self._max_stretch = float(value)
         seg = float(self.built.seg_length)
         # squared segment lengths beyond these go to the exact test (bounds slightly inside it)
-        self._length2_bounds = (
-            (seg * (1.0 - self._max_stretch)) ** 2 * (1.0 + 1e-9),
-            (seg * (1.0 + self._max_stretch)) ** 2 * (1.0 - 1e-9),
+        self._bounds = np.array(
+            [
+                (seg * (1.0 - self._max_stretch)) ** 2 * (1.0 + 1e-9),
+                (seg * (1.0 + self._max_stretch)) ** 2 * (1.0 - 1e-9),
+                seg,
+                self._max_stretch,
+            ]
         )
 
     @property
@@ -266,8 +287,7 @@ class Simulator:
 
     def points(self) -> np.ndarray:
         """Centerline points P_0..P_n, shape (n+1, 3) (a copy)."""
-        b = self.built
-        return self.data.flexvert_xpos[b.vert_adr : b.vert_adr + b.nvert].copy()
+        return self._xpos.copy()
 
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
@@ -276,109 +296,104 @@ class Simulator:
             self._move_mocap()
             mujoco.mj_step(m, d)
             self.step_index += 1
-            pts = self._check()
+            rec = self.record(check=True)
             if tracker is not None and k < n - 1:
-                tracker.update(self.record(pts))
-        rec = self.record(pts)
+                tracker.update(rec)
         if tracker is not None:
             object.__setattr__(rec, "state", tracker.update(rec))
         return rec
 
-    def _warning_count(self) -> int:
-        return int(self.data.warning.number[self._fatal].sum())
-
-    def _check(self) -> np.ndarray:
-        """Divergence checks after a step; returns the cable points (a copy)."""
+    def _diverged(self, code: int, index: int, value: float) -> SimulationDiverged:
+        """The error of a failed divergence check (see :func:`dlovr.sim.kernels.step_record`)."""
         d = self.data
-        count = self._warning_count()
-        if count != self._warnings:
-            now = self.data.warning.number
-            w = next(w for w, n0 in zip(self._fatal, self._warnings_each, strict=True) if now[w] > n0)
-            name = mujoco.mjtWarning(int(w)).name
+        if code == 1:
+            now = d.warning.number
+            w = next((w for w, n0 in zip(self._fatal, self._warnings_each, strict=True) if now[w] > n0), None)
+            name = "count changed" if w is None else mujoco.mjtWarning(int(w)).name
             self._reset_warnings()
-            raise SimulationDiverged(self.step_index, d.time, f"MuJoCo warning {name}")
-        # a sum is NaN/inf as soon as one element is: one cheap test per array
-        if not math.isfinite(float(d.qpos.sum()) + float(d.qvel.sum())):
-            raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the state")
-        pts = self.points()
-        if not math.isfinite(float(pts.sum())):
-            raise SimulationDiverged(self.step_index, d.time, "NaN/inf in the cable points")
-        seg = pts[1:] - pts[:-1]
-        length2 = np.einsum("ij,ij->i", seg, seg)
-        lo, hi = self._length2_bounds
-        if length2.min() < lo or length2.max() > hi:  # rare: the exact test, naming the segment
-            dev = np.abs(np.sqrt(length2) / self.built.seg_length - 1.0)
-            stretch = float(dev.max())
-            if stretch > self.max_stretch:
-                i = int(np.argmax(dev))
-                raise SimulationDiverged(
-                    self.step_index,
-                    d.time,
-                    f"segment {i} length off by {stretch:.1%} (bound {self.max_stretch:.0%})",
-                )
-        return pts
+            return SimulationDiverged(self.step_index, d.time, f"MuJoCo warning {name}")
+        if code == 2:
+            return SimulationDiverged(self.step_index, d.time, "NaN/inf in the state")
+        if code == 3:
+            return SimulationDiverged(self.step_index, d.time, "NaN/inf in the cable points")
+        why = f"segment {index} length off by {value:.1%} (bound {self.max_stretch:.0%})"
+        return SimulationDiverged(self.step_index, d.time, why)
 
     def _reset_warnings(self) -> None:
-        """Take MuJoCo's current warning counts as the baseline of :meth:`_check`."""
+        """Take MuJoCo's current warning counts as the baseline of the divergence checks."""
         self._warnings_each = self.data.warning.number[self._fatal].copy()
-        self._warnings = int(self._warnings_each.sum())
+        self._views.set_warning_base(int(self._warnings_each.sum()))
 
     def contact_arrays(self) -> ContactArrays:
-        """Raw rod contacts of the current step as arrays (vectorised; no per-contact Python objects)."""
-        return read_contact_arrays(
-            self.model, self.data, self.built.flex_id, self._piece_of_geom, self._obj_of_geom, self._names
-        )
+        """Raw rod contacts of the current step as arrays (no per-contact Python objects)."""
+        return self.record().contact_arrays
 
     def contacts(self) -> tuple[RodContact, ...]:
         """Raw contacts of the rod with obstacle pieces at the current step, as objects."""
         return self.contact_arrays().as_list()
 
-    def record(self, points: np.ndarray | None = None) -> StepRecord:
-        """The current step's record (``points``: the cable points if already copied)."""
-        d, mid = self.data, self.built.mocap_id
-        return StepRecord(
-            step=self.step_index,
-            time=float(d.time),
-            points=self.points() if points is None else points,
-            gripper_pos=d.mocap_pos[mid].copy(),
-            gripper_quat=d.mocap_quat[mid].copy(),
-            target_pos=self.target_pos.copy(),
-            target_quat=self.target_quat.copy(),
-            contact_arrays=self.contact_arrays(),
-            **dict(zip(("gripper_force", "gripper_torque"), self.gripper_wrench(), strict=True)),
-        )
-
-    def _hold_forces(self) -> np.ndarray:
-        """(2, 3) forces (N, world) of the holding constraints ``hold_0`` (at the gripper's origin) and
-        ``hold_1`` (one segment down ``-G_z``) on the gripper."""
-        d = self.data
-        ne = int(d.ne)  # equality constraint rows come first, in a fixed layout while ne is unchanged
-        if self._hold_rows is None or self._hold_rows[0] != ne:
+    def record(self, *, check: bool = False) -> StepRecord:
+        """The current step's record; with ``check`` the divergence checks too (raises
+        SimulationDiverged): the warnings counted since the last reset, NaN/inf in the state or the
+        cable points, a segment stretched beyond ``max_stretch``. One kernel call
+        (:func:`dlovr.sim.kernels.step_record`) reads MuJoCo's arrays once."""
+        d, views = self.data, self._views
+        ncon = d.ncon
+        ne = d.ne  # equality constraint rows come first, in a fixed layout while ne is unchanged
+        if self._hold_rows[0] != ne:
             ids = d.efc_id[:ne]
             rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
             self._hold_rows = (ne, rows)
-        return d.efc_force[self._hold_rows[1]].reshape(-1, 3)
+            views.set_hold_rows(rows)
+        pts = np.empty(self._pts_shape)
+        table = np.empty((ncon, kernels.T_WIDTH))
+        grip = np.empty(3)
+        arena = views.contacts() if ncon else views.arena
+        code, index, value, rows, nself = kernels.step_record(
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, pts, table, grip
+        )
+        if check and code:
+            raise self._diverged(code, index, value)
+        pairs = _NO_PAIRS
+        if nself:
+            pairs = np.empty((nself, 2), np.int64)
+            kernels.self_pairs(ncon, arena, views.cfg, pairs)
+        return StepRecord(
+            self.step_index,
+            d.time,
+            pts,
+            self._mocap_pos.copy(),
+            self._mocap_quat.copy(),
+            self.target_pos.copy(),
+            self.target_quat.copy(),
+            ContactArrays(table if rows == ncon else table[:rows], pairs, self._names),
+            grip,
+            self._hold_torque(d.efc_force[self._hold_rows[1]].reshape(-1, 3)),
+        )
 
-    def gripper_force(self) -> np.ndarray:
-        """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
-        (a hanging cable pulls with its weight, -m g along z)."""
-        return self._hold_forces().sum(axis=0)
-
-    def gripper_wrench(self) -> tuple[np.ndarray, np.ndarray]:
-        """Force (N) and torque (N m, about the gripper's origin), world frame, that the cable exerts on
-        the gripper through its two holding constraints: ``hold_0`` acts at the origin, ``hold_1`` one
-        segment down ``-G_z``, so the torque is ``(-seg G_z) x F_1``. The torsion taken by the twist
-        lock (``hold_twist``) is not included."""
-        f = self._hold_forces()
+    def _hold_torque(self, f: np.ndarray) -> np.ndarray:
+        """Torque (N m, world, about the gripper's origin) of the holding constraints' forces ``f``
+        ((2, 3), N): ``hold_0`` acts at the origin, ``hold_1`` one segment down ``-G_z``, so the torque
+        is ``(-seg G_z) x F_1``. The torsion taken by the twist lock (``hold_twist``) is not included."""
         if len(f) < 2:
-            return f.sum(axis=0), np.zeros(3)
-        q = self.data.mocap_quat[self.built.mocap_id]
+            return np.zeros(3)
+        q = self._mocap_quat
         w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
         s = -float(self.built.seg_length)  # lever = s * G_z, G_z the third column of R(q)
         rx, ry, rz = s * 2.0 * (x * z + w * y), s * 2.0 * (y * z - w * x), s * (1.0 - 2.0 * (x * x + y * y))
         fx, fy, fz = float(f[1, 0]), float(f[1, 1]), float(f[1, 2])
-        torque = np.array([ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx])
-        return f[0] + f[1], torque
+        return np.array([ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx])
+
+    def gripper_force(self) -> np.ndarray:
+        """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
+        (a hanging cable pulls with its weight, -m g along z)."""
+        return self.record().gripper_force
+
+    def gripper_wrench(self) -> tuple[np.ndarray, np.ndarray]:
+        """Force (N) and torque (N m, about the gripper's origin), world frame, that the cable exerts on
+        the gripper through its two holding constraints (see :meth:`_hold_torque`)."""
+        rec = self.record()
+        return rec.gripper_force, rec.gripper_torque
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
         """Play ``script`` from the current gripper pose; yield one record per step.

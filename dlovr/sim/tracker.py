@@ -1,11 +1,15 @@
 """Per-step contact extraction: a simulation step -> topological and discrete contact situation.
 
-Pure (numpy + the model + geometry; no MuJoCo): it reads the cable points and, when given, the raw
-contact arrays of :class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach
-normal forces). Contacts are labelled geometrically (NOTES.md): a point touches a piece when its
-centerline is within ``radius + enter_tol`` of it, and keeps touching until it is farther than
-``radius + leave_tol`` (hysteresis). The per-step situations are debounced (docs/model.md: flicker,
-brief intermediate states, flights) into the demonstration's kept situations.
+No MuJoCo: it reads the cable points and, when given, the raw contact arrays of
+:class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach normal forces).
+Contacts are labelled geometrically (NOTES.md): a point touches a piece when its centerline is within
+``radius + enter_tol`` of it, and keeps touching until it is farther than ``radius + leave_tol``
+(hysteresis). The per-step situations are debounced (docs/model.md: flicker, brief intermediate
+states, flights) into the demonstration's kept situations.
+
+The per-step work up to the touching hits runs in compiled kernels (:mod:`dlovr.sim.kernels`), one
+call on a step that keeps its labels; model objects (topology, discrete situations) are built only on
+the steps where the hits or the tip's decision change.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.geometry import LabelBudgets, SceneGeometry, primitives_per_point
+from dlovr.geometry import SceneGeometry, point_primitives
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
 from dlovr.model.transitions import (
@@ -27,6 +31,8 @@ from dlovr.model.transitions import (
     is_transient,
     kept_classes,
 )
+from dlovr.sim import track_kernels as tk
+from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT, T_WIDTH
 
 
 @dataclass(frozen=True)
@@ -84,10 +90,10 @@ class ContactTracker:
 
     ``reuse``: a step that queries the same (point, piece) pairs as the step of the last labelling,
     with every queried point closer to where it was then than its slack
-    (:meth:`dlovr.geometry.SceneGeometry.label_slack`), keeps those labels instead of labelling
-    again: the same result, cheaper; points that moved farther are labelled again alone.
-    ``labellings`` counts the steps that labelled every queried point, ``partial_labellings`` those
-    that labelled some.
+    (:meth:`dlovr.geometry.SceneGeometry.label_slack`), or within its budgets along and across its
+    faces, keeps those labels instead of labelling again: the same result, cheaper; points that moved
+    farther are labelled again alone. ``labellings`` counts the steps that labelled every queried
+    point, ``partial_labellings`` those that labelled some.
     """
 
     geometry: SceneGeometry
@@ -101,16 +107,24 @@ class ContactTracker:
 
     def __post_init__(self) -> None:
         self._debouncer: Debouncer[DiscreteSituation] = Debouncer(self.hold, is_transient, self.flight)
-        self._touching = np.zeros(0, dtype=np.int64)  # (point << 20 | piece id) in contact
-        self._signature: tuple[Any, ...] | None = None
+        packed = self.geometry.packed()
+        self._gf, self._gi, self._width = packed.floats, packed.ints, packed.width
+        self._n_pieces = len(self.geometry.pieces)
         self._piece_map: tuple[Any, np.ndarray] | None = None
-        self._tip: tuple[Any, list[np.ndarray]] | None = None
-        self._situation: Situation | None = None
-        self._labels: _Labels | None = None
-        self._pairs_memo: tuple[np.ndarray, ...] | None = None
+        self._tols: tuple[float, float, np.ndarray] | None = None
+        self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
+        self._forget()
         self.labellings = 0
         self.partial_labellings = 0
         self.current: ContactState | None = None
+
+    def _forget(self) -> None:
+        """No labels, no touching pairs, no hits."""
+        self._n1 = -1  # the work and label arrays are made afresh at the next step
+        self._spans: tuple[Any, np.ndarray] = (None, _NO_SPANS)
+        self._tip: tuple[int, list[list[float]]] | None = None
+        self._signature: tuple[Any, ...] | None = None
+        self._situation: Situation | None = None
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -118,9 +132,7 @@ class ContactTracker:
         A recording starts this way, and its replay too, so both see the same contact states.
         """
         self._debouncer = Debouncer(self.hold, is_transient, self.flight)
-        self._touching = np.zeros(0, dtype=np.int64)
-        self._signature = self._situation = None
-        self._labels = self._pairs_memo = None
+        self._forget()
         self.changes = []
         self.current = None
         return self.update(record)
@@ -129,70 +141,29 @@ class ContactTracker:
     def kept(self) -> list[Kept[DiscreteSituation]]:
         return self._debouncer.kept
 
-    def classify(
-        self,
-        points: np.ndarray,
-        gripper_z: Sequence[float] | None = None,
-        pairs: tuple[np.ndarray, np.ndarray] | None = None,
-        between: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-    ) -> Situation:
-        """Topological situation of the cable polyline ``points`` (hysteresis applied).
-
-        ``pairs``: (point indices, piece ids) the simulator reports in contact; only those (and the
-        pairs touching at the last step) are classified. ``None``: every point against every piece.
-        ``between``: (centerline positions, owner point, piece id) of contacts the simulator reports
-        between two points (a segment crossing an edge touches it between its end points); their
-        labels count for the nearer point.
-        """
-        pts = np.asarray(points, dtype=float)
+    def classify(self, pts: np.ndarray, record: Any) -> Situation:
+        """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
+        :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
+        situation is made again) is the gripper's z axis."""
         geom = self.geometry
-        if pairs is None:
-            pi = np.repeat(np.arange(len(pts)), len(geom.pieces))
-            pc = np.tile(np.arange(len(geom.pieces)), len(pts))
-        else:  # the reported pairs and those touching at the last step, once each
-            raw_pi, raw_pc = (np.asarray(a, dtype=np.int64) for a in pairs)
-            memo, touching = self._pairs_memo, self._touching
-            if (
-                memo is not None
-                and _same(raw_pi, memo[0])
-                and _same(raw_pc, memo[1])
-                and _same(touching, memo[2])
-            ):
-                pi, pc = memo[3], memo[4]
-            else:
-                pi, pc = _unique_pairs(
-                    np.concatenate([raw_pi, touching >> 20]), np.concatenate([raw_pc, touching & _LOW])
-                )
-                self._pairs_memo = (raw_pi, raw_pc, touching, pi, pc)
-        owner = np.arange(len(pts))
-        if between is not None and len(between[0]):
-            vpos, vowner, vpiece = between
-            pi = np.concatenate([pi, len(pts) + np.arange(len(vpos))])
-            pc = np.concatenate([pc, vpiece])
-            owner = np.concatenate([owner, vowner])
-            pts_all = np.concatenate([pts, vpos])
-        else:
-            pts_all = pts
-        lab = self._reuse_labels(pts_all, pi, pc) or self._label(pts_all, pi, pc)
-        kept_hits = self._hits(lab, owner)
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
-        if self._tip is None or self._tip[0] is not kept_hits:  # the tip's faces, per labelling
-            tip_faces = sorted({f for h in kept_hits if h.point == n for f in h.faces})
+        if self._tip is None or self._tip[0] != self._version:  # the tip's faces, per labelling
+            tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
             normals = [np.asarray(geom.face_normal(f), dtype=float).tolist() for f in tip_faces]
-            self._tip = (kept_hits, normals)
+            self._tip = (self._version, normals)
         tip_normals = self._tip[1]
         tip = None
         if tip_normals:
             tip = tip_touches((pts[n] - pts[n - 1]).tolist(), tip_normals, self.params.tip_angle_deg)
-        signature = (len(pts), tuple(kept_hits), tip)
+        signature = (len(pts), self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
-        env = primitives_per_point(len(pts), kept_hits)
+        gripper_z = getattr(record, "gripper_z", None)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
-            env,
+            self._env,
             np.diff(pts, axis=0),
             self.geometry.face_normal,
             tip_angle_deg=self.params.tip_angle_deg,
@@ -201,134 +172,130 @@ class ContactTracker:
         self._signature, self._situation = signature, sit
         return sit
 
-    @property
-    def _thresholds(self) -> tuple[float, float]:
-        """The centerline distances (m) at which a pair enters contact and leaves it."""
-        r = self.geometry.radius
-        return r + self.enter_tol, r + self.leave_tol
+    def _params(self) -> np.ndarray:
+        """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
+        the labels' contact tolerance (the leave one), the tangential tolerance and the centerline
+        distances at which a pair enters contact and leaves it."""
+        if self._tols is None or self._tols[:2] != (self.enter_tol, self.leave_tol):
+            r = self.geometry.radius
+            params = np.array([r, self.leave_tol, r / 5.0, r + self.enter_tol, r + self.leave_tol])
+            self._tols = (self.enter_tol, self.leave_tol, params)
+        return self._tols[2]
 
-    def _label(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels:
-        """Label the queried (point, piece) pairs geometrically (which faces each touches, and on which
-        side of the enter and leave distances)."""
-        self.labellings += 1
-        pt, pid, dist, faces, _ = self.geometry.pair_hits(pts_all, pi, pc, contact_tol=self.leave_tol)
-        t_enter, t_leave = self._thresholds
-        enter, leave = dist <= t_enter, dist <= t_leave
-        lab = _Labels(pi, pc, pts_all.copy(), pt, pid, faces, enter, leave, bool((leave & ~enter).any()))
-        self._labels = lab
-        return lab
+    def _label_step(self, pts: np.ndarray, table: np.ndarray | None, arrays: Any) -> None:
+        """This step's touching hits (:func:`dlovr.sim.track_kernels.track_step`), and the forces on
+        the last situation's contact spans: the pairs the simulator reports in ``table`` (and those
+        touching at the last step; every point against every piece without a table) keep their last
+        labels while their points stay within their slack or budgets; the others are labelled again
+        (all of them, or the moved points alone). The environment primitives of the points whose hits
+        changed are made again (``_env``, ``_point_faces``, ``_version``)."""
+        has = table is not None
+        table = _NO_TABLE if table is None else table
+        n1, nc = len(pts), len(table)
+        if n1 != self._n1:
+            self._alloc(n1, nc, 0)
+        elif nc > self._cap_c:
+            self._alloc(n1, max(nc, 2 * self._cap_c), self._cap_h)
+        pm = self._piece_map
+        if has and (pm is None or pm[0] is not arrays.names[0]):
+            pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
+        pmap = pm[1] if has else _NO_MAP
+        while True:
+            out, changed, bad = tk.track_step(
+                pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
+                self._lab_i, self._lab_f, self._work_i, self._work_f,
+            )  # fmt: skip
+            if out != tk.GROW:
+                break
+            self._grow()
+        if out == tk.BAD_PIECE:
+            obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
+            name = objs[obj] if 0 <= obj < len(objs) else obj
+            raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
+        if out == tk.FULL:
+            self.labellings += 1
+        elif out == tk.PARTIAL:
+            self.partial_labellings += 1
+        if changed:
+            face, made = self.geometry.face_tuple, self._made
+            group, start = self._group, self._start
+            for p in self._changed[: self._work_i[tk.W_CHANGED_N]].tolist():
+                faces = [face(row) for row in group[start[p] : start[p + 1]]]
+                self._point_faces[p] = faces
+                self._env[p] = point_primitives(faces, made)
+            self._version += 1
 
-    def _hits(self, lab: _Labels, owner: np.ndarray) -> list[_Hit]:
-        """The labelled pairs that touch, by cable point, with hysteresis: a pair within the enter
-        distance touches, one within the leave distance keeps touching."""
-        if lab.owner is not None and not lab.between and _same(owner, lab.owner):
-            return lab.hits  # the same owners, no pair between the distances: the same hits
-        pt = owner[lab.pt]
-        keys = pt << 20 | lab.pid
-        keep = lab.enter | (_member(keys, self._touching) & lab.leave)
-        self._touching = np.unique(keys[keep])
-        if lab.owner is not None and _same(keep, lab.keep) and _same(pt, lab.owner[lab.pt]):
-            lab.owner = owner
-            return lab.hits
-        faces = lab.faces
-        lab.hits = [
-            _Hit(p, faces[i]) for i, p in zip(np.nonzero(keep)[0].tolist(), pt[keep].tolist(), strict=True)
-        ]
-        lab.owner, lab.keep = owner, keep
-        return lab.hits
+    def _grow(self) -> None:
+        """Room for what :func:`dlovr.sim.track_kernels.track_step` asked (``GROW``)."""
+        wi = self._work_i
+        need_i, need_f, need_h = int(wi[tk.W_NEED_I]), int(wi[tk.W_NEED_F]), int(wi[tk.W_NEED_H])
+        for name, need in (("_lab_i", need_i), ("_lab_f", need_f)):
+            old = getattr(self, name)
+            if need > len(old):
+                new = np.zeros(max(need, 2 * len(old)), old.dtype)
+                new[: len(old)] = old
+                setattr(self, name, new)
+        if need_h > self._cap_h:
+            self._alloc(self._n1, self._cap_c, max(need_h, 2 * self._cap_h))
 
-    def _reuse_labels(self, pts_all: np.ndarray, pi: np.ndarray, pc: np.ndarray) -> _Labels | None:
-        """The last labels when the same pairs are queried, brought up to date: points that moved by
-        less than their slack since they were labelled keep their labels (labelling them again would
-        give the same), the others are labelled again. ``None`` when the queried pairs changed."""
-        lab = self._labels
-        if lab is None or not self.reuse or len(pi) != len(lab.pi) or len(pts_all) != len(lab.pts):
-            return None
-        if not (_same(pi, lab.pi) and _same(pc, lab.pc)):
-            return None
-        if lab.q is None:
-            lab.q = np.unique(lab.pi)
-            *_, slack, budgets = self.geometry.pair_hits_and_slack(
-                lab.pts, lab.pi, lab.pc, self.leave_tol, thresholds=self._thresholds
-            )
-            lab.slack2 = slack[lab.q] ** 2
-            lab.budgets = _own(budgets)
-        if len(lab.q) == 0:
-            return lab
-        dp = pts_all[lab.q] - lab.pts[lab.q]
-        moved = np.einsum("ij,ij->i", dp, dp) >= lab.slack2
-        if not moved.any():
-            return lab
-        # beyond its slack in some direction: within its budgets along and across its faces?
-        rows = _member(pi, lab.q[moved])
-        moving = pi[rows]
-        kept = lab.budgets.keeps(rows, pts_all[moving] - lab.pts[moving])
-        if kept.all():
-            return lab
-        # label the moved points again (a point's labels depend on it alone) and splice them in
-        self.partial_labellings += 1
-        again = np.unique(moving[~kept])
-        rows = _member(pi, again)
-        t_enter, t_leave = self._thresholds
-        pt, pid, dist, faces, _, slack, budgets = self.geometry.pair_hits_and_slack(
-            pts_all, pi[rows], pc[rows], self.leave_tol, thresholds=(t_enter, t_leave)
-        )
-        old = ~_member(lab.pt, again)
-        pt_all = np.concatenate([lab.pt[old], pt])
-        pid_all = np.concatenate([lab.pid[old], pid])
-        order = np.lexsort((pid_all, pt_all))
-        old_faces = [f for f, o in zip(lab.faces, old.tolist(), strict=True) if o]
-        all_faces = old_faces + faces
-        enter = np.concatenate([lab.enter[old], dist <= t_enter])[order]
-        leave = np.concatenate([lab.leave[old], dist <= t_leave])[order]
-        lab.pt, lab.pid, lab.enter, lab.leave = pt_all[order], pid_all[order], enter, leave
-        lab.faces = [all_faces[i] for i in order.tolist()]
-        lab.between = bool((leave & ~enter).any())
-        lab.pts[again] = pts_all[again]  # lab.pts and the budgets are the labelling's own
-        lab.slack2[_member(lab.q, again)] = slack[again] ** 2
-        for mine, new in zip(_fields(lab.budgets), _fields(budgets), strict=True):
-            mine[rows] = new
-        lab.owner = None  # the hits must be made again
-        return lab
+    def _alloc(self, n1: int, nc: int, cap_h: int) -> None:
+        """Work arrays of :mod:`dlovr.sim.track_kernels` for ``n1`` points, at least ``nc`` contacts and
+        ``cap_h`` kept hits; what a step keeps (the touching keys, the grouped hits) is copied over when
+        the points stay the same, else the labels and hits start afresh."""
+        old = self._work_i if n1 == self._n1 else None
+        w = self._width
+        cap_c, cap_h = max(nc, 16), max(cap_h, 16)
+        cap_q = n1 + cap_c
+        cap_k = n1 * self._n_pieces + 2 * cap_c + cap_h
+        sizes = (cap_h, cap_h * (w + 1), cap_h * w, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
+        offsets = np.cumsum((tk.W_HEAD, *sizes))
+        wi = np.zeros(int(offsets[-1]), np.int64)
+        wi[[tk.W_POINTS, tk.W_WIDTH, tk.W_CAP_H]] = n1, w, cap_h
+        wi[list(_SECTIONS)] = offsets[:-1]
+        wi[tk.W_QPTS], wi[tk.W_FORCES] = 0, 3 * cap_q
+        if old is not None:  # what lasts from step to step: the counts, the touching keys, the groups
+            for slot in (tk.W_TOUCH_N, tk.W_CHANGED_N, tk.W_KEPT_N):
+                wi[slot] = old[slot]
+            old_h = old[tk.W_CAP_H]
+            for sec, n in ((tk.W_TOUCH, old_h), (tk.W_KEPT, old_h * (w + 1)), (tk.W_GROUP, old_h * w),
+                           (tk.W_START, n1 + 1)):  # fmt: skip
+                wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
+        else:
+            self._lab_i = np.full(64, -1, np.int64)  # no labels
+            self._lab_f = np.zeros(64)
+            self._env: list[list[Any]] = [[] for _ in range(n1)]
+            self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
+            self._version = 0
+        self._work_i, self._work_f = wi, np.zeros(3 * cap_q + 2 * n1 + 8)
+        self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
+        self._group = wi[wi[tk.W_GROUP] : wi[tk.W_START]].reshape(cap_h, w)
+        self._start = wi[wi[tk.W_START] : wi[tk.W_START] + n1 + 1]
+        self._changed = wi[wi[tk.W_CHANGED] : wi[tk.W_CHANGED] + n1]
+        self._forces_out = self._work_f[3 * cap_q :]
 
-    def _piece_ids(self, arrays: Any) -> np.ndarray:
-        """Piece ids (positions in ``geometry.pieces``) of the simulator's contacts."""
-        objs = arrays.names[0]
-        if self._piece_map is None or self._piece_map[0] is not objs:
-            pieces = self.geometry.pieces
-            table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
-            row = {o: i for i, o in enumerate(objs)}
-            for k, p in enumerate(pieces):
-                if p.obj in row:
-                    table[row[p.obj], p.index] = k
-            self._piece_map = (objs, table)
-        table = self._piece_map[1]
-        obj, piece = np.asarray(arrays.obj), np.asarray(arrays.piece)
-        ids = table[obj, np.minimum(piece, table.shape[1] - 1)]
-        bad = (ids < 0) | (piece >= table.shape[1])
-        if bad.any():
-            i = int(np.nonzero(bad)[0][0])
-            raise KeyError(f"the geometry has no piece {int(piece[i])} of object {objs[int(obj[i])]!r}")
-        return ids
+    def _piece_table(self, objs: Any) -> np.ndarray:
+        """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
+        pieces = self.geometry.pieces
+        table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
+        row = {o: i for i, o in enumerate(objs)}
+        for k, p in enumerate(pieces):
+            if p.obj in row:
+                table[row[p.obj], p.index] = k
+        return table
 
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
         arrays = getattr(record, "contact_arrays", None)
-        pts = np.asarray(record.points, dtype=float)
-        pairs = None
-        between = None
-        point_of = np.zeros(0, dtype=np.int64)
-        if arrays is not None and len(arrays.dist):
-            point_of, seg_rows, seg_pos = _locate(arrays, pts)
-            ids = self._piece_ids(arrays)
-            ok = point_of >= 0
-            pairs = (point_of[ok], ids[ok])
-            between = (seg_pos, point_of[seg_rows], ids[seg_rows])
-        elif arrays is not None:
-            pairs = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        pts = record.points
+        if type(pts) is not np.ndarray or pts.dtype != np.float64 or not pts.flags.c_contiguous:
+            pts = np.ascontiguousarray(pts, dtype=float)
+        table = None if arrays is None else getattr(arrays, "table", None)
+        if arrays is not None and table is None:
+            table = _table_of(arrays)
+        self._label_step(pts, table, arrays)
         prev = self.current
-        topo = self.classify(pts, record.gripper_z, pairs, between)
+        topo = self.classify(pts, record)
         if prev is not None and (
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
@@ -336,57 +303,39 @@ class ContactTracker:
             disc = prev.discrete
         else:
             disc = discretize(topo, self.geometry.fact_book(), self.params)
-        forces = _forces(topo, arrays, point_of)
         state = ContactState(
-            int(record.step), float(record.time), topo, disc, forces,
+            int(record.step), float(record.time), topo, disc, self._forces(topo, table),
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
             _tuple(getattr(record, "gripper_force", _ORIGIN)),
         )  # fmt: skip
-        if prev is None or prev.discrete != disc or prev.topological != topo:
+        if prev is None or (prev.discrete is not disc and prev.discrete != disc) or (
+            prev.topological is not topo and prev.topological != topo
+        ):
             self.changes.append(state)
         self.current = state
         self._debouncer.push(state.t, disc)
         return state
+
+    def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
+        """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span
+        (summed by the kernels on the last situation's spans; again here when the situation changed)."""
+        if table is None or len(table) == 0:
+            return tuple(0.0 for _ in topo.contacts)
+        if self._spans[0] is not topo:
+            spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in topo.contacts]
+            self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
+            if len(spans) > len(self._forces_out):
+                raise RuntimeError("more contacts than the cable has points")
+            wi = self._work_i
+            tk.span_forces(self._spans[1], wi[wi[tk.W_POINT_OF] : wi[tk.W_AGAIN]], table, self._forces_out)
+        return tuple(self._forces_out[: len(topo.contacts)].tolist())
 
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
         """The kept situations with the classes of the transition into each (``()`` for the first;
         a landing after a flight is classed with the flight, ``S,E``)."""
         kept = self.kept
         return list(zip(kept, kept_classes(kept), strict=True))
-
-
-def _same(a: np.ndarray, b: np.ndarray | None) -> bool:
-    """Whether two integer or boolean arrays are equal, shape, dtype and all (cheaper than
-    ``np.array_equal`` for the small arrays here; a dtype mismatch reads as a difference, which
-    only costs a recomputation)."""
-    return b is not None and a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
-
-
-def _fields(b: LabelBudgets) -> tuple[np.ndarray, ...]:
-    return b.normal, b.along, b.across, b.any
-
-
-def _own(b: LabelBudgets) -> LabelBudgets:
-    """Budgets with arrays of their own (a partial relabel writes rows of them in place)."""
-    return LabelBudgets(*(np.array(a, dtype=float) for a in _fields(b)))
-
-
-def _member(a: np.ndarray, sorted_b: np.ndarray) -> np.ndarray:
-    """``np.isin(a, sorted_b)`` for a sorted ``sorted_b`` (cheaper for the small arrays here)."""
-    if len(sorted_b) == 0:
-        return np.zeros(len(a), dtype=bool)
-    i = np.minimum(np.searchsorted(sorted_b, a), len(sorted_b) - 1)
-    return sorted_b[i] == a
-
-
-def _unique_pairs(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique (a, b) pairs of non-negative ints (b < 2**20), sorted by a then b."""
-    u = np.unique(a.astype(np.int64) << 20 | b.astype(np.int64))
-    return u >> 20, u & _LOW
-
-
-_LOW = (1 << 20) - 1
 
 
 _ORIGIN = (0.0, 0.0, 0.0)
@@ -398,31 +347,6 @@ def _tuple(v: Any) -> Any:
     if isinstance(v, np.ndarray) and v.dtype == np.float64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
-
-
-@dataclass(eq=False)
-class _Labels:
-    """One geometric labelling: the queried pairs (``pi``, ``pc``) and query points ``pts`` then; per
-    hit its query point ``pt``, piece ``pid``, ``faces`` and whether it lies within the enter and the
-    leave distance (``between``: some hit lies between the two). Filled in later: the queried points
-    ``q`` with their squared slacks (``pts`` then holds, for each, where it was last labelled), and
-    the kept hits last made from it with the owners and keep mask used."""
-
-    pi: np.ndarray
-    pc: np.ndarray
-    pts: np.ndarray
-    pt: np.ndarray
-    pid: np.ndarray
-    faces: list[tuple[str, ...]]
-    enter: np.ndarray
-    leave: np.ndarray
-    between: bool
-    q: np.ndarray | None = None
-    slack2: np.ndarray | None = None
-    budgets: LabelBudgets | None = None
-    owner: np.ndarray | None = None
-    keep: np.ndarray | None = None
-    hits: list[_Hit] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -437,44 +361,22 @@ def _vector_independent(topo: Situation) -> bool:
     return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
 
 
-def _locate(arrays: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where each raw contact is on the cable.
-
-    Returns the cable point of every contact (its vertex, or the nearer end of its segment; -1 for
-    none), the rows of segment contacts, and their centerline points (the contact projected onto the
-    segment).
-    """
-    point = np.asarray(arrays.point, dtype=np.int64)
-    seg = np.asarray(arrays.segment, dtype=np.int64)
-    pos = np.asarray(arrays.pos, dtype=float)
-    usual = point.max() < 0 and seg.min() >= 0  # every contact is a segment's
-    if usual:
-        rows, s = np.arange(len(seg)), seg
-    else:
-        rows = np.nonzero((point < 0) & (seg >= 0))[0]
-        s, pos = seg[rows], pos[rows]
-    a = pts[s]
-    ab = pts[s + 1] - a
-    t = np.einsum("ij,ij->i", pos - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
-    t = np.minimum(np.maximum(t, 0.0), 1.0)  # on the segment
-    nearer = np.where(t < 0.5, s, s + 1)
-    if usual:
-        out = nearer
-    else:
-        out = point.copy()
-        out[rows] = nearer
-    return out, rows, a + t[:, None] * ab
+def _table_of(arrays: Any) -> np.ndarray:
+    """Contact rows (:mod:`dlovr.sim.kernels`) of raw contact arrays given as columns (``point``,
+    ``segment``, ``obj``, ``piece``, ``pos``, ``force``: what the tracker reads)."""
+    n = len(arrays.point)
+    table = np.zeros((n, T_WIDTH))
+    for col, name in ((T_POINT, "point"), (T_SEGMENT, "segment"), (T_OBJ, "obj"), (T_PIECE, "piece"),
+                      (T_FORCE, "force")):  # fmt: skip
+        table[:, col] = np.asarray(getattr(arrays, name), dtype=float).reshape(n)
+    table[:, T_POS : T_POS + 3] = np.asarray(arrays.pos, dtype=float).reshape(n, 3)
+    return table
 
 
-def _forces(topo: Situation, arrays: Any, point_of: np.ndarray) -> tuple[float, ...]:
-    if arrays is None or len(point_of) == 0:
-        return tuple(0.0 for _ in topo.contacts)
-    force = np.asarray(arrays.force, dtype=float)
-    out = []
-    for c in topo.contacts:
-        if c.is_free or c.dlo.span is None:
-            out.append(0.0)
-            continue
-        a, b = c.dlo.span
-        out.append(float(force[(point_of >= a) & (point_of <= b)].sum()))
-    return tuple(out)
+_NO_TABLE = np.zeros((0, T_WIDTH))
+_NO_MAP = np.full((1, 1), -1, np.int64)
+_NO_SPANS = np.zeros((0, 2), np.int64)
+_SECTIONS = (
+    tk.W_TOUCH, tk.W_KEPT, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF,
+    tk.W_AGAIN,
+)  # fmt: skip

@@ -1,0 +1,131 @@
+"""Bit-identity check of the per-step pipeline: every step's states, forces and raw contacts over
+every built-in script, saved from one checkout and compared against another.
+
+Run: ``python benchmarks/check_states.py save REF.pkl`` on the reference checkout, then
+``python benchmarks/check_states.py compare REF.pkl`` on the changed one (``--only NAME`` for one
+script, ``--segments 40 80`` for extra runs of the peg-in-hole demonstration at those segment counts).
+
+Per step it keeps: the topological and discrete situation (their notation and the objects
+themselves), the per-contact forces, the gripper force, the cable points and every field of the raw
+contact arrays (as bytes), plus the tracker's changes, kept situations and labelling counts at the
+end. ``compare`` names the first step that differs. Speeding the pipeline up must change none of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import pickle
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from dlovr.scene import load_scene, scenes_dir
+from dlovr.script import load_script
+from dlovr.sim import Simulator
+
+_FIELDS = ("point", "segment", "geom", "obj", "piece", "dist", "normal", "pos", "force", "active",
+           "self_pairs")  # fmt: skip
+
+
+def _step_digest(rec) -> tuple:
+    st = rec.state
+    h = hashlib.sha256(np.ascontiguousarray(rec.points).tobytes())
+    h.update(np.ascontiguousarray(rec.gripper_force).tobytes())
+    a = rec.contact_arrays
+    for f in _FIELDS:
+        h.update(np.ascontiguousarray(getattr(a, f)).astype(bool if f == "active" else np.float64).tobytes())
+    return (
+        rec.step,
+        st.topological.format(),
+        st.discrete.format(),
+        (st.topological, st.discrete),
+        st.forces,
+        h.hexdigest(),
+    )
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """Two steps' digests agree (situations compared by value; a saved one may be pickled)."""
+    sa, sb = (pickle.loads(x[3]) if isinstance(x[3], bytes) else x[3] for x in (a, b))
+    return a[:3] == b[:3] and a[4:] == b[4:] and sa == sb
+
+
+def run(name: str, segments: int | None) -> dict:
+    script = load_script(scenes_dir() / f"{name}.script.toml")
+    scene = load_scene(script.scene or name)
+    if segments is not None:
+        scene = replace(scene, dlo=replace(scene.dlo, segments=segments))
+    sim = Simulator(scene, track=True)
+    t0 = time.perf_counter()
+    steps = [_step_digest(rec) for rec in sim.run(script)]
+    wall = time.perf_counter() - t0
+    tr = sim.tracker
+    end = (
+        [(c.step, c.topological.format(), c.discrete.format(), c.forces) for c in tr.changes],
+        [(k.situation.format(), k.start, k.end) for k in tr.kept],
+        tr.labellings,
+        tr.partial_labellings,
+    )
+    return {"steps": steps, "end": end, "wall": wall}
+
+
+def _runs(args) -> list[tuple[str, int | None]]:
+    names = sorted(p.name.removesuffix(".script.toml") for p in scenes_dir().glob("*.script.toml"))
+    runs: list[tuple[str, int | None]] = [(n, None) for n in names]
+    runs += [("peg_in_hole", s) for s in args.segments]
+    if args.only:
+        runs = [r for r in runs if r[0] in args.only]
+    return runs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mode", choices=("save", "compare"))
+    ap.add_argument("ref", type=Path)
+    ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--segments", type=int, nargs="*", default=[40, 80])
+    args = ap.parse_args()
+    out = {} if args.mode == "save" else pickle.loads(args.ref.read_bytes())
+    bad = 0
+    for name, seg in _runs(args):
+        key = f"{name}@{seg or 'scene'}"
+        got = run(name, seg)
+        n = len(got["steps"])
+        if args.mode == "save":
+            out[key] = got
+            print(f"{key}: {n} steps, {got['wall'] / n * 1e6:.0f} µs/step, saved")
+            continue
+        want = out.get(key)
+        if want is None:
+            print(f"{key}: no reference")
+            continue
+        diff = next(
+            (i for i, (a, b) in enumerate(zip(want["steps"], got["steps"], strict=False)) if not _same(a, b)),
+            None,
+        )
+        if diff is None and len(want["steps"]) != n:
+            diff = min(len(want["steps"]), n)
+        if diff is not None:
+            bad += 1
+            a = want["steps"][diff] if diff < len(want["steps"]) else None
+            b = got["steps"][diff] if diff < n else None
+            print(f"{key}: DIFFERS at step index {diff}:")
+            print(f"  ref {a and a[:3] + a[4:]}\n  now {b and b[:3] + b[4:]}")
+        elif want["end"] != got["end"]:
+            bad += 1
+            print(f"{key}: steps identical, end differs: ref {want['end'][2:]} now {got['end'][2:]}")
+        else:
+            ratio = got["wall"] / want["wall"]
+            us = got["wall"] / n * 1e6
+            print(f"{key}: {n} steps identical ({us:.0f} µs/step, {ratio:.2f}x the reference's)")
+    if args.mode == "save":
+        args.ref.write_bytes(pickle.dumps(out, protocol=5))
+    sys.exit(1 if bad else 0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,138 @@
+"""Compiled kernels: numba's setup for dlovr, in one place.
+
+The per-step pipeline (the simulator's checks and contact arrays, the tracker's labelling) runs in
+numba kernels (``dlovr.geometry.kernels``, ``dlovr.sim.kernels``). They are compiled on first use and
+cached on disk (``cache=True``): in ``__pycache__`` beside the sources, or, when the package directory
+is read-only, in ``<cache dir>/numba`` (:func:`dlovr.cache.cache_dir`; ``$NUMBA_CACHE_DIR`` wins when
+set). Without ``fastmath`` LLVM neither fuses multiply-adds nor reorders sums, so the kernels round
+the same on every x86-64 processor (their labels go into recordings that replay bit for bit);
+:func:`fma` is the one explicit fused multiply-add, correctly rounded everywhere.
+
+:func:`kernels_warm` tells whether this installation has compiled them already (a marker file keyed
+by the versions of Python, numba and dlovr and the kernels' sources, beside numba's cache), so that
+commands can say "compiling kernels (first run only)" while :func:`dlovr.sim.warm_up` compiles them;
+:func:`check_cache` drops cached kernels compiled from other sources.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from dlovr import __version__
+from dlovr.cache import cache_dir
+
+_PACKAGE = Path(__file__).resolve().parent
+
+
+def _writable(directory: Path) -> bool:
+    cache = directory / "__pycache__"
+    return os.access(cache if cache.is_dir() else directory, os.W_OK)
+
+
+if "NUMBA_CACHE_DIR" not in os.environ and not (
+    _writable(_PACKAGE / "geometry") and _writable(_PACKAGE / "sim")
+):
+    os.environ["NUMBA_CACHE_DIR"] = str(cache_dir() / "numba")
+
+import numba  # noqa: E402  (after the cache directory is chosen)
+from llvmlite import ir  # noqa: E402
+from numba.core import cgutils, types  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
+
+if os.environ.get("NUMBA_CACHE_DIR") and numba.config.CACHE_DIR != os.environ["NUMBA_CACHE_DIR"]:
+    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba was imported before dlovr
+
+
+_KERNELS: dict[str, list[Any]] = {}  # the kernels of each module
+
+
+def njit(fn: Callable[..., Any]) -> Any:
+    """``numba.njit`` as dlovr's kernels use it: cached on disk, no fastmath, no Python fallback."""
+    kernel = numba.njit(cache=True, nogil=True)(fn)
+    _KERNELS.setdefault(fn.__module__, []).append(kernel)
+    return kernel
+
+
+@intrinsic
+def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``): the rounding of BLAS kernels that fuse,
+    reproduced exactly on every processor."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        d = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+KERNEL_SOURCES = ("geometry/kernels.py", "sim/kernels.py", "sim/track_kernels.py", "jit.py")
+
+
+def _key() -> str:
+    """The versions and the kernels' sources, hashed: compiled kernels are valid for one key."""
+    h = hashlib.sha256(f"{sys.version}|{numba.__version__}|{__version__}".encode())
+    for rel in KERNEL_SOURCES:
+        h.update((_PACKAGE / rel).read_bytes())
+    return h.hexdigest()[:24]
+
+
+def _cache_path(module: str) -> Path | None:
+    """Where numba caches ``module``'s kernels (None if it cannot tell)."""
+    kernels = _KERNELS.get(module)
+    try:
+        return Path(kernels[0]._cache._cache_path) if kernels else None
+    except AttributeError:
+        return None
+
+
+def check_cache(module: str) -> None:
+    """Drop ``module``'s cached kernels if they were compiled from other kernel sources.
+
+    numba checks a cached kernel against its own source file only, while kernels call kernels of
+    other modules (compiled into them): after any kernel source changes, every module's cache is
+    flushed once, so nothing stale runs. Called at the end of each kernel module."""
+    path = _cache_path(module)
+    if path is None:
+        return
+    stamp = path / f"dlovr-{module.rpartition('.')[2]}.key"
+    key = _key()
+    try:
+        if stamp.is_file() and stamp.read_text() == key:
+            return
+        for kernel in _KERNELS[module]:
+            kernel._cache.flush()
+        path.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(key)
+    except (OSError, AttributeError):
+        pass
+
+
+def _marker() -> Path:
+    path = _cache_path("dlovr.sim.track_kernels") or cache_dir() / "numba"
+    return path / "dlovr-kernels.warm"
+
+
+def kernels_warm() -> bool:
+    """Whether this installation has compiled the current kernels already (see the module docstring;
+    import the kernel modules first)."""
+    try:
+        return _marker().read_text() == _key()
+    except OSError:
+        return False
+
+
+def mark_kernels_warm() -> None:
+    """Record that the current kernels are compiled (a failure to write only repeats the notice)."""
+    path = _marker()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(_key())
+    except OSError:
+        pass

@@ -1,0 +1,167 @@
+"""Compiled per-step kernel of the simulator (world frame, metres, newtons): :func:`step_record`,
+after ``mj_step``, the divergence checks and the step's record arrays (cable points, the raw
+rod-obstacle contacts with their normal forces, the gripper force) in one call, reading MuJoCo's
+arrays in place (:class:`dlovr.sim.contacts.MjViews`). The tracker's kernels are in
+:mod:`dlovr.sim.track_kernels`.
+
+Contact rows (``table``, (n, 14) float64, ints held exactly): point, segment, geom, object, piece,
+distance, normal (3, obstacle toward rod), position (3, MuJoCo's midway point), normal force, active
+(0/1). See :class:`dlovr.sim.contacts.ContactArrays`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dlovr.geometry.kernels import block_sum, dot3
+from dlovr.jit import check_cache, njit
+
+T_POINT, T_SEGMENT, T_GEOM, T_OBJ, T_PIECE, T_DIST = 0, 1, 2, 3, 4, 5
+T_NORMAL, T_POS, T_FORCE, T_ACTIVE, T_WIDTH = 6, 9, 12, 13, 14
+
+# layout of MuJoCo's contact structs (see dlovr.sim.contacts.contact_layout): float64 units, then int32
+L_STRIDE_F, L_DIST, L_POS, L_FRAME, L_STRIDE_I, L_DIM, L_GEOM, L_FLEX, L_ELEM, L_VERT, L_EFC = range(11)
+
+# the simulator's configuration (cfg, int64): header, then sections
+C_WARN_BASE, C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM, C_NHOLD = 0, 1, 2, 3, 4, 5
+C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT, C_LAYOUT = 6, 7, 8, 9, 10, 11, 12
+C_HEAD = C_LAYOUT + 11  # then: fatal warning indices, piece and object of each geom, hold rows
+
+
+# --------------------------------------------------------------------------------------------------
+# simulator
+
+
+@njit
+def step_record(
+    mj: np.ndarray,
+    warn: np.ndarray,
+    arena: np.ndarray,
+    efc_force: np.ndarray,
+    cfg: np.ndarray,
+    bounds: np.ndarray,
+    ncon: int,
+    pts: np.ndarray,
+    table: np.ndarray,
+    grip: np.ndarray,
+):
+    """The step's record arrays, and the divergence checks.
+
+    ``mj``: MuJoCo's float arrays in place (qpos, qvel and the cable points at the offsets in
+    ``cfg``); ``warn``: its warning structs as int32; ``arena``: its contact structs (the first
+    ``ncon``); ``cfg``: the configuration (``C_*``; see :class:`dlovr.sim.contacts.MjViews`);
+    ``bounds``: squared segment length bounds (lo, hi), the segment length and the largest relative
+    stretch. Fills ``pts`` (the cable points), the rows of ``table`` (one per rod-obstacle contact, in
+    MuJoCo's order) and ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
+    per axis).
+
+    Returns (code, index, value, rows, self pairs): code 0, or the first failed check: 1 the count
+    of the fatal warnings differs from the baseline, 2 NaN/inf in qpos or qvel, 3 in the cable
+    points, 4 segment ``index`` stretched by ``value`` (relative) beyond the largest stretch.
+    """
+    n_fatal, n_geom, n_hold = cfg[C_NFATAL], cfg[C_NGEOM], cfg[C_NHOLD]
+    fatal = cfg[C_HEAD : C_HEAD + n_fatal]
+    piece_of_geom = cfg[C_HEAD + n_fatal : C_HEAD + n_fatal + n_geom]
+    obj_of_geom = cfg[C_HEAD + n_fatal + n_geom : C_HEAD + n_fatal + 2 * n_geom]
+    hold_rows = cfg[C_HEAD + n_fatal + 2 * n_geom : C_HEAD + n_fatal + 2 * n_geom + n_hold]
+    layout = cfg[C_LAYOUT : C_LAYOUT + 11]
+    code, index, value = 0, -1, 0.0
+    count = 0
+    for w in fatal:
+        count += warn[w]
+    if count != cfg[C_WARN_BASE]:
+        code = 1
+    if code == 0:
+        for i in range(cfg[C_QPOS], cfg[C_QPOS] + cfg[C_NQ]):
+            if not np.isfinite(mj[i]):
+                code = 2
+        for i in range(cfg[C_QVEL], cfg[C_QVEL] + cfg[C_NV]):
+            if not np.isfinite(mj[i]):
+                code = 2
+    n1 = cfg[C_NVERT]
+    x0 = cfg[C_XPOS]
+    for i in range(n1):
+        for c in range(3):
+            pts[i, c] = mj[x0 + 3 * i + c]
+            if code == 0 and not np.isfinite(pts[i, c]):
+                code = 3
+    if code == 0:
+        lo, hi, seg, max_stretch = bounds[0], bounds[1], bounds[2], bounds[3]
+        out = False
+        for i in range(n1 - 1):
+            dx, dy, dz = pts[i + 1, 0] - pts[i, 0], pts[i + 1, 1] - pts[i, 1], pts[i + 1, 2] - pts[i, 2]
+            d2 = dot3(dx, dy, dz, dx, dy, dz)
+            out = out or d2 < lo or d2 > hi
+        if out:  # rare: the exact test, naming the segment
+            for i in range(n1 - 1):
+                dx, dy, dz = pts[i + 1, 0] - pts[i, 0], pts[i + 1, 1] - pts[i, 1], pts[i + 1, 2] - pts[i, 2]
+                dev = abs(np.sqrt(dot3(dx, dy, dz, dx, dy, dz)) / seg - 1.0)
+                if dev > value or index < 0:
+                    index, value = i, dev
+            if value > max_stretch:
+                code = 4
+    for c in range(3):
+        s = 0.0
+        for r in range(c, n_hold, 3):
+            s += efc_force[hold_rows[r]]
+        grip[c] = 0.0 + s
+    rows, nself = 0, 0
+    flex, pyramidal = cfg[C_FLEX], cfg[C_PYRAMIDAL] != 0
+    cf, ci = arena, arena.view(np.int32)
+    sf, si = layout[L_STRIDE_F], layout[L_STRIDE_I]
+    for i in range(ncon):
+        bi = i * si
+        f0, f1 = ci[bi + layout[L_FLEX]], ci[bi + layout[L_FLEX] + 1]
+        g0, g1 = ci[bi + layout[L_GEOM]], ci[bi + layout[L_GEOM] + 1]
+        if f0 == flex and f1 == flex:
+            nself += 1
+            continue
+        if f1 == flex and g0 >= 0:
+            side, gid, sign = 1, g0, 1.0
+        elif f0 == flex and g1 >= 0:
+            side, gid, sign = 0, g1, -1.0
+        else:
+            continue
+        if piece_of_geom[gid] < 0:
+            continue
+        bf = i * sf
+        t = table[rows]
+        t[T_POINT] = ci[bi + layout[L_VERT] + side]
+        t[T_SEGMENT] = ci[bi + layout[L_ELEM] + side]
+        t[T_GEOM] = gid
+        t[T_OBJ] = obj_of_geom[gid]
+        t[T_PIECE] = piece_of_geom[gid]
+        t[T_DIST] = cf[bf + layout[L_DIST]]
+        for c in range(3):
+            fr = cf[bf + layout[L_FRAME] + c]
+            t[T_NORMAL + c] = fr if sign > 0 else -fr
+            t[T_POS + c] = cf[bf + layout[L_POS] + c]
+        adr = ci[bi + layout[L_EFC]]
+        force = 0.0
+        if adr >= 0:
+            dim = ci[bi + layout[L_DIM]]
+            if pyramidal and dim > 1:  # mj_contactForce: the sum of the cone's 2 (dim - 1) edge forces
+                force = 0.0 + block_sum(efc_force, adr, 2 * (dim - 1))  # np_sum's, at most 10 rows
+            else:
+                force = efc_force[adr]
+        t[T_FORCE] = force
+        t[T_ACTIVE] = 1.0 if adr >= 0 else 0.0
+        rows += 1
+    return code, index, value, rows, nself
+
+
+@njit
+def self_pairs(ncon: int, arena: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
+    """The segment pairs (sorted) of the rod's self-contacts among MuJoCo's first ``ncon``."""
+    k = 0
+    ci, layout, flex = arena.view(np.int32), cfg[C_LAYOUT : C_LAYOUT + 11], cfg[C_FLEX]
+    si = layout[L_STRIDE_I]
+    for i in range(ncon):
+        bi = i * si
+        if ci[bi + layout[L_FLEX]] == flex and ci[bi + layout[L_FLEX] + 1] == flex:
+            a, b = ci[bi + layout[L_ELEM]], ci[bi + layout[L_ELEM] + 1]
+            out[k, 0], out[k, 1] = min(a, b), max(a, b)
+            k += 1
+
+
+check_cache(__name__)

@@ -1,0 +1,54 @@
+"""The compiled kernels' own guarantees: sums round as numpy's, the first-run compilation is
+recorded, the simulator reads MuJoCo's contacts in place correctly."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dlovr.geometry.kernels import np_sum
+
+
+def test_np_sum_rounds_as_numpy_sums():
+    rng = np.random.default_rng(0)
+    for n in [*range(0, 140), 255, 256, 257, 1000, 1025, 4097]:
+        a = rng.normal(size=n) * 10.0 ** rng.integers(-6, 6, size=n)
+        assert np_sum(a) == a.sum(), n  # bit for bit, the order of numpy's pairwise summation
+        assert np_sum(np.abs(a)) == np.abs(a).sum(), n
+
+
+def test_warm_up_compiles_once_and_says_so():
+    from dlovr.jit import kernels_warm
+    from dlovr.sim.warmup import NOTICE, warm_up
+
+    said: list[str] = []
+    warm_up(said.append)  # compiles, or finds the kernels compiled by an earlier run
+    assert kernels_warm()
+    assert said in ([], [NOTICE])
+    again: list[str] = []
+    assert warm_up(again.append) == 0.0 and again == []
+
+
+def test_contact_rows_read_in_place_match_mujocos_own_accessors():
+    import mujoco
+
+    from dlovr.scene import load_scene, scenes_dir
+    from dlovr.script import load_script
+    from dlovr.sim import Simulator
+
+    sim = Simulator(load_scene("table"))
+    for rec in sim.run(load_script(scenes_dir() / "table.script.toml")):
+        if len(rec.contact_arrays) > 3:
+            break
+    d, m = sim.data, sim.model
+    ca = rec.contact_arrays
+    assert len(ca) == d.ncon > 3  # every contact is the rod's with the table
+    c = d.contact
+    np.testing.assert_array_equal(ca.dist, c.dist[: d.ncon])
+    np.testing.assert_array_equal(ca.pos, c.pos[: d.ncon])
+    np.testing.assert_array_equal(ca.normal, c.frame[: d.ncon, :3])
+    np.testing.assert_array_equal(ca.segment, c.elem[: d.ncon, 1])
+    force = np.zeros(6)
+    for i in range(d.ncon):
+        mujoco.mj_contactForce(m, d, i, force)
+        assert ca.force[i] == force[0] or abs(ca.force[i] - force[0]) <= 1e-12 * max(1.0, abs(force[0]))
+    assert ca.active.all() == (c.efc_address[: d.ncon] >= 0).all()
