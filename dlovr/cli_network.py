@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from dlovr.batch import cluster_option
+
 
 class NetworkInputError(click.ClickException):
     """A problem with the user's input: printed as one line, exit code 2 (as ``dlovr.cli.UserError``)."""
@@ -33,7 +35,15 @@ def _write_text(path: str, text: str) -> None:
 @click.option(
     "--html", "html_out", type=click.Path(dir_okay=False), help="Also write a self-contained HTML view."
 )
-def network_cmd(recordings: tuple[str, ...], out: str, html_out: str | None) -> None:
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 64),
+    help="Read the recordings on this many worker processes (default: one after the other here).",
+)
+@cluster_option
+def network_cmd(
+    recordings: tuple[str, ...], out: str, html_out: str | None, workers: int | None, cluster: str | None
+) -> None:
     """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
     situations, transitions with class, count, probability, durations, gripper motions and risk."""
     from dlovr.model.network import NetworkError
@@ -45,6 +55,8 @@ def network_cmd(recordings: tuple[str, ...], out: str, html_out: str | None) -> 
     paths = find_recordings(recordings)
     if not paths:
         raise NetworkInputError(f"no recordings found in {', '.join(recordings)}")
+    if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
+        paths = [p.resolve() for p in paths]
     # a progress bar on a terminal only: elsewhere an error stays the one line on stderr
     stream = sys.stderr if sys.stderr.isatty() else io.StringIO()
     bar = click.progressbar(length=len(paths), label="reading recordings", file=stream, show_eta=True)
@@ -56,7 +68,7 @@ def network_cmd(recordings: tuple[str, ...], out: str, html_out: str | None) -> 
             done[0] = k
 
         try:
-            net = network_from_recordings(paths, progress=progress)
+            net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
         except (NetworkError, RecordingError) as e:
             raise NetworkInputError(str(e)) from None
     _write_text(out, net.dumps())

@@ -3,7 +3,7 @@ situations and the gripper pose track of each, read from the contact-state chann
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -42,16 +42,20 @@ def network_from_recordings(
     paths: Sequence[str | Path],
     hold: float | None = None,
     progress: Callable[[int], None] | None = None,
+    *,
+    workers: int | None = None,
+    cluster: str | None = None,
 ) -> Network:
     """Build a transition network from recordings of one scene; ``progress(k)`` after each one read.
 
-    Raises :class:`RecordingError` for an unreadable recording and
-    :class:`~dlovr.model.network.NetworkError` for recordings of different scenes (checked as soon as
-    the second scene is read, before the rest are).
+    The recordings are read here one after the other, or with ``workers`` / ``cluster`` through
+    :func:`dlovr.batch.run_batch` (local processes or Ray; the network is the same, it is built from
+    the demonstrations in input order). Raises :class:`RecordingError` for an unreadable recording
+    and :class:`~dlovr.model.network.NetworkError` for recordings of different scenes (read one after
+    the other: checked as soon as the second scene is read, before the rest are).
     """
     demos: list[Demonstration] = []
-    for k, p in enumerate(paths, 1):
-        d = demonstration(p, hold)
+    for k, d in enumerate(_demonstrations(paths, hold, workers, cluster), 1):
         if demos and (d.scene_sha256, d.scene_name) != (demos[0].scene_sha256, demos[0].scene_name):
             f = demos[0]
             raise NetworkError(
@@ -62,3 +66,21 @@ def network_from_recordings(
         if progress is not None:
             progress(k)
     return build_network(demos)
+
+
+def _demonstrations(
+    paths: Sequence[str | Path], hold: float | None, workers: int | None, cluster: str | None
+) -> Iterator[Demonstration]:
+    """The recordings as demonstrations, in input order."""
+    if workers is None and cluster is None:
+        yield from (demonstration(p, hold) for p in paths)
+        return
+    from dlovr.batch import Task, run_batch
+
+    tasks = [Task(f"{i}:{p}", (str(p), hold)) for i, p in enumerate(paths)]
+    batch = run_batch(demonstration, tasks, workers=workers, cluster=cluster, progress=False)
+    done = sorted(batch, key=lambda r: r.index)
+    for r in done:
+        if not r.ok:
+            raise RecordingError(str(r.error))
+        yield r.value

@@ -187,6 +187,24 @@ def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance
             assert (tmp_path / "ray" / out).read_bytes() == (tmp_path / "local" / out).read_bytes()
 
 
+def test_network_on_ray_and_local_processes_equals_reading_one_after_the_other(ray_instance, tmp_path):
+    """``dlovr network --workers/--cluster`` reads the recordings elsewhere and builds the same network."""
+    src = tmp_path / "in"
+    src.mkdir()
+    for k in range(3):  # three demonstrations of one scene
+        shutil.copy(RECORDINGS / "table.mcap", src / f"table_{k}.mcap")
+    outs = {}
+    for name, extra in (("here", ()), ("local", ("--workers", "2")), ("ray", ("--cluster", "local"))):
+        r = cli("network", src, "-o", tmp_path / f"{name}.json", *extra)
+        assert r.exit_code == 0, r.output
+        outs[name] = (tmp_path / f"{name}.json").read_text()
+    assert outs["local"] == outs["here"] and outs["ray"] == outs["here"]
+    # a broken recording is one line naming it, whichever engine read it
+    (src / "broken.mcap").write_bytes(b"not an mcap file")
+    r = cli("network", src, "-o", tmp_path / "x.json", "--workers", "2")
+    assert r.exit_code == 2 and "broken.mcap" in r.output and "Traceback" not in r.output
+
+
 def _touch_program(d: Path) -> Path:
     """A 0.9 s demonstration on the table (lower the cable onto it), recorded and compiled."""
     from dlovr.recording import DemoRecorder, compile_recording
