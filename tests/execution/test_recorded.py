@@ -7,39 +7,16 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
 
 from dlovr.cli import main
 from dlovr.execution.executor import ExecOptions
-from dlovr.execution.programs import load_program
 from dlovr.execution.recorded import TOPIC_EVENTS, record_run, scene_bundle
-from dlovr.execution.run import load_track, run_program
+from dlovr.execution.run import run_program
 from dlovr.execution.variation import parse_vary, perturb
 
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "tests" / "data" / "touch_press.script.toml"
-
-
-@pytest.fixture(scope="module")
-def touch(tmp_path_factory):
-    """A demonstration that lowers the cable onto the table (V/F), recorded and compiled."""
-    from dlovr.recording import DemoRecorder, compile_recording
-    from dlovr.scene import load_scene
-    from dlovr.script import load_script
-    from dlovr.sim import Simulator
-
-    d = tmp_path_factory.mktemp("touch_rec")
-    scene = load_scene("table")
-    sim = Simulator(scene, track=True)
-    with DemoRecorder(d / "touch.mcap", scene, sim, sim.tracker) as rec:
-        for r in sim.run(load_script(SCRIPT)):
-            rec.step(r)
-    prog = compile_recording(d / "touch.mcap")
-    path = d / "touch.program.json"
-    path.write_text(prog.dumps())
-    return load_program(path), scene, load_track(d / "touch.mcap"), sim.pieces
 
 
 def events(path: Path) -> list[dict]:

@@ -21,29 +21,6 @@ from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outp
 from dlovr.execution.variation import parse_vary
 
 ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "tests" / "data" / "touch_press.script.toml"
-
-
-@pytest.fixture(scope="module")
-def touch(tmp_path_factory):
-    """A demonstration that lowers the cable onto the table (V/F), recorded and compiled."""
-    from dlovr.recording import DemoRecorder, compile_recording
-    from dlovr.scene import load_scene
-    from dlovr.script import load_script
-    from dlovr.sim import Simulator
-
-    d = tmp_path_factory.mktemp("touch")
-    scene = load_scene("table")
-    sim = Simulator(scene, track=True)
-    with DemoRecorder(d / "touch.mcap", scene, sim, sim.tracker) as rec:
-        for r in sim.run(load_script(SCRIPT)):
-            rec.step(r)
-    prog = compile_recording(d / "touch.mcap")
-    path = d / "touch.program.json"
-    path.write_text(prog.dumps())
-    program = load_program(path)
-    assert [m.label for m in program.macros] == ["E"] and program.goal == ("V/F[table.F1]",)
-    return program, scene, load_track(d / "touch.mcap"), sim.pieces
 
 
 def test_force_guarded_program_reaches_its_goal(touch):
