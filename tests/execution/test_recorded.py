@@ -16,8 +16,6 @@ from dlovr.execution.recorded import TOPIC_EVENTS, record_run, scene_bundle
 from dlovr.execution.run import run_program
 from dlovr.execution.variation import parse_vary, perturb
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 def events(path: Path) -> list[dict]:
     with open(path, "rb") as fh:
