@@ -196,7 +196,7 @@ def _record_trials(
     from pathlib import Path
 
     from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
-    from dlovr.execution.variation import VaryError, parse_vary
+    from dlovr.execution.variation import VaryError, parse_varies
     from dlovr.geometry import scene_pieces
     from dlovr.outputs import prepare_output_dir
     from dlovr.recording.bundle import SceneBundle
@@ -207,12 +207,9 @@ def _record_trials(
     else:
         scene = _scene(script.scene, script) if script.scene else _scene("table")
     try:
-        variations = tuple(parse_vary(v, scene) for v in varies)
+        variations = parse_varies(varies, scene)
     except VaryError as e:
         raise UserError(str(e)) from None
-    keys = [v.key for v in variations]
-    if len(set(keys)) != len(keys):
-        raise UserError(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
     if os.path.exists(out) and not os.path.isdir(out):
         raise UserError(f"{out}: exists and is not a directory")
     setup = DemoSetup(scene, scene_pieces(scene), script, variations, seed, str(Path(out).resolve()),

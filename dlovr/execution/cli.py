@@ -235,16 +235,13 @@ def _trials(
     from pathlib import Path
 
     from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
-    from dlovr.execution.variation import VaryError, parse_vary
+    from dlovr.execution.variation import VaryError, parse_varies
     from dlovr.geometry import scene_pieces
 
     try:
-        variations = tuple(parse_vary(v, scene) for v in varies)
+        variations = parse_varies(varies, scene)
     except VaryError as e:
         raise _BadInput(str(e)) from None
-    keys = [v.key for v in variations]
-    if len(set(keys)) != len(keys):
-        raise _BadInput(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
     if Path(out).exists() and not Path(out).is_dir():
         raise _BadInput(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)

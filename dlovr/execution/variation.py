@@ -116,6 +116,15 @@ def parse_vary(item: str, scene: Any = None) -> Variation:
     raise VaryError(f"--vary {item!r}: bad spec {spec!r} (use P%, A..B or metres)")
 
 
+
+def parse_varies(items: Sequence[str], scene: Any = None) -> tuple[Variation, ...]:
+    """Every ``--vary KEY=SPEC`` of a command; a key given twice is an error (:class:`VaryError`)."""
+    variations = tuple(parse_vary(v, scene) for v in items)
+    keys = [v.key for v in variations]
+    if len(set(keys)) != len(keys):
+        raise VaryError(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
+    return variations
+
 def _shift(pos: Sequence[float], d: Sequence[float]) -> tuple[float, float, float]:
     return (float(pos[0]) + d[0], float(pos[1]) + d[1], float(pos[2]) + d[2])
 

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from dlovr.recording import Recording, replay
 from dlovr.ui import DemoServer, Stability, point_classes, segment_transforms
@@ -26,15 +25,6 @@ def wait_for(pred: Callable[[], bool], timeout: float = 20.0, what: str = "condi
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-
-
-@pytest.fixture
-def server(tmp_path: Path) -> Iterator[DemoServer]:
-    srv = DemoServer("table", port=None, recordings_dir=tmp_path / "recordings").start()
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 # --------------------------------------------------------------------------------------------------

@@ -5,10 +5,8 @@ headless chromium. Screenshots go to ``tests/artifacts/`` (ignored by git; or ``
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
 from test_ui import open_page, wait_for
 
 from dlovr.ui import DemoServer
@@ -27,15 +25,6 @@ def shot(page, name: str) -> Path:
     page.screenshot(path=str(path), full_page=True)
     print(f"screenshot: {path}")
     return path
-
-
-@pytest.fixture
-def server(tmp_path: Path) -> Iterator[DemoServer]:
-    srv = DemoServer("table", port=None, recordings_dir=tmp_path / "recordings").start()
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def test_the_run_panel_offers_the_programs_of_the_scene_only(server: DemoServer):

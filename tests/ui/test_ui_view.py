@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -34,15 +33,6 @@ def shot(page, name: str) -> Path:
     page.screenshot(path=str(path))
     print(f"screenshot: {path}")
     return path
-
-
-@pytest.fixture
-def server(tmp_path: Path) -> Iterator[DemoServer]:
-    srv = DemoServer("table", port=None, recordings_dir=tmp_path / "recordings").start()
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 # --------------------------------------------------------------------------------------------------
