@@ -12,7 +12,7 @@ import pytest
 
 from dlovr.execution.motion import ScrewPath, TrackPath
 from dlovr.execution.programs import ProgramError, find_recording, load_program, parse_program
-from dlovr.execution.variation import VaryError, parse_vary, perturb
+from dlovr.execution.variation import VaryError, parse_varies, parse_vary, perturb
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -203,3 +203,9 @@ def test_bounces_and_weak_detections_end_by_motion():
     assert _weak("E", {"force_threshold_n": 0.07, "step_n": 0.06})
     assert not _weak("E", {"force_threshold_n": 0.03, "step_n": 0.06})
     assert not _weak("E", {"force_threshold_n": 0.5})  # no derived step: nothing known, detect
+
+
+def test_a_vary_key_given_twice_is_refused():
+    assert [v.key for v in parse_varies(["dlo.length=10%", "dlo.young=0.5..2"])] == ["dlo.length", "dlo.young"]
+    with pytest.raises(VaryError, match="key 'dlo.length' given twice"):
+        parse_varies(["dlo.length=10%", "dlo.length=5%"])
