@@ -106,7 +106,7 @@ class Timeline:
             tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
             border = "border-left:2px solid #000;" if b.classes else ""
             cells.append(
-                f'<div title="{tip}" data-situation="{i}"{_pick_handlers(pick_uuid, i)} '
+                f'<div title="{tip}" data-situation="{i}" '
                 f'style="width:{w:.2f}%;background:{c};{border}cursor:pointer"></div>'
             )
         bar = (
@@ -115,21 +115,28 @@ class Timeline:
         )
         first = max(0, len(self.bands) - 8)
         rows = "".join(
-            f'<li data-situation="{first + k}"{_pick_handlers(pick_uuid, first + k)} style="cursor:pointer">'
+            f'<li data-situation="{first + k}" style="cursor:pointer">'
             f"{b.start:.2f} s <b>{html.escape(format_classes(b.classes) if b.classes else '')}</b> "
             f"<code>{html.escape(b.situation)}</code></li>"
             for k, b in enumerate(self.bands[first:])
         )
         src = html.escape(self.source)
         return (
-            f'<div style="font-size:11px">{bar}<div>{src}: {len(self.bands)} situations, '
+            f'<div class="dlovr-pick"{_pick_handlers(pick_uuid)} style="font-size:11px">{bar}'
+            f"<div>{src}: {len(self.bands)} situations, "
             f"{t0:.2f}-{t1:.2f} s</div><ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
         )
 
 
-def _pick_handlers(uuid: str | None, index: int) -> str:
-    """Inline mouse handlers of a timeline element: send its situation's index to the text input
-    ``uuid`` through the page's viser connection (``GuiUpdateMessage``, as an input edit does)."""
+def _pick_handlers(uuid: str | None) -> str:
+    """Inline mouse handlers of the timeline's outer element: send the index of the situation under
+    the mouse to the text input ``uuid`` through the page's viser connection (``GuiUpdateMessage``, as
+    an input edit does): ``h<i>`` when it changes, ``""`` when the mouse is over none, ``c<i>:<ms>`` on
+    a click. One copy of the code for the whole timeline (event delegation).
+
+    The mouse is followed on the document, not by ``mouseleave``: the live timeline is drawn again
+    every second, and an element replaced under the mouse never sees the mouse leave.
+    """
     if uuid is None or not all(ch.isalnum() or ch in "-_" for ch in uuid):
         return ""
 
@@ -139,9 +146,16 @@ def _pick_handlers(uuid: str | None, index: int) -> str:
             f"{{type:'GuiUpdateMessage',uuid:'{uuid}',updates:{{value:{value}}}}})"
         )
 
+    situation = "var t=e&&e.target&&e.target.closest&&e.target.closest('.dlovr-pick [data-situation]');"
+    follow = (
+        "(window.__dlovrPick||(window.__dlovrPick=function(e){" + situation
+        + "var s=t?'h'+t.dataset.situation:'';if(s!==(window.__dlovrHover||'')){window.__dlovrHover=s;"
+        + send("s") + "}},document.addEventListener('mousemove',window.__dlovrPick,true),"
+        "window.__dlovrPick))"
+    )
+    click = "var e=event;" + situation + "if(t){" + send("'c'+t.dataset.situation+':'+Date.now()") + "}"
     return (
-        f' onmouseenter="{send(repr(f"h{index}"))}" onmouseleave="{send(repr(""))}"'
-        f" onclick=\"{send(repr(f'c{index}:') + '+Date.now()')}\""
+        f' onmouseover="{follow}(event)" onmouseleave="{follow}(null)" onclick="{click}"'
     )
 
 
