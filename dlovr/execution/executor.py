@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.execution.motion import ScrewPath, TrackPath
+from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
 from dlovr.execution.programs import MacroSpec, ProgramSpec
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
@@ -63,7 +63,12 @@ class ExecOptions:
     happened earlier and holds is detected then; a passing swing is not). Neither applies to the
     oracle. ``bounce`` (s): a demonstrated transition undone by the next one within this time (the
     cable bouncing off and back: a dynamic accident of the demonstration) is not waited for: both
-    macros end by their motion (the oracle's too: the bounce need not repeat).
+    macros end by their motion (the oracle's too: the bounce need not repeat). ``phase_blank`` (s):
+    following the recorded track, the force detectors are armed this long into the stretch's last
+    motion phase (where the gripper last set off after holding still), since the transition came in
+    it and the gripper starting or stopping earlier shakes the wrench. ``min_snr``: a detection whose
+    demonstrated step is less than this many times the noise before it (a gradual change) ends its
+    macro by motion, as one whose threshold is not below its step does.
     """
 
     detect: str = "force"
@@ -82,12 +87,14 @@ class ExecOptions:
     bounce: float = 0.1
     blank: float = 0.05
     arm: float = 0.5
+    phase_blank: float = 0.15
+    min_snr: float = 8.0
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
         names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold", "blank",
-                 "arm", "bounce")  # fmt: skip
+                 "arm", "bounce", "phase_blank", "min_snr")  # fmt: skip
         for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -193,7 +200,7 @@ class _Guard:
         self.hold = opts.oracle_hold
         self._since: float | None = None
         #: every detection's threshold is at or above the demonstrated step: no force signal to watch
-        self.weak = bool(m.detection) and all(_weak(d.cls, d.params) for d in m.detection)
+        self.weak = bool(m.detection) and all(_weak(d.cls, d.params, opts.min_snr) for d in m.detection)
 
     def start(self, t: float, f: np.ndarray, tq: np.ndarray) -> None:
         self._since = None
@@ -226,12 +233,17 @@ _THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
               "S": "jump_n"}  # fmt: skip
 
 
-def _weak(cls: str, params: Any) -> bool:
-    """Whether a detection's threshold is not below the step its demonstration showed (``step_n``)."""
+def _weak(cls: str, params: Any, min_snr: float = 0.0) -> bool:
+    """Whether a detection has no force signal to watch: its threshold is not below the step its
+    demonstration showed (``step_n``), or that step is less than ``min_snr`` times the noise seen
+    before it (``noise_n``; a gradual change, not a step a run would show again)."""
     step, key = params.get("step_n"), _THRESHOLD.get(cls)
     if step is None:
         return False
-    return float(step) <= 0.0 or (key in params and float(params[key]) >= float(step))
+    step = float(step)
+    if step <= 0.0 or (key in params and float(params[key]) >= step):
+        return True
+    return "noise_n" in params and step < min_snr * float(params["noise_n"])
 
 
 @dataclass(frozen=True)
@@ -344,9 +356,12 @@ def _path(
         # the track holds commanded targets, which lead the gripper: go on from the current target
         here = tuple(float(x) for x in sim.target_pos), tuple(float(x) for x in sim.target_quat)
         t0 = m.t - mo.duration if t_from is None else min(t_from, m.t - mo.duration)
+        # beyond its stretch the gripper keeps moving as it was when the transition should have come
+        # (a turn keeps turning, an approach approaching); the macro's net motion if it held still
+        span = max(m.t - t0, opts.min_duration)
+        beyond = local_twist(track.t, track.pos, track.quat, t0, m.t, span) or (mo.rotation, mo.relative)
         return TrackPath(
-            track.t, track.pos, track.quat, t0, m.t, *here, frame,  # type: ignore[arg-type]
-            (mo.rotation, mo.relative),
+            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond,  # type: ignore[arg-type]
         )  # fmt: skip
     return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame)  # type: ignore[arg-type]
 
@@ -389,6 +404,13 @@ def _run_macro(
     unit = "mm" if m.motion.distance > 1e-9 else "mrad"
     allowed = opts.allowance * scale
     guard = _Guard(m, opts, 1.0 / ses.dt)
+    arm = opts.arm
+    if track is not None and period > 0:
+        # the transition came in the stretch's last motion phase: the gripper setting off or stopping
+        # earlier shakes the wrench, which is no transition (armed ``blank`` s into the phase, at
+        # the latest 50 ms before the demonstrated transition)
+        phase = last_start(track.t, track.pos, track.quat, t_start, m.t)
+        arm = max(arm, min((phase + opts.phase_blank - t_start) / period, 1.0 - 0.05 / period))
     t0 = float(sim.time)
     force = not guard.oracle
     blank = opts.blank if force else 0.0
@@ -417,7 +439,7 @@ def _run_macro(
             # after the allowance the gripper stops short, which shakes the cable: in force mode
             # only a transition felt while moving counts (the oracle still waits ``settle``)
             moving = not force or s < opts.allowance
-            if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= opts.arm) and moving):
+            if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
                 if track is None:
                     sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
                 ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")

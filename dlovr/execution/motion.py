@@ -115,6 +115,75 @@ class ScrewPath:
         return pos, quat_normalize(quat)
 
 
+def _quat_rotvec(q: np.ndarray) -> Vec:
+    """Rotation vector (rad) of a unit quaternion (wxyz), the short way round."""
+    w, x, y, z = (float(c) for c in q)
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-15:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    th = 2.0 * math.atan2(n, w)
+    return (x * th / n, y * th / n, z * th / n)
+
+
+def local_twist(
+    times: np.ndarray,
+    pos: np.ndarray,
+    quat: np.ndarray,
+    t0: float,
+    t1: float,
+    span: float,
+    window: float = 0.1,
+) -> tuple[Vec, Vec] | None:
+    """How the recorded gripper was moving when a stretch ``t0``-``t1`` (s) ended: the rotation
+    vector (rad) and displacement (m) of ``span`` seconds of the constant twist (gripper frame) that
+    takes the pose at ``t - window`` to the pose at ``t``, for the last ``t <= t1`` in the stretch
+    where the gripper moved (more than 0.1 mm or 1 mrad in ``window``); None if it held still."""
+    times = np.asarray(times, dtype=float)
+    t = float(t1)
+    while t - window >= float(t0) - 1e-12:
+        a, b = np.searchsorted(times, t - window, side="right"), np.searchsorted(times, t, side="right")
+        ia, ib = max(a - 1, 0), max(b - 1, 0)
+        pa, qa, pb, qb = pos[ia], quat_normalize(quat[ia]), pos[ib], quat_normalize(quat[ib])
+        inv = np.array([qa[0], -qa[1], -qa[2], -qa[3]])
+        d = quat_rotate(inv, np.array([float(pb[i]) - float(pa[i]) for i in range(3)]))
+        phi = _quat_rotvec(quat_mul(inv, qb))
+        dist = math.sqrt(sum(float(c) ** 2 for c in d))
+        if dist > 1e-4 or math.sqrt(sum(c * c for c in phi)) > 1e-3:
+            k = span / max(float(times[ib]) - float(times[ia]), 1e-9)
+            rot = (phi[0] * k, phi[1] * k, phi[2] * k)
+            v = _apply_v_inv(phi, (float(d[0]), float(d[1]), float(d[2])))
+            return rot, _apply_v(rot, (v[0] * k, v[1] * k, v[2] * k))
+        t -= window
+    return None
+
+
+def last_start(
+    times: np.ndarray, pos: np.ndarray, quat: np.ndarray, t0: float, t1: float, still: float = 0.05
+) -> float:
+    """Demonstration time (s) at which the gripper last set off, within ``t0``-``t1``, after holding
+    still (no sample-to-sample change above 1 mm/s or 1 mrad/s) for ``still`` s or more: the start of
+    the motion phase in which the stretch's transition came. ``t0`` if it never held still."""
+    times = np.asarray(times, dtype=float)
+    a = max(int(np.searchsorted(times, t0, side="left")) - 1, 0)
+    b = int(np.searchsorted(times, t1, side="right"))
+    if b - a < 2:
+        return float(t0)
+    dt = np.maximum(np.diff(times[a:b]), 1e-12)
+    dp = np.linalg.norm(np.diff(pos[a:b], axis=0), axis=1) / dt
+    dq = np.linalg.norm(np.diff(quat[a:b], axis=0), axis=1) / dt
+    moving = (dp > 1e-3) | (dq > 1e-3)
+    for k in range(len(moving) - 1, 0, -1):
+        if moving[k] and not moving[k - 1]:
+            j = k - 1
+            while j >= 0 and not moving[j]:
+                j -= 1
+            if float(times[a + k]) - float(times[a + j + 1]) >= still - 1e-12:
+                return max(float(times[a + k]), float(t0))
+    return float(t0)
+
+
 @dataclass(frozen=True)
 class TrackPath:
     """Gripper poses along the demonstration's own recorded trajectory between two of its times, from
@@ -122,9 +191,10 @@ class TrackPath:
 
     ``times`` (k,) s, ``pos`` (k, 3) m, ``quat`` (k, 4) wxyz: the demonstration's commanded gripper
     poses (world). The macro's stretch runs from demonstration time ``t0`` (``s = 0``) to ``t1``
-    (``s = 1``). Beyond it (the allowance), the motion goes on as the screw ``beyond`` -- the macro's
-    demonstrated displacement and rotation (gripper frame), scaled by ``s - 1`` -- from the pose
-    reached at ``s = 1``: a guarded approach keeps approaching. ``frame`` as :class:`ScrewPath`:
+    (``s = 1``). Beyond it (the allowance), the motion goes on as the screw ``beyond`` (gripper frame,
+    scaled by ``s - 1``; the executor gives :func:`local_twist`, the recorded motion at the end of
+    the stretch over one stretch's time) from the pose reached at ``s = 1``: a guarded approach keeps
+    approaching, a turn keeps turning. ``frame`` as :class:`ScrewPath`:
     ``world`` repeats the recorded displacement and rotation in the world frame, ``relative`` in the
     gripper frame at the start.
     """

@@ -249,6 +249,11 @@ def derive(
             p[f"dir_{axis}"] = round(float(x), 6)
             texts[f"dir_{axis}"] = "derived: the demonstrated step's direction (no contact vector to watch)"
     p["step_n"] = round(size, 6)
+    p["noise_n"] = round(noise, 6)
+    texts["noise_n"] = (
+        f"derived: the standard deviation along {name} over the {len(before)} samples before the "
+        "transition; a step within a few times it is no signal to trust"
+    )
     texts["step_n"] = (
         f"derived: the demonstrated step along {name} (mean over {len(after)} samples after minus "
         f"{len(before)} before); a threshold at or above it means the force cannot show the transition"

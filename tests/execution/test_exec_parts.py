@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlovr.execution.motion import ScrewPath, TrackPath
+from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
 from dlovr.execution.programs import ProgramError, find_recording, load_program, parse_program
 from dlovr.execution.variation import VaryError, parse_varies, parse_vary, perturb
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
@@ -126,6 +126,45 @@ def test_track_path_repeats_the_recorded_stretch_from_where_the_gripper_is():
     np.testing.assert_allclose(path.at(1.5)[0], path.at(1.0)[0] + [0.0, 0.0, -0.05], atol=1e-12)
 
 
+def test_local_twist_is_the_motion_at_the_end_of_the_stretch():
+    """A recorded push along +x, then a turn about an axis 0.1 m below the gripper (about y): beyond
+    the stretch the gripper goes on turning about that axis, not along the stretch's net motion."""
+    t = np.arange(0.0, 2.0001, 0.002)
+    pos, quat = np.zeros((len(t), 3)), np.zeros((len(t), 4))
+    for k, tk in enumerate(t):
+        a = max(tk - 1.0, 0.0) * 0.5  # rad: still until 1 s of push, then 0.5 rad/s
+        pos[k] = [0.05 * min(tk, 1.0) + 0.1 * math.sin(a), 0.0, 0.4 - 0.1 + 0.1 * math.cos(a)]
+        quat[k] = [math.cos(a / 2), 0.0, math.sin(a / 2), 0.0]
+    rot, disp = local_twist(t, pos, quat, 0.0, 2.0, span=1.0)
+    np.testing.assert_allclose(rot, [0.0, 0.5, 0.0], atol=1e-9)
+    # one second of that twist, applied to the pose at 2 s, lands where the turn goes on to
+    end = ScrewPath(tuple(pos[-1]), tuple(quat[-1]), rot, disp, tuple(quat[-1]), "relative")
+    p, q = end.at(1.0)
+    a = 1.0
+    np.testing.assert_allclose(p, [0.05 + 0.1 * math.sin(a), 0.0, 0.3 + 0.1 * math.cos(a)], atol=1e-9)
+    np.testing.assert_allclose(q, [math.cos(a / 2), 0.0, math.sin(a / 2), 0.0], atol=1e-9)
+    # held still at the end: the last motion before the hold; still throughout: none
+    held = np.concatenate([pos, np.repeat(pos[-1:], 100, axis=0)])
+    held_q = np.concatenate([quat, np.repeat(quat[-1:], 100, axis=0)])
+    t2 = np.arange(len(held)) * 0.002
+    np.testing.assert_allclose(local_twist(t2, held, held_q, 0.0, t2[-1], span=1.0)[0], rot, atol=1e-9)
+    assert local_twist(t, np.zeros_like(pos), np.tile([1.0, 0, 0, 0], (len(t), 1)), 0.0, 2.0, 1.0) is None
+
+
+def test_last_start_is_where_the_last_motion_phase_began():
+    t = np.arange(0.0, 3.0001, 0.002)
+    x = np.interp(t, [0.0, 1.0, 1.5, 2.5, 3.0], [0.0, 0.1, 0.1, 0.2, 0.2])  # move, hold, move, hold
+    pos = np.stack([x, np.zeros_like(t), np.zeros_like(t)], axis=1)
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
+    assert last_start(t, pos, quat, 0.0, 2.4) == pytest.approx(1.5, abs=0.003)
+    assert last_start(t, pos, quat, 0.0, 3.0) == pytest.approx(1.5, abs=0.003)  # held at the end
+    assert last_start(t, pos, quat, 0.0, 0.9) == 0.0  # no hold before: the stretch's start
+    assert last_start(t, pos, quat, 1.7, 2.4) == 1.7
+    jitter = pos.copy()
+    jitter[(t > 1.0) & (t < 1.5), 0] += 1e-7 * np.sin(np.arange(((t > 1.0) & (t < 1.5)).sum()))
+    assert last_start(t, jitter, quat, 0.0, 2.4) == pytest.approx(1.5, abs=0.003)  # a still hand
+
+
 # -- variation ---------------------------------------------------------------------------------------
 
 
@@ -186,7 +225,8 @@ def test_variation_is_deterministic_and_keys_are_independent():
 
 def test_bounces_and_weak_detections_end_by_motion():
     """A transition undone by the next within 0.1 s of demonstrated motion is a bounce; a detection
-    whose threshold is not below the demonstrated step has no force signal to watch."""
+    whose threshold is not below the demonstrated step, or whose step is within a few times the
+    noise before it, has no force signal to watch."""
     from dataclasses import replace
 
     from dlovr.execution.executor import _weak, bounces
@@ -202,6 +242,10 @@ def test_bounces_and_weak_detections_end_by_motion():
     assert bounces([a, replace(back, motion=replace(b.motion, duration=0.5))], 0.1) == set()
     assert _weak("E", {"force_threshold_n": 0.07, "step_n": 0.06})
     assert not _weak("E", {"force_threshold_n": 0.03, "step_n": 0.06})
+    # a step within 8x the noise before it (a gradual change) is not trusted either
+    assert _weak("C", {"force_threshold_n": 0.02, "step_n": 0.027, "noise_n": 0.005}, min_snr=8.0)
+    assert not _weak("C", {"force_threshold_n": 0.02, "step_n": 0.027, "noise_n": 0.005}, min_snr=5.0)
+    assert not _weak("E", {"force_threshold_n": 0.13, "step_n": 0.18, "noise_n": 0.003}, min_snr=8.0)
     assert not _weak("E", {"force_threshold_n": 0.5})  # no derived step: nothing known, detect
 
 
