@@ -515,7 +515,8 @@ class Debouncer(Generic[S]):
             b = k[-1]
             if b.duration < self.hold and not self.transient(b.situation):  # brief stable noise
                 k.pop()
-                k[-1].end = b.end
+                if not b.through_free:  # after a flight the one before keeps its end (when it was left)
+                    k[-1].end = b.end
                 through = b.through_free
         if self._flies(t, situation):
             k.pop()  # the free interval; the one before it keeps its end (when it was left)

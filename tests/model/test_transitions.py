@@ -336,6 +336,17 @@ def test_a_short_flight_is_one_S_E_transition():
     assert Debouncer(0.02, is_transient).flight == DEFAULT_FLIGHT_S == 0.3
 
 
+def test_a_flight_that_lands_through_a_brief_contact_keeps_its_times():
+    """Leaving the ridge through a 4 ms stable contact, then 200 ms free, then 4 ms on another face
+    before the landing that holds (peg_in_hole's drop into the hole): one S,E step, and the ridge
+    still ends when the cable left it, not when it landed (the flight lies between them)."""
+    brief_on, brief_off = P("V/G & E/N & E/F[a.F3] & V/N"), P("V/G & E/N & E/F[a.F4] & V/N")
+    kept = run([(RIDGE, 50), (brief_on, 2), (FREE, 100), (brief_off, 2), (LANDED, 50)], hold=0.02)
+    assert [k.situation for k in kept] == [RIDGE, LANDED]
+    assert kept_classes(kept) == [(), ("S", "E")] and kept[1].through_free
+    assert kept[0].end == pytest.approx(0.104) and kept[1].start == pytest.approx(0.308)
+
+
 def test_a_long_free_interval_is_kept_S_then_E():
     kept = run([(RIDGE, 50), (FREE, 160), (LANDED, 50)], hold=0.02)  # 320 ms > 0.3 s
     assert [k.situation for k in kept] == [RIDGE, FREE, LANDED]
