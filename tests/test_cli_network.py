@@ -78,6 +78,32 @@ def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_pa
         assert [s["node"] for s in c["successors"]] == [c["macro"]["target"]]
 
 
+def test_network_edges_carry_the_detections_derived_from_the_demonstrations(built, tmp_path):
+    """Three copies of one recording: each classed edge's detection is the program's, parameter for
+    parameter (the median of three equal values), marked as merged; the network program's macros
+    carry them, so its detectors watch for the demonstrated steps, not the class defaults."""
+    net = json.loads(built[0].read_text())
+    single = compile_recording(PEG)
+    by_target = {m.to_situation: m for m in single.macros if m.kind != "final"}
+    nodes = {n["id"]: n["situation"] for n in net["nodes"]}
+    classed = [e for e in net["edges"] if e["classes"]]
+    assert len(classed) == len(by_target) == 8
+    for e in classed:
+        m = by_target[nodes[e["target"]]]
+        assert [d["cls"] for d in e["detection"]] == list(m.classes)
+        for d, want in zip(e["detection"], m.detection, strict=True):
+            assert d["params"] == pytest.approx(want.params), e["label"]
+            derived = [k for k, v in want.derivation.items() if v.startswith("derived")]
+            merged = [d["derivation"][k] for k in derived]
+            assert merged and all(t.startswith("derived: median over 3 of 3") for t in merged)
+    r = cli("compile", "--network", built[0], "-o", tmp_path / "prog.json")
+    assert r.exit_code == 0, r.output
+    plan = json.loads((tmp_path / "prog.json").read_text())["plan"]
+    for ch, m in zip(plan, [m for m in single.macros if m.kind != "final"], strict=True):
+        for d, want in zip(ch["macro"]["detection"], m.detection, strict=True):
+            assert d["params"] == pytest.approx(want.params)
+
+
 def test_recordings_of_different_scenes_are_refused_with_one_line(tmp_path):
     r = dlovr("network", PEG, SAMPLES / "table.mcap", "-o", tmp_path / "net.json")
     assert r.returncode == 2 and "Traceback" not in r.stderr

@@ -9,13 +9,16 @@ The loop, from the network's start node and the scene's gripper position:
 2. the macro runs as a guarded motion like a compiled program's (:mod:`dlovr.execution.executor`):
    from where the gripper is, along the demonstrated mean motion, ended by the detectors of its
    classes (or, with ``detect="oracle"``, by the contact tracker), failed at its allowance;
-3. after the detection the gripper holds still ``sense_settle`` s, and the **sensed contact vector**
+3. after the detection (or, for a transition without a force signal, the end of its motion) the
+   gripper holds still ``sense_settle`` s, and the **sensed contact vector**
    is taken from the wrench: the sensed force minus the force sensed in free space (the cable's
    weight ``-m g`` along z, known from the scene as a robot knows its payload; the first samples of
    a run are not settled enough to tare on), negated and normalised -- a contact
    that begins adds about ``-v * F`` to the sensed force (:mod:`dlovr.model.detection`), so the
    environment's share is ``-v`` times its size; below ``free_force`` N it is no contact (the zero
-   vector). :func:`dlovr.model.planning.identify` picks the successor whose expected vector is
+   vector; or half the detection threshold that fired, when smaller: the network's detections are
+   derived from the demonstrations' wrench). :func:`dlovr.model.planning.identify` picks the
+   successor whose expected vector is
    closest; farther than ``tolerance`` from every one is **a situation outside the network**: the run
    stops with a report of the sensed vector and the expected ones. With the oracle the node is the
    one whose principal contacts the tracker sees;
@@ -39,6 +42,8 @@ from typing import Any
 import numpy as np
 
 from dlovr.execution.executor import (
+    _THRESHOLD,
+    ENDED_OK,
     ExecOptions,
     Execution,
     _run_final,
@@ -130,9 +135,22 @@ def _macro_spec(index: int, nprog: Any, node: str, plan: Any, sim: Any) -> Macro
         v = None if n.vector is None or math.sqrt(sum(x * x for x in n.vector)) < 1e-9 else tuple(n.vector)
         return tuple(ContactVec(s, v) for s in n.principal)  # type: ignore[arg-type]
 
-    det = tuple(DetectionSpec(c, "", {}) for c in plan.classes)
+    derived = {d.cls: d for d in plan.detection}  # the network's parameters; the defaults without
+    det = tuple(
+        DetectionSpec(c, derived[c].algorithm, dict(derived[c].params)) if c in derived
+        else DetectionSpec(c, "", {})
+        for c in plan.classes
+    )  # fmt: skip
     return MacroSpec(index, tuple(plan.classes), 0.0, src.situation, dst.situation, contacts(src),
                      contacts(dst), motion, det, final=plan.final, frame="world")  # fmt: skip
+
+
+def _free_force(m: MacroSpec, free_force: float) -> float:
+    """Below what contact force (N) the sensed vector is free space after macro ``m``: ``free_force``,
+    or half the smallest threshold its detectors fired at (a detection at a smaller force than
+    ``free_force`` is a contact of that size, not free space)."""
+    thr = [float(d.params[_THRESHOLD[d.cls]]) for d in m.detection if _THRESHOLD.get(d.cls) in d.params]
+    return min([free_force, *(0.5 * t for t in thr if t > 0.0)])
 
 
 def _hold(ses: _Session, seconds: float) -> None:
@@ -208,7 +226,7 @@ def run_network_in(
                 path.append(node)
                 continue
             run = _run_macro(m, ses, None)
-            if run.ended != "detected":
+            if run.ended not in ENDED_OK:
                 tn, tp = _true_node(nprog, sim)
                 macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
                                        run.ended_at, run.ended, None, None, tn, tp, run.reason))  # fmt: skip
@@ -216,7 +234,7 @@ def run_network_in(
                 break
             _hold(ses, nopts.sense_settle)
             tn, tp = _true_node(nprog, sim)
-            sensed = sensed_contact_vector(ses.f, tare, nopts.free_force)
+            sensed = sensed_contact_vector(ses.f, tare, _free_force(m, nopts.free_force))
             if opts.detect == "oracle":
                 found = next((s for s in choice.successors if s.node == tn), None)
             else:

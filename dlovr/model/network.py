@@ -12,8 +12,11 @@ Pure Python + numpy + networkx. Each demonstration contributes its kept contact 
   (:func:`dlovr.model.transitions.classify_step`), how often they were demonstrated (``count``), the
   probability of leaving the source node along them (``count`` / all departures from the source), the
   durations (time from entering the source to entering the target, s), the demonstrated gripper motion
-  (mean and spread of the world displacement, m; where it began and ended) and their **risk**: ``none``
-  for ``C``, ``E`` and ``-``, ``caution`` for ``T``, ``risky`` for ``I`` and ``S`` (docs/networks.md);
+  (mean and spread of the world displacement, m; where it began and ended), their **risk**: ``none``
+  for ``C``, ``E`` and ``-``, ``caution`` for ``T``, ``risky`` for ``I`` and ``S`` (docs/networks.md),
+  and, for a classed edge, the **detection** of each class with parameters derived from the
+  demonstrations' wrench around each occurrence (:mod:`dlovr.model.derivation`), merged as the median
+  over the occurrences that gave a signal (the class's defaults where none did);
 - **start** and **goal**: the most common first and last kept situation of the demonstrations (ties go
   to the one seen first).
 
@@ -33,8 +36,9 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
+from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
-from dlovr.model.program import PoseTrack, TimedSituation, motion_between
+from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
 from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
 
 NETWORK_VERSION = 1
@@ -72,14 +76,16 @@ def _vec(a: Sequence[float] | np.ndarray) -> Vec3:
 
 @dataclass(frozen=True)
 class Demonstration:
-    """One demonstration: its kept situations (in time order) and gripper pose track, and the scene
-    it was made in (name and content hash; demonstrations of one network must share the hash)."""
+    """One demonstration: its kept situations (in time order) and gripper pose track, the scene it was
+    made in (name and content hash; demonstrations of one network must share the hash), and the
+    sensed gripper wrench when the recording has one (for the edges' detection parameters)."""
 
     name: str
     states: tuple[TimedSituation, ...]
     poses: PoseTrack
     scene_name: str = ""
     scene_sha256: str = ""
+    wrench: WrenchSeries | None = None
 
 
 @dataclass(frozen=True)
@@ -120,7 +126,8 @@ class Node:
 class Edge:
     """A demonstrated transition ``source -> target`` (node ids). ``probability`` = ``count`` / all
     departures from ``source``; ``durations`` (s) one per demonstrated occurrence, in input order;
-    ``demonstrations`` the indices of the demonstrations that took it (with repeats)."""
+    ``demonstrations`` the indices of the demonstrations that took it (with repeats); ``detection``:
+    per class, the detection its macro ends with (parameters merged over the occurrences)."""
 
     source: str
     target: str
@@ -131,6 +138,7 @@ class Edge:
     durations: tuple[float, ...]
     motion: MotionStats
     demonstrations: tuple[int, ...]
+    detection: tuple[Detection, ...] = ()
 
     @property
     def id(self) -> str:
@@ -229,6 +237,7 @@ class Network:
                     "motion": {
                         k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(e.motion).items()
                     },
+                    "detection": [asdict(d) for d in e.detection],
                 }
                 for e in self.edges
             ],
@@ -256,7 +265,8 @@ class Network:
             edges = tuple(
                 Edge(str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
                      int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
-                     _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])))
+                     _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])),
+                     tuple(_detection_from_json(d) for d in e.get("detection", ())))
                 for e in data["edges"]
             )  # fmt: skip
             net = Network(
@@ -291,6 +301,43 @@ def _motion_from_json(d: Mapping[str, Any]) -> MotionStats:
         _vec(d["world_mean"]), _vec(d["world_std"]), _vec(d["relative_mean"]), _vec(d["rotation_mean"]),
         _vec(d["start_mean"]), float(d["start_spread"]), _vec(d["end_mean"]),
     )  # fmt: skip
+
+
+def _detection_from_json(d: Mapping[str, Any]) -> Detection:
+    return Detection(
+        str(d["cls"]), str(d["algorithm"]), {str(k): float(v) for k, v in d["params"].items()},
+        {str(k): str(v) for k, v in d.get("derivation", {}).items()},
+    )  # fmt: skip
+
+
+def _derived(d: Detection, key: str) -> bool:
+    return d.derivation.get(key, "").startswith("derived")
+
+
+def merge_detections(per_occurrence: Sequence[Sequence[Detection]]) -> tuple[Detection, ...]:
+    """One detection per class from those derived at each occurrence of an edge: each parameter the
+    median over the occurrences whose parameter was derived from a signal (``derived: ...``), the
+    first occurrence's default where none was."""
+    if not per_occurrence:
+        return ()
+    out = []
+    for k, first in enumerate(per_occurrence[0]):
+        same = [occ[k] for occ in per_occurrence if len(occ) > k and occ[k].cls == first.cls]
+        params: dict[str, float] = {}
+        texts: dict[str, str] = {}
+        for key in first.params:
+            vals = [d.params[key] for d in same if key in d.params and _derived(d, key)]
+            if vals:
+                params[key] = round(float(np.median(vals)), 6)
+                texts[key] = (
+                    f"derived: median over {len(vals)} of {len(same)} demonstrations "
+                    f"({min(vals):.3g} to {max(vals):.3g})"
+                )
+            else:
+                params[key] = first.params[key]
+                texts[key] = first.derivation.get(key, "default: the class keeps it")
+        out.append(Detection(first.cls, first.algorithm, params, texts))
+    return tuple(out)
 
 
 def _check(net: Network) -> None:
@@ -381,6 +428,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     held: dict[str, list[float]] = {}
     vectors: dict[str, list[np.ndarray]] = {}
     occ: dict[tuple[str, str], list[tuple[int, float, Any, np.ndarray, np.ndarray, bool]]] = {}
+    steps: dict[tuple[str, str], list[tuple[TimedSituation, TimedSituation, WrenchSeries | None]]] = {}
     firsts: list[tuple[str, np.ndarray]] = []
     lasts: list[tuple[str, np.ndarray]] = []
     for di, d in enumerate(demos):
@@ -404,6 +452,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
             occ.setdefault((keys[k - 1], keys[k]), []).append(
                 (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
             )
+            steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
     by_id = {v: k for k, v in ids.items()}
     nodes = []
     for nid in ids.values():
@@ -436,9 +485,10 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
             _vec(np.mean([x[2].rotation for x in xs], axis=0)),
             _vec(starts.mean(axis=0)), _spread(starts), _vec(ends.mean(axis=0)),
         )  # fmt: skip
+        derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps[(u, v)]])
         edges.append(
             Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
-                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs))
+                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived)
         )  # fmt: skip
     order = list(ids.values())
     net = Network(

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.model.network import RISKS, Edge, Network, NetworkError, Vec3
+from dlovr.model.program import Detection
 
 PROGRAM_VERSION = 1
 """Version of the network-program JSON format."""
@@ -70,7 +71,8 @@ class MacroPlan:
     """One macro of a network program: the network edges it follows (ids), the classes of the
     transition that ends it and its risk, the node expected after it, whether it is the final macro
     (no detection), and its motion: summed mean world displacement (m), root-sum-square of the
-    per-axis spreads (m), summed mean rotation vector (rad, gripper frame) and mean duration (s)."""
+    per-axis spreads (m), summed mean rotation vector (rad, gripper frame) and mean duration (s); the
+    detection of each class of its last edge (parameters derived from the demonstrations)."""
 
     edges: tuple[str, ...]
     classes: tuple[str, ...]
@@ -81,6 +83,7 @@ class MacroPlan:
     world_std: Vec3
     rotation: Vec3
     duration: float
+    detection: tuple[Detection, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -251,7 +254,7 @@ class NetworkProgram:
         return MacroPlan(
             tuple(e.id for e in edges), last.classes, max((e.risk for e in edges), key=RISKS.index),
             last.target, not last.classes, tuple(map(_r, world)), tuple(map(_r, std)), tuple(map(_r, rot)),  # type: ignore[arg-type]
-            _r(duration),
+            _r(duration), last.detection,
         )  # fmt: skip
 
     def _outcomes(

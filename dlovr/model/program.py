@@ -289,14 +289,15 @@ def _principals(s: DiscreteSituation) -> tuple[ContactSpec, ...]:
     return tuple(_spec(c) for run in successional_contacts(s) for c in principal(run))
 
 
-def _detections(
+def detections(
     classes: Sequence[str],
     prev: TimedSituation,
     cur: TimedSituation,
     wrench: WrenchSeries | None,
     rules: DerivationRules | None,
 ) -> tuple[Detection, ...]:
-    """The detections of a transition's classes, parameters derived from the wrench around it."""
+    """The detections of a transition ``prev -> cur`` of these classes, parameters derived from the
+    wrench around it (defaults without one)."""
     fr, to = _principals(prev.situation), _principals(cur.situation)
     released = [c.vector for c in fr if c.state not in {x.state for x in to}]
     established = [c.vector for c in to if c.state not in {x.state for x in fr}]
@@ -357,7 +358,7 @@ def compile_program(
                 from_contacts=_principals(prev.situation),
                 to_contacts=_principals(cur.situation),
                 motion=motion_between(poses, start.t, cur.t),
-                detection=_detections(classes, prev, cur, wrench, rules),
+                detection=detections(classes, prev, cur, wrench, rules),
                 risk=risk(classes),
             )
         )

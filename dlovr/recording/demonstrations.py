@@ -18,7 +18,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
     """One recording as a :class:`~dlovr.model.network.Demonstration` (scene name and hash from its
     metadata: for a demonstration in a perturbed scene (``dlovr record --trials``) the hash of the
     unperturbed scene, ``base_scene_sha256``, so that perturbed runs of one scene merge; gripper poses
-    from its contact-state messages, world frame, m and wxyz)."""
+    from its contact-state messages, world frame, m and wxyz; the sensed wrench when it has one)."""
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
@@ -35,6 +35,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         poses,
         rec.metadata.get("scene_name", ""),
         rec.metadata.get("base_scene_sha256") or rec.metadata.get("scene_sha256", ""),
+        rec.wrench(),
     )
 
 

@@ -332,3 +332,20 @@ def test_a_flight_edge_is_classed_as_the_program_classes_it():
     for demos, label in (([demo(True)], ("S", "E")), ([demo(False)], ("S",))):
         (edge,) = build_network(demos).edges
         assert edge.classes == label
+
+
+def test_merged_detections_take_the_median_of_the_derived_parameters():
+    from dlovr.model.network import merge_detections
+    from dlovr.model.program import Detection
+
+    def det(thr: float, how: str = "derived: 40% of the step") -> Detection:
+        return Detection("E", "force_along_contact_vector", {"force_threshold_n": thr, "max_angle_deg": 30.0},
+                         {"force_threshold_n": how, "max_angle_deg": "default: E keeps it"})  # fmt: skip
+
+    (m,) = merge_detections([[det(0.1)], [det(0.3)], [det(0.2)], [det(0.5, "default: no wrench signal")]])
+    assert m.params == {"force_threshold_n": 0.2, "max_angle_deg": 30.0}  # the default one left out
+    assert m.derivation["force_threshold_n"] == "derived: median over 3 of 4 demonstrations (0.1 to 0.3)"
+    assert m.derivation["max_angle_deg"] == "default: E keeps it"
+    (d,) = merge_detections([[det(0.5, "default: no wrench signal")]] * 2)
+    assert d.params["force_threshold_n"] == 0.5 and d.derivation["force_threshold_n"].startswith("default")
+    assert merge_detections([]) == ()
