@@ -71,7 +71,7 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
 
         Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
         path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
-        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        meta = _trial_metadata(setup, trial, values)
         res = record_run(
             setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta
         )
@@ -84,6 +84,15 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     return out
 
 
+def _trial_metadata(setup: TrialSetup, trial: int, values: dict[str, Any]) -> dict[str, str]:
+    """A recorded trial's metadata: trial, seed, drawn values and the unperturbed scene's hash
+    (``base_scene_sha256``), so that recorded trials of one scene merge into a network."""
+    from dlovr.recording.bundle import SceneBundle
+
+    return {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values),
+            "base_scene_sha256": SceneBundle.from_path(setup.scene.path).digest}  # fmt: skip
+
+
 def _network_trial(
     setup: TrialSetup, trial: int, scene: Any, values: dict[str, Any], opts: ExecOptions, t0: float
 ) -> dict[str, Any]:
@@ -94,7 +103,7 @@ def _network_trial(
 
         Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
         path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
-        meta = {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values)}
+        meta = _trial_metadata(setup, trial, values)
         res = record_run(setup.program, scene, path, opts, pieces=setup.pieces, extra_metadata=meta,
                          network=setup.network)  # fmt: skip
     else:

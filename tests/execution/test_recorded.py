@@ -82,3 +82,6 @@ def test_cli_records_a_run_and_trials(touch, tmp_path):
     r = CliRunner().invoke(main, [*args, "--record", "-o", str(d)])
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in d.glob("*.mcap")) == ["trial_000.mcap", "trial_001.mcap"]
+    # recorded trials carry the unperturbed scene's hash: they merge into one network
+    r = CliRunner().invoke(main, ["network", str(d), "-o", str(tmp_path / "net.json")])
+    assert r.exit_code == 0 and "from 2 recordings of table" in r.output, r.output
