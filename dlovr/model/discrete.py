@@ -459,7 +459,12 @@ _DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$"
 #: Distinct faces a written discrete contact may name, by environment type: a face (or coplanar
 #: faces of several objects, as many as there are), an edge (its two faces, up to two edges side by
 #: side in a groove: ``E/(F1∩F3) + E/(F2∩F4)``), a vertex (three faces, or four where four meet).
-FACE_COUNTS: dict[str, tuple[int, int | None]] = {"F": (1, None), "E^P": (2, 4), "E^L": (2, 4), "V": (3, 4)}
+#: Fewest and most faces a contact names: an edge two faces of a piece, a vertex three or more, and a
+#: contact with several pieces the faces of each (the groove's end in peg_in_hole: a holeblock vertex
+#: of three faces and a block edge of two, five faces); no upper bound.
+FACE_COUNTS: dict[str, tuple[int, int | None]] = {
+    "F": (1, None), "E^P": (2, None), "E^L": (2, None), "V": (3, None)
+}  # fmt: skip
 
 
 def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact:
