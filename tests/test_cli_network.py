@@ -15,6 +15,8 @@ import pytest
 from click.testing import CliRunner
 
 from dlovr.cli import main
+from dlovr.model.network import Network
+from dlovr.model.planning import NetworkProgram
 from dlovr.recording import compile_recording
 
 SAMPLES = Path(__file__).parents[1] / "recordings"
@@ -102,6 +104,21 @@ def test_network_edges_carry_the_detections_derived_from_the_demonstrations(buil
     for ch, m in zip(plan, [m for m in single.macros if m.kind != "final"], strict=True):
         for d, want in zip(ch["macro"]["detection"], m.detection, strict=True):
             assert d["params"] == pytest.approx(want.params)
+
+
+def test_network_nodes_carry_the_contact_vector_the_demonstrations_sensed(built):
+    """Free space senses nothing; the tip on the block's top senses its contact vector (down); every
+    sensed vector is unit or zero; successors are identified by it."""
+    net = json.loads(built[0].read_text())
+    nodes = {n["situation"]: n for n in net["nodes"]}
+    assert nodes["V/G & E/N & V/N"]["sensed"] == [0.0, 0.0, 0.0]
+    np.testing.assert_allclose(nodes["V/G & E/N & V/F[block.F1]"]["sensed"], [0.0, 0.0, -1.0], atol=0.3)
+    for n in net["nodes"]:
+        assert n["sensed"] is not None
+        assert np.linalg.norm(n["sensed"]) == pytest.approx(1.0) or not any(n["sensed"])
+    first = NetworkProgram(Network.from_json(net), 0.02).replan(net["start"], None)
+    by_id = {n["id"]: n for n in net["nodes"]}
+    assert [list(s.vector) for s in first.successors] == [by_id[s.node]["sensed"] for s in first.successors]
 
 
 def test_recordings_of_different_scenes_are_refused_with_one_line(tmp_path):

@@ -110,7 +110,10 @@ class MotionStats:
 
 @dataclass(frozen=True)
 class Node:
-    """A discrete situation of the network. Times in s; ``vector`` unit or zero, world frame."""
+    """A discrete situation of the network. Times in s; ``vector`` unit or zero, world frame: the
+    normalised sum of the principal contacts' vectors; ``sensed``: the contact vector the
+    demonstrations' wrench showed while the situation held (:func:`sensed_vectors`; unit, zero for
+    no contact force, None without a wrench), which weighs each contact by how hard it pushes."""
 
     id: str
     situation: str
@@ -120,6 +123,7 @@ class Node:
     visits: int
     total_time: float
     mean_time: float
+    sensed: Vec3 | None = None
 
 
 @dataclass(frozen=True)
@@ -220,6 +224,7 @@ class Network:
                     "visits": n.visits,
                     "total_time": n.total_time,
                     "mean_time": n.mean_time,
+                    "sensed": None if n.sensed is None else list(n.sensed),
                 }
                 for n in self.nodes
             ],
@@ -259,7 +264,8 @@ class Network:
             nodes = tuple(
                 Node(str(n["id"]), str(n["situation"]), tuple(map(str, n["principal"])), str(n["stability"]),
                      None if n["vector"] is None else _vec(n["vector"]), int(n["visits"]),
-                     float(n["total_time"]), float(n["mean_time"]))
+                     float(n["total_time"]), float(n["mean_time"]),
+                     None if n.get("sensed") is None else _vec(n["sensed"]))
                 for n in data["nodes"]
             )  # fmt: skip
             edges = tuple(
@@ -453,6 +459,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
                 (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
             )
             steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
+    sensed = sensed_vectors(demos, ids)
     by_id = {v: k for k, v in ids.items()}
     nodes = []
     for nid in ids.values():
@@ -466,7 +473,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         h = held[nid]
         nodes.append(
             Node(nid, by_id[nid], tuple(c.format() for c in principal_contacts(sit)),
-                 situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)))
+                 situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)), sensed.get(nid))
         )  # fmt: skip
     departures = Counter[str]()
     for (u, _), xs in occ.items():
@@ -498,6 +505,40 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     )  # fmt: skip
     _check(net)
     return net
+
+
+def sensed_vectors(
+    demos: Sequence[Demonstration], ids: Mapping[str, str], settle: float = 0.05, floor: float = 0.02
+) -> dict[str, Vec3]:
+    """Per node id, the contact vector the demonstrations sensed while it held: in each occurrence
+    (after its first ``settle`` s), ``-(mean force - tare)`` with the tare the mean force in the
+    demonstration's first situation when that one touches nothing (the cable's weight), unit, or zero
+    under ``floor`` N; the occurrences' mean, normalised (zero when most were zero). Demonstrations
+    without a wrench, or not starting in free space, give none."""
+    per: dict[str, list[np.ndarray]] = {}
+    for d in demos:
+        w = d.wrench
+        if w is None or not d.states or situation_stability(d.states[0].situation) != "free":
+            continue
+        first = d.states[0]
+        base = w.window(first.t + settle, first.t + first.duration)
+        if len(base) < 3:
+            continue
+        tare = base.mean(axis=0)
+        for s in d.states:
+            f = w.window(s.t + min(settle, 0.5 * s.duration), s.t + s.duration)
+            if len(f) == 0:  # held shorter than the wrench's sampling period
+                continue
+            v = -(f.mean(axis=0) - tare)
+            n = float(np.sqrt(np.sum(v * v)))
+            per.setdefault(ids[s.situation.format()], []).append(v / n if n >= floor else np.zeros(3))
+    out = {}
+    for nid, vs in per.items():
+        zeros = sum(1 for v in vs if not v.any())
+        m = np.mean([v for v in vs if v.any()] or [np.zeros(3)], axis=0)
+        n = float(np.sqrt(np.sum(m * m)))
+        out[nid] = _vec(np.zeros(3) if zeros * 2 > len(vs) or n < 1e-9 else m / n)
+    return out
 
 
 def _endpoints(items: Sequence[tuple[str, np.ndarray]], order: Sequence[str]) -> tuple[Endpoint, ...]:

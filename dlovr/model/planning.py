@@ -57,7 +57,8 @@ _Key = tuple[Fraction, int, int, int]  # P, risky, caution, length
 @dataclass(frozen=True)
 class Successor:
     """A node the next detected transition may lead to, its expected contact vector (unit or zero,
-    world frame, as the node's) and the probability of reaching it first."""
+    world frame: the one the demonstrations sensed there, else the sum of its principal contacts')
+    and the probability of reaching it first."""
 
     node: str
     situation: str
@@ -126,6 +127,12 @@ def _dist(a: Sequence[float], b: Sequence[float]) -> float:
 
 def _counts(e: Edge) -> tuple[int, int]:
     return int(e.risk == "risky"), int(e.risk == "caution")
+
+
+def _expected(node: Any) -> Vec3 | None:
+    """The contact vector a node is identified by: the one its demonstrations sensed, else the sum
+    of its principal contacts' vectors (docs/networks.md)."""
+    return node.sensed if node.sensed is not None else node.vector
 
 
 def identify(
@@ -278,7 +285,7 @@ class NetworkProgram:
         rows = sorted(out.items(), key=lambda kv: (-kv[1], int(kv[0][1:])))
         nodes = self._nodes
         return tuple(
-            Successor(k, nodes[k].situation, nodes[k].principal, nodes[k].vector, _r(p / total))
+            Successor(k, nodes[k].situation, nodes[k].principal, _expected(nodes[k]), _r(p / total))
             for k, p in rows
         )
 

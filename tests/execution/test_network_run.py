@@ -82,7 +82,7 @@ def test_an_unexpected_transition_is_identified_and_planned_again(net):
     raw = copy.deepcopy(raw)
     e12 = raw["edges"][0]
     n3 = {**raw["nodes"][1], "id": "n3", "situation": "V/G & E/N & V/F[table.F3]",
-          "principal": ["V/F[table.F3]"], "vector": TILTED, "visits": 3}  # fmt: skip
+          "principal": ["V/F[table.F3]"], "vector": TILTED, "sensed": TILTED, "visits": 3}  # fmt: skip
     e13 = {**copy.deepcopy(e12), "target": "n3", "count": 3, "probability": 0.6,
            "durations": [0.582] * 3, "demonstrations": [0, 1, 1]}  # fmt: skip
     e32 = {**copy.deepcopy(e12), "source": "n3", "classes": ["C"], "label": "C", "count": 3,
@@ -104,7 +104,8 @@ def test_an_unexpected_transition_is_identified_and_planned_again(net):
 def test_a_situation_outside_the_network_stops_the_run_with_a_report(net):
     _, raw = net
     raw = copy.deepcopy(raw)
-    raw["nodes"][1]["vector"] = TILTED  # the network expects a tilted contact, the cable lands flat
+    # the network expects a tilted contact (as if the demonstrations had sensed one), the cable lands flat
+    raw["nodes"][1]["vector"] = raw["nodes"][1]["sensed"] = TILTED
     res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
     assert not res.success
     (m,) = res.macros
