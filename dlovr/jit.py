@@ -66,16 +66,21 @@ class _InnerKernel(CPUDispatcher):
         raise TypeError(f"{self.py_func.__qualname__}: an inner kernel, called only from kernels")
 
 
-def njit(fn: Callable[..., Any] | None = None, *, inner: bool = False) -> Any:
+def njit(fn: Callable[..., Any] | None = None, *, inner: bool = False, inline: bool = False) -> Any:
     """``numba.njit`` as dlovr's kernels use it: cached on disk, no fastmath, no Python fallback
     (see ``_OPTIONS``). ``@njit(inner=True)``: a kernel that only other kernels call
-    (:class:`_InnerKernel`)."""
+    (:class:`_InnerKernel`); ``inline=True`` (inner kernels only): numba inlines its code into its
+    callers' before typing them instead of compiling it alone, for a kernel with one caller and
+    callees of its own, whose code would otherwise be optimised and compiled to machine code once
+    more in its own module."""
     if fn is None:
-        return lambda f: njit(f, inner=inner)
+        return lambda f: njit(f, inner=inner, inline=inline)
     if numba.config.DISABLE_JIT:
         return fn
     if inner:
         options = {**_OPTIONS, "nopython": True, "no_cpython_wrapper": True}
+        if inline:
+            options["inline"] = "always"
         kernel = _InnerKernel(py_func=fn, targetoptions=options)
         kernel.enable_caching()
     else:

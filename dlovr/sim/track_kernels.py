@@ -215,7 +215,7 @@ def _outcome(
     return PARTIAL if n_again else KEPT
 
 
-@njit(inner=True)
+@njit(inner=True, inline=True)  # one caller; its own module would compile pair_hits once more
 def _relabel(
     full: bool, k: int, nq: int, n_pieces: int, gf: np.ndarray, gi: np.ndarray,
     params: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray, work_f: np.ndarray,
