@@ -59,8 +59,8 @@ _OPTIONS = {"nogil": True, "no_cfunc_wrapper": True, "error_model": "numpy"}
 
 class _InnerKernel(CPUDispatcher):
     """A kernel called only from other kernels: compiled without numba's CPython wrapper (the code
-    that unboxes its arguments from Python objects and boxes its results), which is a large part of
-    a small kernel's compile time. Called from Python it raises (it has nothing to run)."""
+    that unboxes its arguments from Python objects and boxes its results, compiled and cached for
+    nothing when only kernels call it). Called from Python it raises: it has nothing to run."""
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         raise TypeError(f"{self.py_func.__qualname__}: an inner kernel, called only from kernels")
