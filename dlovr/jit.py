@@ -42,6 +42,7 @@ if "NUMBA_CACHE_DIR" not in os.environ and not (
 import numba  # noqa: E402  (after the cache directory is chosen)
 from llvmlite import ir  # noqa: E402
 from numba.core import cgutils, types  # noqa: E402
+from numba.core.registry import CPUDispatcher  # noqa: E402
 from numba.extending import intrinsic  # noqa: E402
 
 if os.environ.get("NUMBA_CACHE_DIR") and numba.config.CACHE_DIR != os.environ["NUMBA_CACHE_DIR"]:
@@ -50,10 +51,40 @@ if os.environ.get("NUMBA_CACHE_DIR") and numba.config.CACHE_DIR != os.environ["N
 
 _KERNELS: dict[str, list[Any]] = {}  # the kernels of each module
 
+# numba's options for every kernel: nopython, no fastmath, the GIL released; no C-callable wrapper
+# (``cfunc``: no kernel is called through one); division by zero gives inf or nan instead of raising
+# (no kernel divides by zero; the checks are code to compile and run for nothing)
+_OPTIONS = {"nogil": True, "no_cfunc_wrapper": True, "error_model": "numpy"}
 
-def njit(fn: Callable[..., Any]) -> Any:
-    """``numba.njit`` as dlovr's kernels use it: cached on disk, no fastmath, no Python fallback."""
-    kernel = numba.njit(cache=True, nogil=True)(fn)
+
+class _InnerKernel(CPUDispatcher):
+    """A kernel called only from other kernels: compiled without numba's CPython wrapper (the code
+    that unboxes its arguments from Python objects and boxes its results, compiled and cached for
+    nothing when only kernels call it). Called from Python it raises: it has nothing to run."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        raise TypeError(f"{self.py_func.__qualname__}: an inner kernel, called only from kernels")
+
+
+def njit(fn: Callable[..., Any] | None = None, *, inner: bool = False, inline: bool = False) -> Any:
+    """``numba.njit`` as dlovr's kernels use it: cached on disk, no fastmath, no Python fallback
+    (see ``_OPTIONS``). ``@njit(inner=True)``: a kernel that only other kernels call
+    (:class:`_InnerKernel`); ``inline=True`` (inner kernels only): numba inlines its code into its
+    callers' before typing them instead of compiling it alone, for a kernel with one caller and
+    callees of its own, whose code would otherwise be optimised and compiled to machine code once
+    more in its own module."""
+    if fn is None:
+        return lambda f: njit(f, inner=inner, inline=inline)
+    if numba.config.DISABLE_JIT:
+        return fn
+    if inner:
+        options = {**_OPTIONS, "nopython": True, "no_cpython_wrapper": True}
+        if inline:
+            options["inline"] = "always"
+        kernel = _InnerKernel(py_func=fn, targetoptions=options)
+        kernel.enable_caching()
+    else:
+        kernel = numba.njit(cache=True, **_OPTIONS)(fn)
     _KERNELS.setdefault(fn.__module__, []).append(kernel)
     return kernel
 

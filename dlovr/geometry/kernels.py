@@ -29,19 +29,19 @@ _INF = np.inf
 # arithmetic
 
 
-@njit
+@njit(inner=True)
 def dot3(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
     """Dot product rounded as ``np.einsum`` rounds a contraction of three (x and z first)."""
     return (ax * bx + az * bz) + ay * by
 
 
-@njit
+@njit(inner=True)
 def dot3f(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
     """Dot product rounded as BLAS's matrix product (fused multiply-adds, x first)."""
     return fma(az, bz, fma(ay, by, ax * bx))
 
 
-@njit
+@njit(inner=True)
 def norm3(x: float, y: float, z: float) -> float:
     """Euclidean length rounded as ``np.linalg.norm`` (squares summed in order)."""
     return np.sqrt((x * x + y * y) + z * z)
@@ -83,7 +83,7 @@ def np_sum(a: np.ndarray) -> float:
             v = part[top] + v
 
 
-@njit
+@njit(inner=True)
 def block_sum(a: np.ndarray, lo: int, n: int) -> float:
     """numpy's sum of ``a[lo : lo + n]`` for ``n`` up to 128 (without the initial 0.0 it adds)."""
     if n < 8:
@@ -106,7 +106,7 @@ def block_sum(a: np.ndarray, lo: int, n: int) -> float:
     return res
 
 
-@njit
+@njit(inner=True)
 def unpack(gf: np.ndarray, gi: np.ndarray):
     """The sections of the packed pieces as views (see :class:`dlovr.geometry.packing.PackedPieces`)."""
     n_p, n_f, n_e, n_t, n_o = gi[P_], gi[F_], gi[E_], gi[T_], gi[O_]
@@ -139,7 +139,7 @@ def unpack(gf: np.ndarray, gi: np.ndarray):
 # primitives
 
 
-@njit
+@njit(inner=True)
 def closest_on_segment(px: float, py: float, pz: float, a: np.ndarray, b: np.ndarray, e: int):
     """Closest point (x, y, z) on segment ``a[e]``-``b[e]`` to ``p`` and its distance."""
     ax, ay, az = a[e, 0], a[e, 1], a[e, 2]
@@ -153,7 +153,7 @@ def closest_on_segment(px: float, py: float, pz: float, a: np.ndarray, b: np.nda
     return qx, qy, qz, norm3(px - qx, py - qy, pz - qz)
 
 
-@njit
+@njit(inner=True)
 def in_triangles(
     qx: float, qy: float, qz: float, starts: np.ndarray, inwards: np.ndarray, t0: int, t1: int, tol: float
 ) -> bool:
@@ -171,7 +171,7 @@ def in_triangles(
     return False
 
 
-@njit
+@njit(inner=True)
 def outline_slack(qx: float, qy: float, qz: float, a: np.ndarray, b: np.ndarray, s0: int, s1: int) -> float:
     """How far ``q`` on a mixed face may move before it crosses its exposed part's outline (segments
     ``s0``..``s1``), less the tolerance of the in-triangle test (0 for a face without outline)."""
@@ -183,7 +183,7 @@ def outline_slack(qx: float, qy: float, qz: float, a: np.ndarray, b: np.ndarray,
     return max(d - 1e-8, 0.0)
 
 
-@njit
+@njit(inner=True)
 def inside_other(
     qx: float, qy: float, qz: float, obj: int, margin: float, normals: np.ndarray, offsets: np.ndarray,
     nfaces: np.ndarray, owner: np.ndarray,
@@ -203,7 +203,7 @@ def inside_other(
     return False
 
 
-@njit
+@njit(inner=True)
 def cover_margin(
     qx: float, qy: float, qz: float, obj: int, normals: np.ndarray, offsets: np.ndarray, nfaces: np.ndarray,
     owner: np.ndarray,
@@ -228,7 +228,7 @@ def cover_margin(
 # classification of points against every piece
 
 
-@njit
+@njit(inner=True)
 def classify_point(
     px: float,
     py: float,
@@ -353,7 +353,7 @@ def classify_point(
     return h, slack
 
 
-@njit
+@njit(inner=True)
 def _add_face(hit_i: np.ndarray, row: int, h: int, width: int, face: int, point: int, piece: int) -> int:
     """Insert face id ``face`` into the sorted face list of hit row ``row`` (``h > row``: the row is
     started); returns ``row + 1``."""
@@ -510,7 +510,7 @@ def pair_hits(
     return h
 
 
-@njit
+@njit(inner=True)
 def _sort_hits(hit_i: np.ndarray, hit_f: np.ndarray, h: int, width: int) -> None:
     """Sort the first ``h`` hit rows by point, then piece (stable; an insertion sort: the rows come
     nearly sorted)."""
@@ -532,7 +532,7 @@ def budgets_keep(budgets: np.ndarray, rows: np.ndarray, moves: np.ndarray, out: 
         out[i] = keeps(budgets, rows[i], moves[i, 0], moves[i, 1], moves[i, 2])
 
 
-@njit
+@njit(inner=True)
 def keeps(budgets: np.ndarray, j: int, mx: float, my: float, mz: float) -> bool:
     """Whether a move ``m`` keeps the labels of the pair with budget row ``j``."""
     d2 = dot3(mx, my, mz, mx, my, mz)

@@ -141,7 +141,7 @@ def step_record(
         if adr >= 0:
             dim = ci[bi + layout[L_DIM]]
             if pyramidal and dim > 1:  # mj_contactForce: the sum of the cone's 2 (dim - 1) edge forces
-                force = 0.0 + block_sum(efc_force, adr, 2 * (dim - 1))  # np_sum's, at most 10 rows
+                force = 0.0 + block_sum(efc_force, np.int64(adr), 2 * (dim - 1))  # np_sum's (lo int64)
             else:
                 force = efc_force[adr]
         t[T_FORCE] = force

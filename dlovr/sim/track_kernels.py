@@ -47,7 +47,7 @@ L_K, L_Q, L_H, L_N, L_HEAD = 0, 1, 2, 3, 4
 P_RADIUS, P_TOL, P_TTOL, P_ENTER, P_LEAVE = 0, 1, 2, 3, 4
 
 
-@njit
+@njit(inner=True)
 def _work(work_i: np.ndarray, work_f: np.ndarray):
     n1, w, cap_h = work_i[W_POINTS], work_i[W_WIDTH], work_i[W_CAP_H]
     return (
@@ -65,7 +65,7 @@ def _work(work_i: np.ndarray, work_f: np.ndarray):
     )
 
 
-@njit
+@njit(inner=True)
 def _labels(lab_i: np.ndarray, lab_f: np.ndarray, width: int):
     k, q, h, n = lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N]
     a, b = L_HEAD + 2 * k, L_HEAD + 2 * k + q
@@ -174,7 +174,7 @@ def track_step(
     return outcome, changed, -1
 
 
-@njit
+@njit(inner=True)
 def _outcome(
     reuse: bool, k: int, nq: int, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray,
     pairs: np.ndarray, qpts: np.ndarray, again: np.ndarray,
@@ -215,7 +215,7 @@ def _outcome(
     return PARTIAL if n_again else KEPT
 
 
-@njit
+@njit(inner=True, inline=True)  # one caller; its own module would compile pair_hits once more
 def _relabel(
     full: bool, k: int, nq: int, n_pieces: int, gf: np.ndarray, gi: np.ndarray,
     params: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray, work_f: np.ndarray,
@@ -333,7 +333,7 @@ def _relabel(
     return True
 
 
-@njit
+@njit(inner=True)
 def _hit_row(
     rows: np.ndarray, r: int, hits: np.ndarray, b: int, dist: float, enter: float, leave: float
 ) -> None:
@@ -346,7 +346,7 @@ def _hit_row(
         rows[r, c + 2] = hits[b, c]
 
 
-@njit
+@njit(inner=True)
 def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> bool:
     """The labelled pairs that touch, with hysteresis: a hit within the enter distance touches, one
     within the leave distance keeps touching if it touched. Hit rows: query point, piece id, within
@@ -421,7 +421,7 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     return True
 
 
-@njit
+@njit(inner=True)
 def _sort(a: np.ndarray, n: int) -> None:
     """Sort ``a[:n]`` in place (an insertion sort: the keys here come nearly sorted and few)."""
     for i in range(1, n):
@@ -433,7 +433,7 @@ def _sort(a: np.ndarray, n: int) -> None:
         a[j] = v
 
 
-@njit
+@njit(inner=True)
 def _sort_keys(keys: np.ndarray, n: int, n_points: int) -> None:
     """Sort ``keys[:n]`` (cable point << 20 | piece id, points below ``n_points``) in place: a
     counting sort by point, then by piece within each point."""
@@ -452,7 +452,7 @@ def _sort_keys(keys: np.ndarray, n: int, n_points: int) -> None:
     _sort(keys, n)  # now only pieces of one point out of order: an insertion sort finishes it
 
 
-@njit
+@njit(inner=True)
 def _contains(sorted_a: np.ndarray, n: int, v: int) -> bool:
     """Whether ``v`` is among ``sorted_a[:n]`` (a binary search)."""
     lo, hi = 0, n
@@ -465,7 +465,7 @@ def _contains(sorted_a: np.ndarray, n: int, v: int) -> bool:
     return lo < n and sorted_a[lo] == v
 
 
-@njit
+@njit(inner=True)
 def _unique(a: np.ndarray) -> np.ndarray:
     """The sorted distinct values of ``a``."""
     b = a.copy()

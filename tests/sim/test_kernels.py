@@ -16,6 +16,15 @@ def test_np_sum_rounds_as_numpy_sums():
         assert np_sum(np.abs(a)) == np.abs(a).sum(), n
 
 
+def test_an_inner_kernel_called_from_python_raises_instead_of_crashing():
+    import pytest
+
+    from dlovr.geometry.kernels import dot3
+
+    with pytest.raises(TypeError, match="inner kernel"):
+        dot3(1.0, 2.0, 3.0, 4.0, 5.0, 6.0)  # compiled without the wrapper Python would call
+
+
 def test_warm_up_compiles_once_and_says_so():
     from dlovr.jit import kernels_warm
     from dlovr.sim.warmup import NOTICE, warm_up
