@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.geometry import SceneGeometry, point_primitives
-from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
+from dlovr.model.discrete import DiscreteSituation, Discretizer, ModelParams
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
 from dlovr.model.transitions import (
     DEFAULT_FLIGHT_S,
@@ -113,6 +113,7 @@ class ContactTracker:
         self._piece_map: tuple[Any, np.ndarray] | None = None
         self._tols: tuple[float, float, np.ndarray] | None = None
         self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
+        self._disc: Discretizer | None = None
         self._forget()
         self.labellings = 0
         self.partial_labellings = 0
@@ -302,7 +303,7 @@ class ContactTracker:
         ):
             disc = prev.discrete
         else:
-            disc = discretize(topo, self.geometry.fact_book(), self.params)
+            disc = self._discretizer()(topo)
         state = ContactState(
             int(record.step), float(record.time), topo, disc, self._forces(topo, table),
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
@@ -316,6 +317,13 @@ class ContactTracker:
         self.current = state
         self._debouncer.push(state.t, disc)
         return state
+
+    def _discretizer(self) -> Discretizer:
+        """The scene's :class:`dlovr.model.discrete.Discretizer` for the current parameters."""
+        d, book = self._disc, self.geometry.fact_book()
+        if d is None or d.book is not book or d.params is not self.params:
+            d = self._disc = Discretizer(book, self.params)
+        return d
 
     def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
         """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span
