@@ -19,14 +19,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
 from dlovr.model.facts import ContactFacts, FaceFact, FactBook, ModelParams, PairFact
 from dlovr.model.topology import (
     Contact,
-    EnvPrimitive,
     NotationError,
     Situation,
     Vec3,
@@ -501,15 +500,15 @@ def discretize(
 
 class Discretizer:
     """:func:`discretize` for many situations of one scene (``book``), as a simulation's steps give:
-    what a contact takes from the scene facts alone is kept by its topology (DLO kind and environment
-    primitives), so a contact seen before costs only its span and, on an edge, the point or line
-    decision from its DLO vector. Contacts with the gripper (whose contact vector is the gripper's z
-    axis, an annotation of the primitive) are discretized afresh every time. Same results as
-    :func:`discretize`."""
+    what a contact takes from the scene facts alone is kept by its topology (DLO kind, environment
+    primitives and the gripper's z axis, an annotation of ``G`` that its contact vector takes), so a
+    contact seen before costs only its span and, on an edge, the point or line decision from its DLO
+    vector; a contact that comes out as the last one of its topology did is that one again. At most
+    ``size`` topologies are kept (then forgotten all at once). Same results as :func:`discretize`."""
 
-    def __init__(self, book: FactBook, params: ModelParams = ModelParams()):
-        self.book, self.params = book, params
-        self._parts: dict[tuple[bool, tuple[EnvPrimitive, ...]], _Parts] = {}
+    def __init__(self, book: FactBook, params: ModelParams = ModelParams(), size: int = 4096):
+        self.book, self.params, self.size = book, params, size
+        self._memo: dict[tuple[Any, ...], list[Any]] = {}  # key -> [parts, last discrete contact]
 
     def __call__(self, situation: Situation) -> DiscreteSituation:
         return DiscreteSituation(tuple(self.contact(c) for c in situation.contacts))
@@ -517,13 +516,21 @@ class Discretizer:
     def contact(self, contact: Contact) -> DiscreteContact:
         """:func:`discretize_contact` of ``contact`` with this scene's facts and parameters."""
         env = contact.env
-        if any(e.kind == "G" for e in env):
-            return discretize_contact(contact, self.book, self.params)
-        key = (contact.dlo.kind == "E", env)
-        parts = self._parts.get(key)
-        if parts is None:
-            parts = self._parts[key] = _contact_parts(contact, self.book, self.params)
-        return _from_parts(parts, contact, self.params)
+        z = env[0].z if len(env) == 1 else tuple(e.z for e in env)
+        key = (contact.dlo.kind == "E", env, z)
+        got = self._memo.get(key)
+        if got is None:
+            if len(self._memo) >= self.size:
+                self._memo.clear()
+            got = self._memo[key] = [_contact_parts(contact, self.book, self.params), None]
+        last = got[1]
+        if last is not None and last.span == contact.dlo.span and got[0][1] is None:
+            return last
+        dc = _from_parts(got[0], contact, self.params)
+        if last is not None and last.span == dc.span and last.state == dc.state:
+            return last
+        got[1] = dc
+        return dc
 
 
 # --------------------------------------------------------------------------------------------------

@@ -270,7 +270,12 @@ def contract(
     n_points = len(point_env)
     if n_points < 2:
         raise ValueError("a DLO has at least two points")
-    envs = [tuple(sorted(set(e))) or (N,) for e in point_env]
+    free = (N,)
+    # a list of one primitive or none (most points) is canonical already
+    envs = [
+        (tuple(e) or free) if type(e) is list and len(e) < 2 else (tuple(sorted(set(e))) or free)
+        for e in point_env
+    ]
 
     def vec(i: int) -> Vec3 | None:
         if vectors is None:
@@ -303,14 +308,18 @@ def tip_touches(
     ``tip_angle_deg`` from that surface; a last segment lying on a face is an ``E`` contact instead,
     with ``V_E/N`` after it. (The caller checks that the contact lies at the end cap.)
     """
-    d = [float(x) for x in last_vector]
-    norm = sum(x * x for x in d) ** 0.5
+    d0, d1, d2 = last_vector
+    d0, d1, d2 = float(d0), float(d1), float(d2)
+    # sums from 0 as sum() adds them (this runs on most steps of a simulation)
+    norm = (0 + d0 * d0 + d1 * d1 + d2 * d2) ** 0.5
     if norm == 0.0:
         raise ValueError("zero-length DLO vector at the tip")
     sin_tip = math.sin(math.radians(tip_angle_deg))
     for n in normals:
-        nn = sum(float(x) * float(x) for x in n) ** 0.5
-        if -sum(a * float(b) for a, b in zip(d, n, strict=True)) / (norm * nn) > sin_tip:
+        n0, n1, n2 = n
+        n0, n1, n2 = float(n0), float(n1), float(n2)
+        nn = (0 + n0 * n0 + n1 * n1 + n2 * n2) ** 0.5
+        if -(0 + d0 * n0 + d1 * n1 + d2 * n2) / (norm * nn) > sin_tip:
             return True
     return False
 
@@ -335,9 +344,9 @@ def situation_from_points(
     (``… ∧ E_{n-1}/F ∧ V_E/N``; ``E_1`` for ``V_S``), together with what that point touches itself.
     (A DLO of two points has no interior point: its tip keeps the contact.)
     """
-    env = [list(e) for e in point_env]
+    env = [e if type(e) is list else list(e) for e in point_env]  # entries replaced below, not changed
     n = len(env) - 1
-    vecs = [tuple(v) for v in (vectors.tolist() if hasattr(vectors, "tolist") else vectors)]
+    vecs = vectors.tolist() if hasattr(vectors, "tolist") else list(vectors)
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
     ends = [(n, n - 1, vecs[n - 1])]

@@ -114,6 +114,7 @@ class ContactTracker:
         self._tols: tuple[float, float, np.ndarray] | None = None
         self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
         self._disc: Discretizer | None = None
+        self._normals: dict[str, list[float]] = {}
         self._forget()
         self.labellings = 0
         self.partial_labellings = 0
@@ -146,32 +147,38 @@ class ContactTracker:
         """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
         :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
         situation is made again) is the gripper's z axis."""
-        geom = self.geometry
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
-        if self._tip is None or self._tip[0] != self._version:  # the tip's faces, per labelling
+        tip_info = self._tip
+        if tip_info is None or tip_info[0] != self._version:  # the tip's faces, per labelling
             tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
-            normals = [np.asarray(geom.face_normal(f), dtype=float).tolist() for f in tip_faces]
-            self._tip = (self._version, normals)
-        tip_normals = self._tip[1]
+            tip_info = self._tip = (self._version, [self._normal(f) for f in tip_faces])
         tip = None
-        if tip_normals:
-            tip = tip_touches((pts[n] - pts[n - 1]).tolist(), tip_normals, self.params.tip_angle_deg)
-        signature = (len(pts), self._version, tip)
+        if tip_info[1]:
+            a, b = pts[n - 1 :].tolist()  # the last DLO vector, rounded as pts[n] - pts[n - 1]
+            tip = tip_touches([b[0] - a[0], b[1] - a[1], b[2] - a[2]], tip_info[1], self.params.tip_angle_deg)
+        signature = (n, self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
             self._env,
-            np.diff(pts, axis=0),
-            self.geometry.face_normal,
+            pts[1:] - pts[:-1],
+            self._normal,
             tip_angle_deg=self.params.tip_angle_deg,
             gripper_z=z,  # type: ignore[arg-type]
         )
         self._signature, self._situation = signature, sit
         return sit
+
+    def _normal(self, face: str) -> list[float]:
+        """A face's outward unit normal (world frame) as Python floats, kept per face."""
+        got = self._normals.get(face)
+        if got is None:
+            got = self._normals[face] = np.asarray(self.geometry.face_normal(face), dtype=float).tolist()
+        return got
 
     def _params(self) -> np.ndarray:
         """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
