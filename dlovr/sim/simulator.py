@@ -347,11 +347,12 @@ class Simulator:
             views.set_hold_rows(rows)
         pts = np.empty(self._pts_shape)
         table = np.empty((ncon, kernels.T_WIDTH))
-        grip = np.empty(3)
+        grip, torque = np.empty(3), np.empty(3)
         arena = views.contacts() if ncon else views.arena
         code, index, value, rows, nself = kernels.step_record(
-            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, pts, table, grip
-        )
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
+            table, grip, torque,
+        )  # fmt: skip
         if check and code:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS
@@ -368,21 +369,8 @@ class Simulator:
             self.target_quat.copy(),
             ContactArrays(table if rows == ncon else table[:rows], pairs, self._names),
             grip,
-            self._hold_torque(d.efc_force[self._hold_rows[1]].reshape(-1, 3)),
+            torque,
         )
-
-    def _hold_torque(self, f: np.ndarray) -> np.ndarray:
-        """Torque (N m, world, about the gripper's origin) of the holding constraints' forces ``f``
-        ((2, 3), N): ``hold_0`` acts at the origin, ``hold_1`` one segment down ``-G_z``, so the torque
-        is ``(-seg G_z) x F_1``. The torsion taken by the twist lock (``hold_twist``) is not included."""
-        if len(f) < 2:
-            return np.zeros(3)
-        q = self._mocap_quat
-        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-        s = -float(self.built.seg_length)  # lever = s * G_z, G_z the third column of R(q)
-        rx, ry, rz = s * 2.0 * (x * z + w * y), s * 2.0 * (y * z - w * x), s * (1.0 - 2.0 * (x * x + y * y))
-        fx, fy, fz = float(f[1, 0]), float(f[1, 1]), float(f[1, 2])
-        return np.array([ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx])
 
     def gripper_force(self) -> np.ndarray:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
@@ -391,7 +379,7 @@ class Simulator:
 
     def gripper_wrench(self) -> tuple[np.ndarray, np.ndarray]:
         """Force (N) and torque (N m, about the gripper's origin), world frame, that the cable exerts on
-        the gripper through its two holding constraints (see :meth:`_hold_torque`)."""
+        the gripper through its two holding constraints (see :func:`dlovr.sim.kernels.hold_torque`)."""
         rec = self.record()
         return rec.gripper_force, rec.gripper_torque
 

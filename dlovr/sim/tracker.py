@@ -184,11 +184,12 @@ class ContactTracker:
         """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
         the labels' contact tolerance (the leave one), the tangential tolerance and the centerline
         distances at which a pair enters contact and leaves it."""
-        if self._tols is None or self._tols[:2] != (self.enter_tol, self.leave_tol):
+        tols = self._tols
+        if tols is None or tols[0] != self.enter_tol or tols[1] != self.leave_tol:
             r = self.geometry.radius
             params = np.array([r, self.leave_tol, r / 5.0, r + self.enter_tol, r + self.leave_tol])
-            self._tols = (self.enter_tol, self.leave_tol, params)
-        return self._tols[2]
+            tols = self._tols = (self.enter_tol, self.leave_tol, params)
+        return tols[2]
 
     def _label_step(self, pts: np.ndarray, table: np.ndarray | None, arrays: Any) -> None:
         """This step's touching hits (:func:`dlovr.sim.track_kernels.track_step`), and the forces on
@@ -209,21 +210,22 @@ class ContactTracker:
             pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
         pmap = pm[1] if has else _NO_MAP
         while True:
-            out, changed, bad = tk.track_step(
+            out, changed, bad = _track_step(
                 pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
                 self._lab_i, self._lab_f, self._work_i, self._work_f,
             )  # fmt: skip
-            if out != tk.GROW:
+            if out != _GROW:
                 break
             self._grow()
-        if out == tk.BAD_PIECE:
-            obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
-            name = objs[obj] if 0 <= obj < len(objs) else obj
-            raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
-        if out == tk.FULL:
-            self.labellings += 1
-        elif out == tk.PARTIAL:
-            self.partial_labellings += 1
+        if out != _KEPT:
+            if out == tk.BAD_PIECE:
+                obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
+                name = objs[obj] if 0 <= obj < len(objs) else obj
+                raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
+            if out == tk.FULL:
+                self.labellings += 1
+            elif out == tk.PARTIAL:
+                self.partial_labellings += 1
         if changed:
             face, made = self.geometry.face_tuple, self._made
             group, start = self._group, self._start
@@ -296,7 +298,7 @@ class ContactTracker:
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
         arrays = getattr(record, "contact_arrays", None)
         pts = record.points
-        if type(pts) is not np.ndarray or pts.dtype != np.float64 or not pts.flags.c_contiguous:
+        if type(pts) is not np.ndarray or pts.dtype is not _F64 or not pts.flags.c_contiguous:
             pts = np.ascontiguousarray(pts, dtype=float)
         table = None if arrays is None else getattr(arrays, "table", None)
         if arrays is not None and table is None:
@@ -359,7 +361,7 @@ _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 def _tuple(v: Any) -> Any:
     """A vector as a tuple of Python floats."""
-    if isinstance(v, np.ndarray) and v.dtype == np.float64:
+    if type(v) is np.ndarray and v.dtype is _F64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
 
@@ -388,6 +390,9 @@ def _table_of(arrays: Any) -> np.ndarray:
     return table
 
 
+_F64 = np.dtype(np.float64)
+_KEPT, _GROW = tk.KEPT, tk.GROW
+_track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
 _NO_SPANS = np.zeros((0, 2), np.int64)
