@@ -23,6 +23,7 @@ import math
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from itertools import groupby
 from typing import Literal
 
 Vec3 = tuple[float, float, float]
@@ -286,12 +287,10 @@ def contract(
     out = [Contact(DloPrimitive("VS", 0, (0, 0), vec(0)), envs[0])]
     i = 1
     last = n_points - 1
-    while i < last:
-        j = i
-        while j + 1 < last and envs[j + 1] == envs[i]:
-            j += 1
+    for env, run in groupby(envs[1:last]):  # the runs of equal interior contacts
+        j = i + len(list(run)) - 1
         mid = (i + j) // 2
-        out.append(Contact(DloPrimitive("E", mid, (i, j), vec(mid)), envs[i]))
+        out.append(Contact(DloPrimitive("E", mid, (i, j), vec(mid)), env))
         i = j + 1
     out.append(Contact(DloPrimitive("VE", last, (last, last), vec(last)), envs[last]))
     return Situation(tuple(out))
