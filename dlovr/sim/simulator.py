@@ -61,6 +61,22 @@ class StepRecord:
     gripper_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     state: Any = None  # the step's dlovr.sim.tracker.ContactState when the simulator tracks contacts
 
+    @classmethod
+    def _of(
+        cls, step: int, time: float, points: np.ndarray, gripper_pos: np.ndarray, gripper_quat: np.ndarray,
+        target_pos: np.ndarray, target_quat: np.ndarray, contact_arrays: ContactArrays,
+        gripper_force: np.ndarray, gripper_torque: np.ndarray,
+    ) -> StepRecord:  # fmt: skip
+        """The record of these fields, as the constructor makes it but without the dataclass's
+        ``__init__``, which sets a frozen field at a time (the simulator makes one every step)."""
+        rec = object.__new__(cls)
+        rec.__dict__.update(
+            step=step, time=time, points=points, gripper_pos=gripper_pos, gripper_quat=gripper_quat,
+            target_pos=target_pos, target_quat=target_quat, contact_arrays=contact_arrays,
+            gripper_force=gripper_force, gripper_torque=gripper_torque, state=None,
+        )  # fmt: skip
+        return rec
+
     @cached_property
     def vectors(self) -> np.ndarray:
         """(n, 3) DLO vectors ``P_{i+1} - P_i`` (m, world frame)."""
@@ -359,7 +375,7 @@ class Simulator:
         if nself:
             pairs = np.empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
-        return StepRecord(
+        return StepRecord._of(
             self.step_index,
             d.time,
             pts,

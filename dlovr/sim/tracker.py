@@ -53,6 +53,21 @@ class ContactState:
     gripper_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     gripper_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    @classmethod
+    def _of(
+        cls, step: int, t: float, topological: Situation, discrete: DiscreteSituation,
+        forces: tuple[float, ...], gripper_pos: tuple[float, float, float],
+        gripper_quat: tuple[float, float, float, float], gripper_force: tuple[float, float, float],
+    ) -> ContactState:  # fmt: skip
+        """The state of these fields, as the constructor makes it but without the dataclass's
+        ``__init__``, which sets a frozen field at a time (the tracker makes one every step)."""
+        state = object.__new__(cls)
+        state.__dict__.update(
+            step=step, t=t, topological=topological, discrete=discrete, forces=forces,
+            gripper_pos=gripper_pos, gripper_quat=gripper_quat, gripper_force=gripper_force,
+        )  # fmt: skip
+        return state
+
     def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
         """JSON-able form for recordings and the UI."""
         contacts = []
@@ -318,7 +333,7 @@ class ContactTracker:
             forces = tuple(self._forces_out[: len(topo.contacts)].tolist())
         else:
             forces = self._forces(topo, table)
-        state = ContactState(
+        state = ContactState._of(
             int(record.step), float(record.time), topo, disc, forces,
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
