@@ -169,6 +169,8 @@ class Contact:
     def __post_init__(self) -> None:
         if not self.env:
             raise ValueError("a contact needs at least one environment primitive")
+        if type(self.env) is tuple and len(self.env) == 1:
+            return  # canonical already (most contacts)
         env = tuple(sorted(set(self.env)))
         if len(env) > 1 and N in env:
             raise ValueError("N (free space) cannot be part of a multiple contact")
