@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -297,6 +297,20 @@ def classify_contact(
     4. Point or line for an E contact on an edge: line when the DLO vector is within the parallel
        tolerance of the crease.
     """
+    got = _classify_faces(dlo, facts, params, gripper)
+    if isinstance(got, DiscreteState):
+        return got
+    stab, normals = got
+    if facts.dlo_vector is None:
+        raise ValueError(_NO_VECTOR)
+    return _point_or_line(stab, _crease(facts, normals), facts.dlo_vector, params)
+
+
+def _classify_faces(
+    dlo: Literal["V", "E"], facts: ContactFacts, params: ModelParams, gripper: bool
+) -> DiscreteState | tuple[str, np.ndarray]:
+    """Steps 1-3 of :func:`classify_contact`: the state, or for an E contact on an edge (whose point
+    or line decision needs the DLO vector, step 4) its stability class and the real faces' normals."""
     if gripper:
         return DiscreteState(dlo, "G")
     real: dict[str, FaceFact] = {}
@@ -335,10 +349,22 @@ def classify_contact(
         return DiscreteState(dlo, "V", stab)  # type: ignore[arg-type]
     if dlo == "V":
         return DiscreteState("V", "E^L", stab)  # type: ignore[arg-type]
-    if facts.dlo_vector is None:
-        raise ValueError("an E contact on an edge needs the DLO vector (point or line contact?)")
-    crease = _unit(facts.crease) if facts.crease is not None else _null_direction(normals)
-    d = _unit(facts.dlo_vector)
+    return stab, normals
+
+
+def _crease(facts: ContactFacts, normals: np.ndarray) -> np.ndarray:
+    """The unit direction of an edge contact's crease (world frame): the caller's, else from the
+    real faces' ``normals``."""
+    return _unit(facts.crease) if facts.crease is not None else _null_direction(normals)
+
+
+_NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contact?)"
+
+
+def _point_or_line(stab: str, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams) -> DiscreteState:
+    """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
+    ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease."""
+    d = _unit(dlo_vector)
     angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
     if angle <= params.parallel_tol_deg:
         return DiscreteState("E", "E^L", stab)  # type: ignore[arg-type]
@@ -421,17 +447,22 @@ class DiscreteSituation:
         return successional_runs([x.state.is_principal_kind for x in self.contacts])
 
 
-def discretize_contact(
-    contact: Contact, book: FactBook, params: ModelParams = ModelParams()
-) -> DiscreteContact:
-    """Discrete contact of one topological contact, using the scene facts in ``book``."""
+#: What a contact's discrete contact takes from the scene facts alone: the state (for an E contact on
+#: an edge, its stability class), the crease of such an edge (else ``None``), the real faces, the
+#: contact vector and the pinch axis.
+_Parts = tuple[DiscreteState | str, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
+
+
+def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Parts:
+    """A contact's :data:`_Parts`: all of its discrete contact but the span and, for an E contact on
+    an edge, the point or line decision from the DLO vector."""
     dlo: Literal["V", "E"] = "E" if contact.dlo.kind == "E" else "V"
     gripper = any(e.kind == "G" for e in contact.env)
-    span = contact.dlo.span
     if contact.is_free:
-        return DiscreteContact(DiscreteState(dlo, "N"), (), (0.0, 0.0, 0.0), span)
+        return DiscreteState(dlo, "N"), None, (), (0.0, 0.0, 0.0), None
     facts = book.for_contact(contact)
-    st = classify_contact(dlo, facts, params, gripper=gripper)
+    got = _classify_faces(dlo, facts, params, gripper)
+    st, crease = (got, None) if isinstance(got, DiscreteState) else (got[0], _crease(facts, got[1]))
     try:
         c = contact_vector(facts, gripper=gripper, merge_deg=params.normal_merge_deg)
         vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
@@ -440,7 +471,24 @@ def discretize_contact(
     a = None if gripper else pinch_axis(facts, params.normal_merge_deg)
     axis: Vec3 | None = None if a is None else (float(a[0]), float(a[1]), float(a[2]))
     real = tuple(f.name for f in facts.faces if not f.internal)
-    return DiscreteContact(st, real, vec, span, axis)
+    return st, crease, real, vec, axis
+
+
+def _from_parts(parts: _Parts, contact: Contact, params: ModelParams) -> DiscreteContact:
+    """The discrete contact of ``contact`` from its :data:`_Parts`."""
+    st, crease, real, vec, axis = parts
+    if crease is not None:
+        if contact.dlo.vector is None:
+            raise ValueError(_NO_VECTOR)
+        st = _point_or_line(st, crease, contact.dlo.vector, params)  # type: ignore[arg-type]
+    return DiscreteContact(st, real, vec, contact.dlo.span, axis)  # type: ignore[arg-type]
+
+
+def discretize_contact(
+    contact: Contact, book: FactBook, params: ModelParams = ModelParams()
+) -> DiscreteContact:
+    """Discrete contact of one topological contact, using the scene facts in ``book``."""
+    return _from_parts(_contact_parts(contact, book, params), contact, params)
 
 
 def discretize(
@@ -448,6 +496,41 @@ def discretize(
 ) -> DiscreteSituation:
     """Discrete situation of a topological one (docs/model.md, 3.2, for every contact)."""
     return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
+
+
+class Discretizer:
+    """:func:`discretize` for many situations of one scene (``book``), as a simulation's steps give:
+    what a contact takes from the scene facts alone is kept by its topology (DLO kind, environment
+    primitives and the gripper's z axis, an annotation of ``G`` that its contact vector takes), so a
+    contact seen before costs only its span and, on an edge, the point or line decision from its DLO
+    vector; a contact that comes out as the last one of its topology did is that one again. At most
+    ``size`` topologies are kept (then forgotten all at once). Same results as :func:`discretize`."""
+
+    def __init__(self, book: FactBook, params: ModelParams = ModelParams(), size: int = 4096):
+        self.book, self.params, self.size = book, params, size
+        self._memo: dict[tuple[Any, ...], list[Any]] = {}  # key -> [parts, last discrete contact]
+
+    def __call__(self, situation: Situation) -> DiscreteSituation:
+        return DiscreteSituation(tuple(self.contact(c) for c in situation.contacts))
+
+    def contact(self, contact: Contact) -> DiscreteContact:
+        """:func:`discretize_contact` of ``contact`` with this scene's facts and parameters."""
+        env = contact.env
+        z = env[0].z if len(env) == 1 else tuple(e.z for e in env)
+        key = (contact.dlo.kind == "E", env, z)
+        got = self._memo.get(key)
+        if got is None:
+            if len(self._memo) >= self.size:
+                self._memo.clear()
+            got = self._memo[key] = [_contact_parts(contact, self.book, self.params), None]
+        last = got[1]
+        if last is not None and last.span == contact.dlo.span and got[0][1] is None:
+            return last
+        dc = _from_parts(got[0], contact, self.params)
+        if last is not None and last.span == dc.span and last.state == dc.state:
+            return last
+        got[1] = dc
+        return dc
 
 
 # --------------------------------------------------------------------------------------------------
@@ -521,7 +604,7 @@ def parse_any(text: str) -> Situation | DiscreteSituation:
 
 __all__ = [
     "AUX_STATES", "FACE_COUNTS", "STATES", "ContactFacts", "DiscreteContact", "DiscreteSituation",
-    "DiscreteState", "FaceFact", "FactBook", "ModelParams", "PairFact", "Stability", "classify_contact",
-    "contact_vector", "discretize", "discretize_contact", "face_object", "parse_any",
+    "DiscreteState", "Discretizer", "FaceFact", "FactBook", "ModelParams", "PairFact", "Stability",
+    "classify_contact", "contact_vector", "discretize", "discretize_contact", "face_object", "parse_any",
     "parse_discrete_contact", "parse_discrete_situation", "pinch_axis", "state",
 ]  # fmt: skip

@@ -23,6 +23,7 @@ import math
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from itertools import groupby
 from typing import Literal
 
 Vec3 = tuple[float, float, float]
@@ -168,6 +169,8 @@ class Contact:
     def __post_init__(self) -> None:
         if not self.env:
             raise ValueError("a contact needs at least one environment primitive")
+        if type(self.env) is tuple and len(self.env) == 1:
+            return  # canonical already (most contacts)
         env = tuple(sorted(set(self.env)))
         if len(env) > 1 and N in env:
             raise ValueError("N (free space) cannot be part of a multiple contact")
@@ -270,7 +273,12 @@ def contract(
     n_points = len(point_env)
     if n_points < 2:
         raise ValueError("a DLO has at least two points")
-    envs = [tuple(sorted(set(e))) or (N,) for e in point_env]
+    free = (N,)
+    # a list of one primitive or none (most points) is canonical already
+    envs = [
+        (tuple(e) or free) if type(e) is list and len(e) < 2 else (tuple(sorted(set(e))) or free)
+        for e in point_env
+    ]
 
     def vec(i: int) -> Vec3 | None:
         if vectors is None:
@@ -281,12 +289,10 @@ def contract(
     out = [Contact(DloPrimitive("VS", 0, (0, 0), vec(0)), envs[0])]
     i = 1
     last = n_points - 1
-    while i < last:
-        j = i
-        while j + 1 < last and envs[j + 1] == envs[i]:
-            j += 1
+    for env, run in groupby(envs[1:last]):  # the runs of equal interior contacts
+        j = i + len(list(run)) - 1
         mid = (i + j) // 2
-        out.append(Contact(DloPrimitive("E", mid, (i, j), vec(mid)), envs[i]))
+        out.append(Contact(DloPrimitive("E", mid, (i, j), vec(mid)), env))
         i = j + 1
     out.append(Contact(DloPrimitive("VE", last, (last, last), vec(last)), envs[last]))
     return Situation(tuple(out))
@@ -303,14 +309,18 @@ def tip_touches(
     ``tip_angle_deg`` from that surface; a last segment lying on a face is an ``E`` contact instead,
     with ``V_E/N`` after it. (The caller checks that the contact lies at the end cap.)
     """
-    d = [float(x) for x in last_vector]
-    norm = sum(x * x for x in d) ** 0.5
+    d0, d1, d2 = last_vector
+    d0, d1, d2 = float(d0), float(d1), float(d2)
+    # sums from 0 as sum() adds them (this runs on most steps of a simulation)
+    norm = (0 + d0 * d0 + d1 * d1 + d2 * d2) ** 0.5
     if norm == 0.0:
         raise ValueError("zero-length DLO vector at the tip")
     sin_tip = math.sin(math.radians(tip_angle_deg))
     for n in normals:
-        nn = sum(float(x) * float(x) for x in n) ** 0.5
-        if -sum(a * float(b) for a, b in zip(d, n, strict=True)) / (norm * nn) > sin_tip:
+        n0, n1, n2 = n
+        n0, n1, n2 = float(n0), float(n1), float(n2)
+        nn = (0 + n0 * n0 + n1 * n1 + n2 * n2) ** 0.5
+        if -(0 + d0 * n0 + d1 * n1 + d2 * n2) / (norm * nn) > sin_tip:
             return True
     return False
 
@@ -335,9 +345,9 @@ def situation_from_points(
     (``… ∧ E_{n-1}/F ∧ V_E/N``; ``E_1`` for ``V_S``), together with what that point touches itself.
     (A DLO of two points has no interior point: its tip keeps the contact.)
     """
-    env = [list(e) for e in point_env]
+    env = [e if type(e) is list else list(e) for e in point_env]  # entries replaced below, not changed
     n = len(env) - 1
-    vecs = [tuple(v) for v in (vectors.tolist() if hasattr(vectors, "tolist") else vectors)]
+    vecs = vectors.tolist() if hasattr(vectors, "tolist") else list(vectors)
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
     ends = [(n, n - 1, vecs[n - 1])]

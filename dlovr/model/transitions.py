@@ -496,7 +496,7 @@ class Debouncer(Generic[S]):
 
     def push(self, t: float, situation: S) -> None:
         k = self.kept
-        if k and k[-1].situation == situation:
+        if k and (k[-1].situation is situation or k[-1].situation == situation):
             k[-1].end = t
             return
         if k:

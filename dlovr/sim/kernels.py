@@ -41,9 +41,11 @@ def step_record(
     cfg: np.ndarray,
     bounds: np.ndarray,
     ncon: int,
+    quat: np.ndarray,
     pts: np.ndarray,
     table: np.ndarray,
     grip: np.ndarray,
+    torque: np.ndarray,
 ):
     """The step's record arrays, and the divergence checks.
 
@@ -52,8 +54,8 @@ def step_record(
     ``ncon``); ``cfg``: the configuration (``C_*``; see :class:`dlovr.sim.contacts.MjViews`);
     ``bounds``: squared segment length bounds (lo, hi), the segment length and the largest relative
     stretch. Fills ``pts`` (the cable points), the rows of ``table`` (one per rod-obstacle contact, in
-    MuJoCo's order) and ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
-    per axis).
+    MuJoCo's order), ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
+    per axis) and ``torque`` (:func:`hold_torque`; ``quat`` is the gripper's, wxyz).
 
     Returns (code, index, value, rows, self pairs): code 0, or the first failed check: 1 the count
     of the fatal warnings differs from the baseline, 2 NaN/inf in qpos or qvel, 3 in the cable
@@ -105,6 +107,7 @@ def step_record(
         for r in range(c, n_hold, 3):
             s += efc_force[hold_rows[r]]
         grip[c] = 0.0 + s
+    hold_torque(efc_force, hold_rows, quat, bounds[2], torque)
     rows, nself = 0, 0
     flex, pyramidal = cfg[C_FLEX], cfg[C_PYRAMIDAL] != 0
     cf, ci = arena, arena.view(np.int32)
@@ -148,6 +151,23 @@ def step_record(
         t[T_ACTIVE] = 1.0 if adr >= 0 else 0.0
         rows += 1
     return code, index, value, rows, nself
+
+
+@njit
+def hold_torque(efc_force: np.ndarray, hold_rows: np.ndarray, quat: np.ndarray, seg: float, out: np.ndarray):
+    """Torque (N m, world, about the gripper's origin) of the holding constraints' forces (rows
+    ``hold_rows`` of ``efc_force``, 3 per constraint): ``hold_0`` acts at the origin, ``hold_1`` one
+    segment (``seg``, m) down ``-G_z`` (``G_z`` from the gripper's ``quat``, wxyz), so the torque is
+    ``(-seg G_z) x F_1``; zero without ``hold_1``. The torsion taken by the twist lock
+    (``hold_twist``) is not included."""
+    if len(hold_rows) < 6:
+        out[0], out[1], out[2] = 0.0, 0.0, 0.0
+        return
+    w, x, y, z = quat[0], quat[1], quat[2], quat[3]
+    s = -seg  # lever = s * G_z, G_z the third column of R(q)
+    rx, ry, rz = s * 2.0 * (x * z + w * y), s * 2.0 * (y * z - w * x), s * (1.0 - 2.0 * (x * x + y * y))
+    fx, fy, fz = efc_force[hold_rows[3]], efc_force[hold_rows[4]], efc_force[hold_rows[5]]
+    out[0], out[1], out[2] = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
 
 
 @njit

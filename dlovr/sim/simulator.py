@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import dot, norm, quat_normalize, quat_rotate, slerp
+from dlovr.transforms import norm, quat_normalize, quat_rotate, slerp
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -60,6 +60,22 @@ class StepRecord:
     gripper_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
     gripper_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     state: Any = None  # the step's dlovr.sim.tracker.ContactState when the simulator tracks contacts
+
+    @classmethod
+    def _of(
+        cls, step: int, time: float, points: np.ndarray, gripper_pos: np.ndarray, gripper_quat: np.ndarray,
+        target_pos: np.ndarray, target_quat: np.ndarray, contact_arrays: ContactArrays,
+        gripper_force: np.ndarray, gripper_torque: np.ndarray,
+    ) -> StepRecord:  # fmt: skip
+        """The record of these fields, as the constructor makes it but without the dataclass's
+        ``__init__``, which sets a frozen field at a time (the simulator makes one every step)."""
+        rec = object.__new__(cls)
+        rec.__dict__.update(
+            step=step, time=time, points=points, gripper_pos=gripper_pos, gripper_quat=gripper_quat,
+            target_pos=target_pos, target_quat=target_quat, contact_arrays=contact_arrays,
+            gripper_force=gripper_force, gripper_torque=gripper_torque, state=None,
+        )  # fmt: skip
+        return rec
 
     @cached_property
     def vectors(self) -> np.ndarray:
@@ -244,19 +260,20 @@ class Simulator:
         p, t = pos.tolist(), target.tolist()
         # a gripper already at its target stays put (the general formulas below give the same values)
         if p != t:
-            # in Python floats (as dlovr.transforms.norm; not np.linalg.norm: this feeds MuJoCo), the
-            # roundings of target - pos and pos + delta * (vmax / dist)
-            delta = [t[0] - p[0], t[1] - p[1], t[2] - p[2]]
-            dist = norm(delta)
+            # in Python floats (not np.linalg.norm: this feeds MuJoCo), the roundings of target - pos,
+            # dlovr.transforms.norm (its sum from 0.0, left to right) and pos + delta * (vmax / dist)
+            d0, d1, d2 = t[0] - p[0], t[1] - p[1], t[2] - p[2]
+            dist = math.sqrt(0.0 + d0 * d0 + d1 * d1 + d2 * d2)
             vmax = self.max_speed * dt
             if dist <= vmax:
                 pos[:] = target
             else:
                 f = vmax / dist
-                pos[:] = [p[0] + delta[0] * f, p[1] + delta[1] * f, p[2] + delta[2] * f]
+                pos[:] = [p[0] + d0 * f, p[1] + d1 * f, p[2] + d2 * f]
         q, tq = self._mocap_quat.tolist(), self.target_quat.tolist()
         if q != tq:
-            angle = 2.0 * math.acos(min(1.0, abs(dot(q, tq))))
+            c = 0.0 + q[0] * tq[0] + q[1] * tq[1] + q[2] * tq[2] + q[3] * tq[3]  # dlovr.transforms.dot's
+            angle = 2.0 * math.acos(min(1.0, abs(c)))
             wmax = self.max_angular_speed * dt
             self._mocap_quat[:] = self.target_quat if angle <= wmax else slerp(q, tq, wmax / angle)
 
@@ -347,18 +364,19 @@ class Simulator:
             views.set_hold_rows(rows)
         pts = np.empty(self._pts_shape)
         table = np.empty((ncon, kernels.T_WIDTH))
-        grip = np.empty(3)
+        grip, torque = np.empty(3), np.empty(3)
         arena = views.contacts() if ncon else views.arena
         code, index, value, rows, nself = kernels.step_record(
-            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, pts, table, grip
-        )
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
+            table, grip, torque,
+        )  # fmt: skip
         if check and code:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS
         if nself:
             pairs = np.empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
-        return StepRecord(
+        return StepRecord._of(
             self.step_index,
             d.time,
             pts,
@@ -368,21 +386,8 @@ class Simulator:
             self.target_quat.copy(),
             ContactArrays(table if rows == ncon else table[:rows], pairs, self._names),
             grip,
-            self._hold_torque(d.efc_force[self._hold_rows[1]].reshape(-1, 3)),
+            torque,
         )
-
-    def _hold_torque(self, f: np.ndarray) -> np.ndarray:
-        """Torque (N m, world, about the gripper's origin) of the holding constraints' forces ``f``
-        ((2, 3), N): ``hold_0`` acts at the origin, ``hold_1`` one segment down ``-G_z``, so the torque
-        is ``(-seg G_z) x F_1``. The torsion taken by the twist lock (``hold_twist``) is not included."""
-        if len(f) < 2:
-            return np.zeros(3)
-        q = self._mocap_quat
-        w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
-        s = -float(self.built.seg_length)  # lever = s * G_z, G_z the third column of R(q)
-        rx, ry, rz = s * 2.0 * (x * z + w * y), s * 2.0 * (y * z - w * x), s * (1.0 - 2.0 * (x * x + y * y))
-        fx, fy, fz = float(f[1, 0]), float(f[1, 1]), float(f[1, 2])
-        return np.array([ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx])
 
     def gripper_force(self) -> np.ndarray:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
@@ -391,7 +396,7 @@ class Simulator:
 
     def gripper_wrench(self) -> tuple[np.ndarray, np.ndarray]:
         """Force (N) and torque (N m, about the gripper's origin), world frame, that the cable exerts on
-        the gripper through its two holding constraints (see :meth:`_hold_torque`)."""
+        the gripper through its two holding constraints (see :func:`dlovr.sim.kernels.hold_torque`)."""
         rec = self.record()
         return rec.gripper_force, rec.gripper_torque
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.geometry import SceneGeometry, point_primitives
-from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
+from dlovr.model.discrete import DiscreteSituation, Discretizer, ModelParams
 from dlovr.model.topology import Situation, situation_from_points, tip_touches
 from dlovr.model.transitions import (
     DEFAULT_FLIGHT_S,
@@ -52,6 +52,21 @@ class ContactState:
     gripper_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gripper_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     gripper_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @classmethod
+    def _of(
+        cls, step: int, t: float, topological: Situation, discrete: DiscreteSituation,
+        forces: tuple[float, ...], gripper_pos: tuple[float, float, float],
+        gripper_quat: tuple[float, float, float, float], gripper_force: tuple[float, float, float],
+    ) -> ContactState:  # fmt: skip
+        """The state of these fields, as the constructor makes it but without the dataclass's
+        ``__init__``, which sets a frozen field at a time (the tracker makes one every step)."""
+        state = object.__new__(cls)
+        state.__dict__.update(
+            step=step, t=t, topological=topological, discrete=discrete, forces=forces,
+            gripper_pos=gripper_pos, gripper_quat=gripper_quat, gripper_force=gripper_force,
+        )  # fmt: skip
+        return state
 
     def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
         """JSON-able form for recordings and the UI."""
@@ -113,6 +128,8 @@ class ContactTracker:
         self._piece_map: tuple[Any, np.ndarray] | None = None
         self._tols: tuple[float, float, np.ndarray] | None = None
         self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
+        self._disc: Discretizer | None = None
+        self._normals: dict[str, list[float]] = {}
         self._forget()
         self.labellings = 0
         self.partial_labellings = 0
@@ -145,42 +162,49 @@ class ContactTracker:
         """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
         :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
         situation is made again) is the gripper's z axis."""
-        geom = self.geometry
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
-        if self._tip is None or self._tip[0] != self._version:  # the tip's faces, per labelling
+        tip_info = self._tip
+        if tip_info is None or tip_info[0] != self._version:  # the tip's faces, per labelling
             tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
-            normals = [np.asarray(geom.face_normal(f), dtype=float).tolist() for f in tip_faces]
-            self._tip = (self._version, normals)
-        tip_normals = self._tip[1]
+            tip_info = self._tip = (self._version, [self._normal(f) for f in tip_faces])
         tip = None
-        if tip_normals:
-            tip = tip_touches((pts[n] - pts[n - 1]).tolist(), tip_normals, self.params.tip_angle_deg)
-        signature = (len(pts), self._version, tip)
+        if tip_info[1]:
+            a, b = pts[n - 1 :].tolist()  # the last DLO vector, rounded as pts[n] - pts[n - 1]
+            tip = tip_touches([b[0] - a[0], b[1] - a[1], b[2] - a[2]], tip_info[1], self.params.tip_angle_deg)
+        signature = (n, self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
             self._env,
-            np.diff(pts, axis=0),
-            self.geometry.face_normal,
+            pts[1:] - pts[:-1],
+            self._normal,
             tip_angle_deg=self.params.tip_angle_deg,
             gripper_z=z,  # type: ignore[arg-type]
         )
         self._signature, self._situation = signature, sit
         return sit
 
+    def _normal(self, face: str) -> list[float]:
+        """A face's outward unit normal (world frame) as Python floats, kept per face."""
+        got = self._normals.get(face)
+        if got is None:
+            got = self._normals[face] = np.asarray(self.geometry.face_normal(face), dtype=float).tolist()
+        return got
+
     def _params(self) -> np.ndarray:
         """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
         the labels' contact tolerance (the leave one), the tangential tolerance and the centerline
         distances at which a pair enters contact and leaves it."""
-        if self._tols is None or self._tols[:2] != (self.enter_tol, self.leave_tol):
+        tols = self._tols
+        if tols is None or tols[0] != self.enter_tol or tols[1] != self.leave_tol:
             r = self.geometry.radius
             params = np.array([r, self.leave_tol, r / 5.0, r + self.enter_tol, r + self.leave_tol])
-            self._tols = (self.enter_tol, self.leave_tol, params)
-        return self._tols[2]
+            tols = self._tols = (self.enter_tol, self.leave_tol, params)
+        return tols[2]
 
     def _label_step(self, pts: np.ndarray, table: np.ndarray | None, arrays: Any) -> None:
         """This step's touching hits (:func:`dlovr.sim.track_kernels.track_step`), and the forces on
@@ -201,21 +225,22 @@ class ContactTracker:
             pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
         pmap = pm[1] if has else _NO_MAP
         while True:
-            out, changed, bad = tk.track_step(
+            out, changed, bad = _track_step(
                 pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
                 self._lab_i, self._lab_f, self._work_i, self._work_f,
             )  # fmt: skip
-            if out != tk.GROW:
+            if out != _GROW:
                 break
             self._grow()
-        if out == tk.BAD_PIECE:
-            obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
-            name = objs[obj] if 0 <= obj < len(objs) else obj
-            raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
-        if out == tk.FULL:
-            self.labellings += 1
-        elif out == tk.PARTIAL:
-            self.partial_labellings += 1
+        if out != _KEPT:
+            if out == tk.BAD_PIECE:
+                obj, piece, objs = int(table[bad, T_OBJ]), int(table[bad, T_PIECE]), arrays.names[0]
+                name = objs[obj] if 0 <= obj < len(objs) else obj
+                raise KeyError(f"the geometry has no piece {piece} of object {name!r}")
+            if out == tk.FULL:
+                self.labellings += 1
+            elif out == tk.PARTIAL:
+                self.partial_labellings += 1
         if changed:
             face, made = self.geometry.face_tuple, self._made
             group, start = self._group, self._start
@@ -288,7 +313,7 @@ class ContactTracker:
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
         arrays = getattr(record, "contact_arrays", None)
         pts = record.points
-        if type(pts) is not np.ndarray or pts.dtype != np.float64 or not pts.flags.c_contiguous:
+        if type(pts) is not np.ndarray or pts.dtype is not _F64 or not pts.flags.c_contiguous:
             pts = np.ascontiguousarray(pts, dtype=float)
         table = None if arrays is None else getattr(arrays, "table", None)
         if arrays is not None and table is None:
@@ -300,22 +325,32 @@ class ContactTracker:
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
         ):
-            disc = prev.discrete
+            disc, new = prev.discrete, False
         else:
-            disc = discretize(topo, self.geometry.fact_book(), self.params)
-        state = ContactState(
-            int(record.step), float(record.time), topo, disc, self._forces(topo, table),
+            disc = self._discretizer()(topo)
+            new = prev is None or prev.discrete != disc or prev.topological != topo
+        if table is not None and len(table) and self._spans[0] is topo:  # the kernel's sums
+            forces = tuple(self._forces_out[: len(topo.contacts)].tolist())
+        else:
+            forces = self._forces(topo, table)
+        state = ContactState._of(
+            int(record.step), float(record.time), topo, disc, forces,
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
             _tuple(getattr(record, "gripper_force", _ORIGIN)),
         )  # fmt: skip
-        if prev is None or (prev.discrete is not disc and prev.discrete != disc) or (
-            prev.topological is not topo and prev.topological != topo
-        ):
+        if new:
             self.changes.append(state)
         self.current = state
         self._debouncer.push(state.t, disc)
         return state
+
+    def _discretizer(self) -> Discretizer:
+        """The scene's :class:`dlovr.model.discrete.Discretizer` for the current parameters."""
+        d, book = self._disc, self.geometry.fact_book()
+        if d is None or d.book is not book or d.params is not self.params:
+            d = self._disc = Discretizer(book, self.params)
+        return d
 
     def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
         """Per contact of ``topo``, the summed normal force of the simulator's contacts on its span
@@ -344,7 +379,7 @@ _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 def _tuple(v: Any) -> Any:
     """A vector as a tuple of Python floats."""
-    if isinstance(v, np.ndarray) and v.dtype == np.float64:
+    if type(v) is np.ndarray and v.dtype is _F64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
 
@@ -373,6 +408,9 @@ def _table_of(arrays: Any) -> np.ndarray:
     return table
 
 
+_F64 = np.dtype(np.float64)
+_KEPT, _GROW = tk.KEPT, tk.GROW
+_track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
 _NO_SPANS = np.zeros((0, 2), np.int64)

@@ -19,6 +19,7 @@ from dlovr.model.discrete import (
     DiscreteContact,
     DiscreteSituation,
     DiscreteState,
+    Discretizer,
     FaceFact,
     FactBook,
     ModelParams,
@@ -353,6 +354,33 @@ def test_discretize_a_whole_situation():
     assert d.format() == "V/G & E/N & E/E^P[box.F1,box.F2] & E/F[box.F1] & V/F[table.F1]"
     np.testing.assert_allclose(d.contacts[2].vector, np.array([-1, 0, -1]) / math.sqrt(2))
     assert d.contacts[1].vector == (0.0, 0.0, 0.0)
+
+
+def test_discretizer_gives_what_discretize_gives_annotations_and_all():
+    """The memoizing Discretizer (a simulation's per-step path) against discretize: same states,
+    faces, contact vectors, axes and spans, the point/line decision of an edge contact made again
+    from each DLO vector, gripper contacts with each step's z axis, the same errors."""
+    import dataclasses
+
+    book = FactBook(
+        {"box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X), "a.F1": ff("a.F1", UP),
+         "b.F1": ff("b.F1", (0.0, 0.0, -1.0))},
+        [PairFact("box.F1", "box.F2", False, 270)],
+    )  # fmt: skip
+    d = Discretizer(book)
+    topo = parse_situation("VS/G & E3/N & E9/(box.F1,box.F2) & E12/a.F1 + E12/b.F1 & VE/box.F1")
+    for k, vec in enumerate([(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.3, 1.0, 0.01), (1.0, 0.0, 0.0)]):
+        c = list(topo.contacts)
+        c[0] = dataclasses.replace(c[0], env=(dataclasses.replace(c[0].env[0], z=(0.0, 0.1 * k, 1.0)),))
+        c[2] = dataclasses.replace(c[2], dlo=dataclasses.replace(c[2].dlo, vector=vec, span=(8, 8 + k)))
+        sit = type(topo)(tuple(c))
+        want, got = discretize(sit, book), d(sit)
+        assert repr(got) == repr(want)
+    assert {c.state.name for c in d(sit).contacts} >= {"E/E^P", "V/G"}
+    with pytest.raises(ValueError, match="DLO vector"):
+        d(topo)  # the edge contact without its vector, though the edge's facts are kept
+    with pytest.raises(KeyError, match="no facts"):
+        d(parse_situation("VS/G & E3/c.F1 & VE/N"))
 
 
 def test_discrete_notation_roundtrip_and_errors():

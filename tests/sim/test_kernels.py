@@ -61,3 +61,24 @@ def test_contact_rows_read_in_place_match_mujocos_own_accessors():
         mujoco.mj_contactForce(m, d, i, force)
         assert ca.force[i] == force[0] or abs(ca.force[i] - force[0]) <= 1e-12 * max(1.0, abs(force[0]))
     assert ca.active.all() == (c.efc_address[: d.ncon] >= 0).all()
+
+
+def test_records_and_states_made_without_init_are_the_constructors_objects():
+    """StepRecord._of and ContactState._of (the per-step path) set exactly the dataclass fields, in
+    order, to what the constructor sets, and stay frozen."""
+    import dataclasses
+
+    import pytest
+
+    from dlovr.sim.simulator import StepRecord
+    from dlovr.sim.tracker import ContactState
+
+    for cls in (StepRecord, ContactState):
+        fields = dataclasses.fields(cls)
+        given = [f for f in fields if f.name != "state"]  # the record's state is set after
+        values = [object() for _ in given]
+        fast, slow = cls._of(*values), cls(*values)
+        assert list(vars(fast)) == [f.name for f in fields] == list(vars(slow))
+        assert all(vars(fast)[k] is vars(slow)[k] for k in vars(slow))
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            fast.step = 0  # type: ignore[misc]
