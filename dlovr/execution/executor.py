@@ -26,6 +26,7 @@ import numpy as np
 
 from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
 from dlovr.execution.programs import MacroSpec, ProgramSpec
+from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
     Detector,
@@ -229,15 +230,11 @@ class _Guard:
         return fired
 
 
-_THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n", "I": "min_force_n",
-              "S": "jump_n"}  # fmt: skip
-
-
 def _weak(cls: str, params: Any, min_snr: float = 0.0) -> bool:
     """Whether a detection has no force signal to watch: its threshold is not below the step its
     demonstration showed (``step_n``), or that step is less than ``min_snr`` times the noise seen
     before it (``noise_n``; a gradual change, not a step a run would show again)."""
-    step, key = params.get("step_n"), _THRESHOLD.get(cls)
+    step, key = params.get("step_n"), THRESHOLD_PARAM.get(cls)
     if step is None:
         return False
     step = float(step)

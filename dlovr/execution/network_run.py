@@ -42,7 +42,6 @@ from typing import Any
 import numpy as np
 
 from dlovr.execution.executor import (
-    _THRESHOLD,
     ENDED_OK,
     ExecOptions,
     Execution,
@@ -52,6 +51,7 @@ from dlovr.execution.executor import (
     principal_states,
 )
 from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, MotionSpec, ProgramSpec
+from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.transforms import quat_rotate
 
 #: Gravity (m/s^2) for the cable's weight, the force sensed in free space.
@@ -149,7 +149,8 @@ def _free_force(m: MacroSpec, free_force: float) -> float:
     """Below what contact force (N) the sensed vector is free space after macro ``m``: ``free_force``,
     or half the smallest threshold its detectors fired at (a detection at a smaller force than
     ``free_force`` is a contact of that size, not free space)."""
-    thr = [float(d.params[_THRESHOLD[d.cls]]) for d in m.detection if _THRESHOLD.get(d.cls) in d.params]
+    keys = [(d, THRESHOLD_PARAM.get(d.cls)) for d in m.detection]
+    thr = [float(d.params[k]) for d, k in keys if k in d.params]
     return min([free_force, *(0.5 * t for t in thr if t > 0.0)])
 
 
