@@ -154,9 +154,9 @@ def _pick_handlers(uuid: str | None) -> str:
         "window.__dlovrPick))"
     )
     click = "var e=event;" + situation + "if(t){" + send("'c'+t.dataset.situation+':'+Date.now()") + "}"
-    return (
-        f' onmouseover="{follow}(event)" onmouseleave="{follow}(null)" onclick="{click}"'
-    )
+    # leaving comes after an entry, which installed the follower
+    leave = "window.__dlovrPick&&window.__dlovrPick(null)"
+    return f' onmouseover="{follow}(event)" onmouseleave="{leave}" onclick="{click}"'
 
 
 def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
