@@ -12,6 +12,7 @@ open loop per variation parameter and level).
 from __future__ import annotations
 
 import csv
+import functools
 import itertools
 import json
 import math
@@ -84,13 +85,19 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     return out
 
 
+@functools.lru_cache(maxsize=8)
+def _scene_digest(path: str) -> str:
+    """The hash of the scene file at ``path`` and its meshes (read once per process, not per trial)."""
+    from dlovr.recording.bundle import SceneBundle
+
+    return SceneBundle.from_path(path).digest
+
+
 def _trial_metadata(setup: TrialSetup, trial: int, values: dict[str, Any]) -> dict[str, str]:
     """A recorded trial's metadata: trial, seed, drawn values and the unperturbed scene's hash
     (``base_scene_sha256``), so that recorded trials of one scene merge into a network."""
-    from dlovr.recording.bundle import SceneBundle
-
     return {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values),
-            "base_scene_sha256": SceneBundle.from_path(setup.scene.path).digest}  # fmt: skip
+            "base_scene_sha256": _scene_digest(str(setup.scene.path))}  # fmt: skip
 
 
 def _network_trial(
