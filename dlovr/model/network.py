@@ -437,8 +437,10 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     steps: dict[tuple[str, str], list[tuple[TimedSituation, TimedSituation, WrenchSeries | None]]] = {}
     firsts: list[tuple[str, np.ndarray]] = []
     lasts: list[tuple[str, np.ndarray]] = []
+    demo_keys: list[list[str]] = []  # per demonstration, the node id of each of its states
     for di, d in enumerate(demos):
-        keys = []
+        keys: list[str] = []
+        demo_keys.append(keys)
         for s in d.states:
             key = s.situation.format()
             if key not in ids:
@@ -459,7 +461,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
                 (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
             )
             steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
-    sensed = sensed_vectors(demos, ids)
+    sensed = sensed_vectors(demos, demo_keys)
     by_id = {v: k for k, v in ids.items()}
     nodes = []
     for nid in ids.values():
@@ -508,15 +510,19 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
 
 
 def sensed_vectors(
-    demos: Sequence[Demonstration], ids: Mapping[str, str], settle: float = 0.05, floor: float = 0.02
+    demos: Sequence[Demonstration],
+    node_ids: Sequence[Sequence[str]],
+    settle: float = 0.05,
+    floor: float = 0.02,
 ) -> dict[str, Vec3]:
     """Per node id, the contact vector the demonstrations sensed while it held: in each occurrence
     (after its first ``settle`` s), ``-(mean force - tare)`` with the tare the mean force in the
     demonstration's first situation when that one touches nothing (the cable's weight), unit, or zero
-    under ``floor`` N; the occurrences' mean, normalised (zero when most were zero). Demonstrations
-    without a wrench, or not starting in free space, give none."""
+    under ``floor`` N; the occurrences' mean, normalised (zero when most were zero). ``node_ids``:
+    per demonstration, the node id of each of its states. Demonstrations without a wrench, or not
+    starting in free space, give none."""
     per: dict[str, list[np.ndarray]] = {}
-    for d in demos:
+    for d, nids in zip(demos, node_ids, strict=True):
         w = d.wrench
         if w is None or not d.states or situation_stability(d.states[0].situation) != "free":
             continue
@@ -525,13 +531,13 @@ def sensed_vectors(
         if len(base) < 3:
             continue
         tare = base.mean(axis=0)
-        for s in d.states:
+        for s, nid in zip(d.states, nids, strict=True):
             f = w.window(s.t + min(settle, 0.5 * s.duration), s.t + s.duration)
             if len(f) == 0:  # held shorter than the wrench's sampling period
                 continue
             v = -(f.mean(axis=0) - tare)
             n = float(np.sqrt(np.sum(v * v)))
-            per.setdefault(ids[s.situation.format()], []).append(v / n if n >= floor else np.zeros(3))
+            per.setdefault(nid, []).append(v / n if n >= floor else np.zeros(3))
     out = {}
     for nid, vs in per.items():
         zeros = sum(1 for v in vs if not v.any())
