@@ -10,15 +10,14 @@ The loop, from the network's start node and the scene's gripper position:
    from where the gripper is, along the demonstrated mean motion, ended by the detectors of its
    classes (or, with ``detect="oracle"``, by the contact tracker), failed at its allowance;
 3. after the detection (or, for a transition without a force signal, the end of its motion) the
-   gripper holds still ``sense_settle`` s, and the **sensed contact vector**
-   is taken from the wrench: the sensed force minus the force sensed in free space (the cable's
-   weight ``-m g`` along z, known from the scene as a robot knows its payload; the first samples of
-   a run are not settled enough to tare on), negated and normalised -- a contact
-   that begins adds about ``-v * F`` to the sensed force (:mod:`dlovr.model.detection`), so the
-   environment's share is ``-v`` times its size; below ``free_force`` N it is no contact (the zero
-   vector; or half the detection threshold that fired, when smaller: the network's detections are
-   derived from the demonstrations' wrench). :func:`dlovr.model.planning.identify` picks the
-   successor whose expected vector is
+   gripper holds still ``sense_settle`` s, and the **sensed contact vector** is taken from the
+   wrench: the sensed force minus the force sensed in free space (the cable's weight ``-m g`` along
+   z, known from the scene as a robot knows its payload; the first samples of a run are not settled
+   enough to tare on), negated and normalised -- a contact that begins adds about ``-v * F`` to the
+   sensed force (:mod:`dlovr.model.detection`), so the environment's share is ``-v`` times its size;
+   below ``free_force`` N, or half the detection threshold that fired when that is smaller, it is no
+   contact (the zero vector). :func:`dlovr.model.planning.identify` picks the successor whose
+   expected vector (the one its demonstrations sensed, else the sum of its principal contacts') is
    closest; farther than ``tolerance`` from every one is **a situation outside the network**: the run
    stops with a report of the sensed vector and the expected ones. With the oracle the node is the
    one whose principal contacts the tracker sees;
@@ -26,10 +25,11 @@ The loop, from the network's start node and the scene's gripper position:
    the previous plan expected); the goal node ends the run, a node with no demonstrated path to the
    goal stops it.
 
-Node-level vectors only: a network node carries the normalised sum of its principal contacts'
-vectors, so a macro's detectors expect the target node's vector for the contacts that begin and the
-source node's for those that end. The run is judged by the tracker (never read by the loop in force
-mode): the goal is reached when the last debounced situation has the goal node's principal contacts.
+Node-level vectors only: a macro's detectors expect the target node's geometric vector (the
+normalised sum of its principal contacts' vectors) for the contacts that begin and the source node's
+for those that end, with the detection parameters the network derived for its last edge. The run is
+judged by the tracker (never read by the loop in force mode): the goal is reached when the last
+debounced situation has the goal node's principal contacts.
 """
 
 from __future__ import annotations
