@@ -33,6 +33,14 @@ def _scene(ref: str, script=None):
         raise UserError(f"{script.source}: scene: {e}" if script is not None else str(e)) from None
 
 
+def _script_scene(script, scene_ref: str | None = None):
+    """The scene a script runs in: ``scene_ref`` when given, else the one the script names, else
+    the built-in table."""
+    if scene_ref is not None:
+        return _scene(scene_ref)
+    return _scene(script.scene, script) if script.scene else _scene("table")
+
+
 def _script(path: str):
     from dlovr.script import ScriptError, load_script
 

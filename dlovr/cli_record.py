@@ -17,6 +17,7 @@ from dlovr.cli_common import (
     _refuse_existing,
     _scene,
     _script,
+    _script_scene,
     _t,
     _warm_up,
 )
@@ -43,10 +44,7 @@ def run_demonstration(scene_ref: str | None, script_path: str | None, out: str |
         script = _script(_builtin_script(scene_ref))
     else:
         script = _script(script_path)
-        if scene_ref is not None:
-            scene = _scene(scene_ref)
-        else:
-            scene = _scene(script.scene, script) if script.scene else _scene("table")
+        scene = _script_scene(script, scene_ref)
     try:
         sim = Simulator(scene, track=True)
     except ValueError as e:
@@ -202,10 +200,7 @@ def _record_trials(
     from dlovr.recording.bundle import SceneBundle
 
     script = _script(script_path)
-    if scene_ref is not None:
-        scene = _scene(scene_ref)
-    else:
-        scene = _scene(script.scene, script) if script.scene else _scene("table")
+    scene = _script_scene(script, scene_ref)
     try:
         variations = parse_varies(varies, scene)
     except VaryError as e:
