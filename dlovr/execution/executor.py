@@ -36,6 +36,7 @@ from dlovr.model.detection import (
     make_detector,
 )
 from dlovr.model.transitions import principal, successional_contacts
+from dlovr.transforms import quat_rotate
 
 DETECT_MODES = ("force", "oracle")
 #: How a macro may end and the program go on: its transition detected, or -- a macro whose
@@ -260,6 +261,10 @@ class _Session:
         self.sim, self.opts, self.out = sim, opts, out
         self.on_step, self.on_event = on_step, on_event
         self.dt = float(sim.model.opt.timestep)
+        #: how much further the cable's tip is from the gripper than demonstrated (m, gripper frame),
+        #: once the tip's first touch has been felt (:func:`tip_offset`); turns are repeated about it
+        self.tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.tool_known = False
         self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
@@ -342,9 +347,34 @@ def execute(
     return out
 
 
+def touches_tip(m: MacroSpec) -> bool:
+    """Whether ``m`` is the cable's tip touching from free space, approached along the cable: an
+    ``E`` that releases nothing and establishes only tip (``V/``) contacts, its demonstrated motion
+    within 25 degrees of the gripper's -z axis (the cable leaves the gripper along -z)."""
+    mo = m.motion
+    d = math.sqrt(sum(float(x) ** 2 for x in mo.relative))
+    return (
+        m.classes == ("E",) and not m.released and bool(m.established)
+        and all(c.state.startswith("V/") for c in m.established)
+        and d > 1e-6 and -float(mo.relative[2]) >= math.cos(math.radians(25.0)) * d
+    )  # fmt: skip
+
+
+def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
+    """The tip's offset from the demonstrated one (m, gripper frame) when its first touch, which the
+    demonstration felt at ``s = 1`` of ``path``, is felt at ``s``: the motion left (or overshot)
+    along the cable's axis. A longer cable touches sooner, and its tip is that much further."""
+    p1, _ = path.at(1.0)
+    ps, qs = path.at(s)
+    down = quat_rotate(np.asarray(qs, dtype=float), np.array([0.0, 0.0, -1.0]))
+    along = sum((float(p1[i]) - float(ps[i])) * float(down[i]) for i in range(3))
+    return (0.0, 0.0, -along)
+
+
 def _path(
-    m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None
-) -> Any:
+    m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None,
+    tool: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> Any:  # fmt: skip
     mid = sim.built.mocap_id
     mo = m.motion
     here = tuple(float(x) for x in sim.data.mocap_pos[mid]), tuple(float(x) for x in sim.data.mocap_quat[mid])
@@ -358,9 +388,9 @@ def _path(
         span = max(m.t - t0, opts.min_duration)
         beyond = local_twist(track.t, track.pos, track.quat, t0, m.t, span) or (mo.rotation, mo.relative)
         return TrackPath(
-            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond,  # type: ignore[arg-type]
+            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool,  # type: ignore[arg-type]
         )  # fmt: skip
-    return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame)  # type: ignore[arg-type]
+    return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)  # type: ignore[arg-type]
 
 
 def _period(m: MacroSpec, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
@@ -394,7 +424,7 @@ def _run_macro(
     from dlovr.sim import SimulationDiverged
 
     sim, opts = ses.sim, ses.opts
-    path = _path(m, sim, opts, track, t_from)
+    path = _path(m, sim, opts, track, t_from, ses.tool)
     period = _period(m, opts, track, t_from)
     t_start = m.t - period
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
@@ -439,8 +469,11 @@ def _run_macro(
             if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
                 if track is None:
                     sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
-                ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
                 at = t_start + s * period if track is not None and s < 1.0 else None
+                if not ses.tool_known and touches_tip(m):
+                    # the approach left undone is the tip's offset, not motion for the next macro
+                    ses.tool, ses.tool_known, at = tip_offset(path, s), True, None
+                ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
                 return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak, resume_at=at)
             if t - t0 >= limit - 1e-12:
                 why = (
@@ -456,7 +489,7 @@ def _run_macro(
 
 def _run_final(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> None:
     """The motion after the last classed transition, to the demonstrated end pose (no detection)."""
-    path = _path(m, ses.sim, ses.opts, track)
+    path = _path(m, ses.sim, ses.opts, track, tool=ses.tool)
     period = _period(m, ses.opts, track)
     t0 = float(ses.sim.time)
     ses.emit("final", m.index, "final motion to the demonstrated end pose")

@@ -12,6 +12,12 @@ Frames: ``"world"`` repeats the demonstrated displacement and rotation in the wo
 (the turn's axis keeps its world direction); ``"relative"`` repeats them in the gripper frame at the
 start (they turn with the gripper). Both start from the gripper's current pose.
 
+Tool: a demonstrated turn about the cable's tip is a turn about a point the cable's demonstrated
+length below the gripper. Where the executor has felt the tip elsewhere (a longer cable touches
+sooner), ``tool`` (m, gripper frame) is how much further the tip is from the gripper than in the
+demonstration, and every rotation is repeated about the point moved by it: the gripper's position
+gets ``R(q_start) tool - R(q) tool`` added (nothing for a pure translation; nothing at ``tool = 0``).
+
 Everything here feeds the simulator, so it is computed in Python floats without BLAS (as
 :mod:`dlovr.transforms`), and the same on every processor.
 """
@@ -86,6 +92,7 @@ class ScrewPath:
     displacement: Vec
     demo_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     frame: str = "world"
+    tool: Vec = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.frame not in ("world", "relative"):
@@ -112,7 +119,17 @@ class ScrewPath:
         else:  # the rotation with its world axis: frame dq frame^-1, applied before q0
             inv = np.array([frame_q[0], -frame_q[1], -frame_q[2], -frame_q[3]])
             quat = quat_mul(quat_mul(quat_mul(frame_q, dq), inv), q0)
-        return pos, quat_normalize(quat)
+        quat = quat_normalize(quat)
+        return tool_shift(pos, q0, quat, self.tool), quat
+
+
+def tool_shift(pos: np.ndarray, q_ref: np.ndarray, q: np.ndarray, tool: Vec) -> np.ndarray:
+    """``pos`` (m, world) plus ``R(q_ref) tool - R(q) tool``: the gripper position that turns about
+    the point ``tool`` (gripper frame) further along than the demonstrated turn's pivot."""
+    if tool[0] == 0.0 and tool[1] == 0.0 and tool[2] == 0.0:
+        return pos
+    a, b = quat_rotate(q_ref, np.array(tool)), quat_rotate(q, np.array(tool))
+    return np.array([float(pos[i]) + float(a[i]) - float(b[i]) for i in range(3)])
 
 
 def _quat_rotvec(q: np.ndarray) -> Vec:
@@ -208,6 +225,7 @@ class TrackPath:
     start_quat: tuple[float, float, float, float]
     frame: str = "world"
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
+    tool: Vec = (0.0, 0.0, 0.0)  # the tip's offset from the demonstrated one (m, gripper frame)
 
     def __post_init__(self) -> None:
         if self.frame not in ("world", "relative"):
@@ -243,7 +261,7 @@ class TrackPath:
             if on is None:
                 pos, quat = self.at(1.0)
                 here = tuple(float(x) for x in quat)
-                on = ScrewPath(tuple(float(x) for x in pos), here, *self.beyond, here, "relative")  # type: ignore[arg-type]
+                on = ScrewPath(tuple(float(x) for x in pos), here, *self.beyond, here, "relative", self.tool)  # type: ignore[arg-type]
                 object.__setattr__(self, "_end", on)
             return on.at(s - 1.0)
         p0, inv0, cur_q = self._p0, self._inv0, self._cur_q  # type: ignore[attr-defined]
@@ -257,4 +275,5 @@ class TrackPath:
             offset = d
             quat = quat_mul(quat_mul(q, inv0), cur_q)
         pos = np.array([self.start_pos[i] + float(offset[i]) for i in range(3)])
-        return pos, quat_normalize(quat)
+        quat = quat_normalize(quat)
+        return tool_shift(pos, cur_q, quat, self.tool), quat

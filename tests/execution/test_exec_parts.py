@@ -112,6 +112,43 @@ def test_a_turn_about_the_tip_keeps_the_tip_in_place():
         np.testing.assert_allclose(tip, [0.1, 0.2, 0.2], atol=1e-9)
 
 
+def test_a_turn_about_the_tip_is_repeated_about_the_tip_felt_further_away():
+    """The demonstrated turn about a tip 0.3 m below the gripper, with ``tool`` saying the tip is
+    4 cm further (a longer cable): the gripper turns about the point 0.34 m below it instead, in both
+    paths (screw and recorded track, within the stretch and beyond it)."""
+    ang = math.radians(60.0)
+    tip_demo, tool = np.array([0.0, 0.0, -0.3]), (0.0, 0.0, -0.04)
+    r = quat_to_matrix([math.cos(ang / 2), 0.0, math.sin(ang / 2), 0.0])
+    disp = tuple(tip_demo - r @ tip_demo)
+    start = (0.1, 0.2, 0.5)
+    screw = ScrewPath(start, (1.0, 0.0, 0.0, 0.0), (0.0, ang, 0.0), disp, (1.0, 0.0, 0.0, 0.0), "relative", tool)
+    t = np.linspace(0.0, 1.0, 101)
+    quats = np.array([[math.cos(a / 2), 0.0, math.sin(a / 2), 0.0] for a in ang * t])
+    pos = np.array([np.array([0.0, 0.0, 1.0]) + tip_demo - quat_rotate(q, tip_demo) for q in quats])
+    beyond = ((0.0, ang / 2, 0.0), tuple(tip_demo - quat_to_matrix(quats[50]) @ tip_demo))
+    track = TrackPath(t, pos, quats, 0.0, 1.0, start, (1.0, 0.0, 0.0, 0.0), "world", beyond, tool)
+    tip_now = np.array(start) + tip_demo + tool
+    for path in (screw, track):
+        for s in (0.0, 0.4, 1.0, 1.3):
+            p, q = path.at(s)
+            np.testing.assert_allclose(p + quat_rotate(q, tip_demo + tool), tip_now, atol=1e-9)
+    # no tool, no change: the demonstrated pivot
+    p, q = ScrewPath(start, (1.0, 0.0, 0.0, 0.0), (0.0, ang, 0.0), disp, (1.0, 0.0, 0.0, 0.0), "relative").at(1.0)
+    np.testing.assert_allclose(p + quat_rotate(q, tip_demo), np.array(start) + tip_demo, atol=1e-9)
+
+
+def test_the_tips_first_touch_gives_its_offset():
+    """An approach along the cable felt 2 cm early: the tip is 2 cm further from the gripper; felt at
+    1.25 of a 4 cm approach: 1 cm nearer. Only a tip touching from free space along the cable counts."""
+    from dlovr.execution.executor import tip_offset, touches_tip
+
+    path = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, -0.04))
+    np.testing.assert_allclose(tip_offset(path, 0.5), (0.0, 0.0, -0.02), atol=1e-12)
+    np.testing.assert_allclose(tip_offset(path, 1.25), (0.0, 0.0, 0.01), atol=1e-12)
+    program = load_program(ROOT / "recordings/programs/peg_in_hole.program.json")
+    assert [touches_tip(m) for m in program.macros] == [True] + [False] * (len(program.macros) - 1)
+
+
 def test_track_path_repeats_the_recorded_stretch_from_where_the_gripper_is():
     t = np.linspace(0.0, 1.0, 11)
     pos = np.stack([t * 0.1, np.zeros_like(t), 0.5 - 0.2 * t * t], axis=1)  # a curve, not a line

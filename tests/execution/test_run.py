@@ -135,6 +135,16 @@ def test_peg_in_hole_force_detection_waits_for_the_last_motion_phase(peg):
     assert res.macros[4].detected_at is not None and 0.0 <= res.macros[4].latency < 0.1
 
 
+def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
+    """A 10 % longer cable touches the block 2.5 cm sooner. The first touch tells the executor where
+    the tip is: the lay-down turns about it (not about the demonstrated tip, which would slide the
+    real one over the block's edge) and the program reaches its goal."""
+    program, scene, track = peg
+    longer = replace(scene, dlo=replace(scene.dlo, length=scene.dlo.length * 1.1))
+    res = run_program(program, longer, ExecOptions(detect="force"), track=track)
+    assert res.success, format_result(res)
+
+
 def test_force_and_noise_runs_are_deterministic(touch):
     program, scene, track, pieces = touch
     a = run_program(program, scene, ExecOptions(noise=0.02, seed=4), track=track, pieces=pieces)
