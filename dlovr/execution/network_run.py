@@ -43,6 +43,7 @@ import numpy as np
 
 from dlovr.execution.executor import (
     ENDED_OK,
+    DemoTrack,
     ExecOptions,
     Execution,
     _run_final,
@@ -52,7 +53,8 @@ from dlovr.execution.executor import (
 )
 from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, MotionSpec, ProgramSpec
 from dlovr.model.derivation import THRESHOLD_PARAM
-from dlovr.transforms import quat_rotate
+from dlovr.model.tracks import join
+from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
 
 #: Gravity (m/s^2) for the cable's weight, the force sensed in free space.
 GRAVITY = 9.81
@@ -63,12 +65,14 @@ class NetworkOptions:
     """How a network program is executed beyond :class:`ExecOptions`: ``tolerance`` (Euclidean
     distance between unit vectors) for :func:`dlovr.model.planning.identify`; ``sense_settle`` (s)
     held still before sensing; ``free_force`` (N): a contact force below it is no contact;
-    ``max_macros``: the run stops after that many macros."""
+    ``max_macros``: the run stops after that many macros; ``tracks``: macros follow their edges' own
+    demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions."""
 
     tolerance: float = 0.8
     sense_settle: float = 0.05
     free_force: float = 0.05
     max_macros: int = 50
+    tracks: bool = True
 
 
 @dataclass(frozen=True)
@@ -120,16 +124,37 @@ class NetworkRunResult:
         return d
 
 
-def _macro_spec(index: int, nprog: Any, node: str, plan: Any, sim: Any) -> MacroSpec:
-    """The executor's macro for a network macro plan, starting at the gripper's pose now."""
+def plan_track(nprog: Any, plan: Any) -> DemoTrack | None:
+    """The macro's motion as one recorded track: its edges' own demonstrated tracks one after the
+    other (:func:`dlovr.model.tracks.join`); None when an edge has none (a network of recordings
+    without commands), and the macro moves along the summed mean displacement instead."""
+    by_id = {e.id: e for e in nprog.network.edges}
+    tracks = [by_id[i].track for i in plan.edges]
+    if not tracks or any(t is None for t in tracks):
+        return None
+    pt = join(tracks)
+    return DemoTrack(pt.t, pt.pos, pt.quat)
+
+
+def _macro_spec(
+    index: int, nprog: Any, node: str, plan: Any, sim: Any, track: DemoTrack | None = None
+) -> MacroSpec:
+    """The executor's macro for a network macro plan, starting at the gripper's pose now (with
+    ``track``: its motion is that track's, from ``t = 0`` to its end)."""
     net = nprog.network
     src, dst = net.node(node), net.node(plan.target)
     mid = sim.built.mocap_id
     here = tuple(float(x) for x in sim.data.mocap_pos[mid])
     q = tuple(float(x) for x in sim.data.mocap_quat[mid])
     inv = np.array([q[0], -q[1], -q[2], -q[3]])
-    rel = tuple(float(x) for x in quat_rotate(inv, np.asarray(plan.world, float)))
-    motion = MotionSpec(tuple(plan.world), rel, tuple(plan.rotation), float(plan.duration), here, q)  # type: ignore[arg-type]
+    world, rot, duration = tuple(plan.world), tuple(plan.rotation), float(plan.duration)
+    if track is not None:
+        world = tuple(float(x) for x in track.pos[-1] - track.pos[0])
+        q0, q1 = track.quat[0], track.quat[-1]
+        rot = tuple(float(x) for x in matrix_to_rotvec(quat_to_matrix(q0).T @ quat_to_matrix(q1)))
+        duration = float(track.t[-1])
+    rel = tuple(float(x) for x in quat_rotate(inv, np.asarray(world, float)))
+    motion = MotionSpec(world, rel, rot, duration, here, q)  # type: ignore[arg-type]
 
     def contacts(n: Any) -> tuple[ContactVec, ...]:
         v = None if n.vector is None or math.sqrt(sum(x * x for x in n.vector)) < 1e-9 else tuple(n.vector)
@@ -141,7 +166,8 @@ def _macro_spec(index: int, nprog: Any, node: str, plan: Any, sim: Any) -> Macro
         else DetectionSpec(c, "", {})
         for c in plan.classes
     )  # fmt: skip
-    return MacroSpec(index, tuple(plan.classes), 0.0, src.situation, dst.situation, contacts(src),
+    t_end = duration if track is not None else 0.0
+    return MacroSpec(index, tuple(plan.classes), t_end, src.situation, dst.situation, contacts(src),
                      contacts(dst), motion, det, final=plan.final, frame="world")  # fmt: skip
 
 
@@ -214,19 +240,20 @@ def run_network_in(
                 break
             plan = choice.macro
             k = len(macros) + 1
-            m = _macro_spec(k, nprog, node, plan, sim)
+            track = plan_track(nprog, plan) if nopts.tracks else None
+            m = _macro_spec(k, nprog, node, plan, sim, track)
             ses.emit("plan", k, f"at {node}: edges {' '.join(plan.edges)} toward {plan.target}, "
                                 f"P(goal)={choice.reach_probability:.3f}")  # fmt: skip
             t0 = float(sim.time)
             if plan.final:
-                _run_final(m, ses, None)
+                _run_final(m, ses, track)
                 node = plan.target
                 tn, tp = _true_node(nprog, sim)
                 macros.append(NetMacro(k, choice.node, plan.target, (), plan.edges, t0, float(sim.time),
                                        "final", None, node, tn, tp))  # fmt: skip
                 path.append(node)
                 continue
-            run = _run_macro(m, ses, None)
+            run = _run_macro(m, ses, track)
             if run.ended not in ENDED_OK:
                 tn, tp = _true_node(nprog, sim)
                 macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
@@ -242,7 +269,7 @@ def run_network_in(
                 from dlovr.model.planning import identify
 
                 found = identify(choice.successors, sensed, nopts.tolerance)
-            sv = None if sensed is None else tuple(round(float(x), 4) for x in sensed)
+            sv = None if sensed is None else tuple(round(float(x), 4) + 0.0 for x in sensed)  # no -0.0
             if found is None:
                 exp = ", ".join(f"{s.node} {list(s.vector) if s.vector is not None else '-'}"
                                 for s in choice.successors)  # fmt: skip

@@ -39,6 +39,7 @@ import numpy as np
 from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
+from dlovr.model.tracks import EdgeTrack, representative, stretch
 from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
 
 NETWORK_VERSION = 1
@@ -86,6 +87,7 @@ class Demonstration:
     scene_name: str = ""
     scene_sha256: str = ""
     wrench: WrenchSeries | None = None
+    commands: PoseTrack | None = None  # the commanded gripper track, for the edges' own tracks
 
 
 @dataclass(frozen=True)
@@ -131,7 +133,9 @@ class Edge:
     """A demonstrated transition ``source -> target`` (node ids). ``probability`` = ``count`` / all
     departures from ``source``; ``durations`` (s) one per demonstrated occurrence, in input order;
     ``demonstrations`` the indices of the demonstrations that took it (with repeats); ``detection``:
-    per class, the detection its macro ends with (parameters merged over the occurrences)."""
+    per class, the detection its macro ends with (parameters merged over the occurrences); ``track``:
+    the representative occurrence's commanded gripper track (:mod:`dlovr.model.tracks`; None when
+    the demonstrations carry no commands)."""
 
     source: str
     target: str
@@ -143,6 +147,7 @@ class Edge:
     motion: MotionStats
     demonstrations: tuple[int, ...]
     detection: tuple[Detection, ...] = ()
+    track: EdgeTrack | None = None
 
     @property
     def id(self) -> str:
@@ -243,6 +248,7 @@ class Network:
                         k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(e.motion).items()
                     },
                     "detection": [asdict(d) for d in e.detection],
+                    **({} if e.track is None else {"track": e.track.to_json()}),
                 }
                 for e in self.edges
             ],
@@ -272,7 +278,8 @@ class Network:
                 Edge(str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
                      int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
                      _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])),
-                     tuple(_detection_from_json(d) for d in e.get("detection", ())))
+                     tuple(_detection_from_json(d) for d in e.get("detection", ())),
+                     None if e.get("track") is None else EdgeTrack.from_json(e["track"]))
                 for e in data["edges"]
             )  # fmt: skip
             net = Network(
@@ -497,7 +504,8 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps[(u, v)]])
         edges.append(
             Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
-                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived)
+                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,
+                 _edge_track(demos, xs, steps[(u, v)]))
         )  # fmt: skip
     order = list(ids.values())
     net = Network(
@@ -507,6 +515,17 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     )  # fmt: skip
     _check(net)
     return net
+
+
+def _edge_track(demos: Sequence[Demonstration], xs: Sequence[Any], steps: Sequence[Any]) -> EdgeTrack | None:
+    """The representative occurrence's commanded track (:mod:`dlovr.model.tracks`), among the
+    occurrences whose demonstration has commands."""
+    have = [k for k, x in enumerate(xs) if demos[x[0]].commands is not None]
+    if not have:
+        return None
+    k = have[representative([xs[i][2].world for i in have])]
+    a, b, _ = steps[k]
+    return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)  # type: ignore[arg-type]
 
 
 def sensed_vectors(

@@ -18,7 +18,8 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
     """One recording as a :class:`~dlovr.model.network.Demonstration` (scene name and hash from its
     metadata: for a demonstration in a perturbed scene (``dlovr record --trials``) the hash of the
     unperturbed scene, ``base_scene_sha256``, so that perturbed runs of one scene merge; gripper poses
-    from its contact-state messages, world frame, m and wxyz; the sensed wrench when it has one)."""
+    from its contact-state messages, world frame, m and wxyz; the sensed wrench when it has one; the
+    commanded gripper track, for the edges' own tracks)."""
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
@@ -29,6 +30,8 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         poses = PoseTrack(t, pos, quat)
     except (KeyError, TypeError, ValueError) as e:
         raise RecordingError(f"{rec.path}: bad gripper pose in the contact states: {e}") from None
+    steps, cpos, cquat = rec.commands()
+    commands = PoseTrack(steps * rec.dt, cpos, cquat)
     return Demonstration(
         str(rec.path),
         tuple(states),
@@ -36,6 +39,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         rec.metadata.get("scene_name", ""),
         rec.metadata.get("base_scene_sha256") or rec.metadata.get("scene_sha256", ""),
         rec.wrench(),
+        commands,
     )
 
 

@@ -349,3 +349,45 @@ def test_merged_detections_take_the_median_of_the_derived_parameters():
     (d,) = merge_detections([[det(0.5, "default: no wrench signal")]] * 2)
     assert d.params["force_threshold_n"] == 0.5 and d.derivation["force_threshold_n"].startswith("default")
     assert merge_detections([]) == ()
+
+
+# --------------------------------------------------------------------------------------------------
+# Edge tracks (dlovr.model.tracks)
+# --------------------------------------------------------------------------------------------------
+
+
+def test_each_edge_keeps_its_representative_occurrences_own_track():
+    """The occurrence nearest the median displacement is the edge's track: commanded poses from
+    entering the source to entering the target, every 10 ms; the JSON round trip is exact."""
+    from dlovr.model.tracks import SAMPLE_S
+
+    cmds = [line_track(v, 40) for v in (0.01, 0.02, 0.012)]
+    demos = [replace(demo(n, [FREE, TIP], [1.0, 1.0], line_track(v)), commands=c)
+             for n, v, c in zip("ABC", (0.01, 0.02, 0.012), cmds, strict=True)]  # fmt: skip
+    net = build_network(demos)
+    (e,) = net.edges
+    assert e.track is not None and e.track.demonstration == 2  # 0.012 m/s: the median displacement
+    assert e.track.t[0] == 0.0 and e.track.t[-1] == 1.0 and len(e.track.t) == round(1.0 / SAMPLE_S) + 1
+    np.testing.assert_allclose(e.track.pos[-1] - e.track.pos[0], [0.012, 0.0, 0.0], atol=1e-9)
+    back = Network.loads(net.dumps())
+    assert back == net and back.edges[0].track == e.track
+    assert build_network([replace(d, commands=None) for d in demos]).edges[0].track is None
+
+
+def test_joined_tracks_repeat_each_motion_from_where_the_last_ended():
+    """Two edges' tracks from different places become one continuous track: a push along +x, then a
+    quarter turn about z that moves along +y in its own demonstration, both repeated from the joint."""
+    import math
+
+    from dlovr.model.tracks import EdgeTrack, join
+
+    t = np.array([0.0, 0.5, 1.0])
+    push = EdgeTrack(0, 0.0, t, np.array([[0.0, 0, 0], [0.05, 0, 0], [0.1, 0, 0]]), np.tile([1.0, 0, 0, 0], (3, 1)))
+    c, s = math.cos(math.pi / 8), math.sin(math.pi / 8)
+    turn_q = np.array([[1.0, 0, 0, 0], [math.cos(math.pi / 16), 0, 0, math.sin(math.pi / 16)], [c, 0, 0, s]])
+    turn = EdgeTrack(1, 3.0, t, np.array([[5.0, 5, 1], [5.0, 5.1, 1], [5.0, 5.2, 1]]), turn_q)
+    out = join([push, turn])
+    np.testing.assert_allclose(out.t, [0.0, 0.5, 1.0, 1.5, 2.0])
+    np.testing.assert_allclose(out.pos[-1], [0.1, 0.2, 0.0], atol=1e-12)
+    np.testing.assert_allclose(out.quat[-1], [c, 0.0, 0.0, s], atol=1e-12)
+    np.testing.assert_allclose(out.pos[2], [0.1, 0.0, 0.0])
