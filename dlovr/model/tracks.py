@@ -42,9 +42,9 @@ class EdgeTrack:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, EdgeTrack):
             return NotImplemented
-        return (self.demonstration, self.t0) == (other.demonstration, other.t0) and all(
-            np.array_equal(a, b) for a, b in ((self.t, other.t), (self.pos, other.pos), (self.quat, other.quat))
-        )
+        pairs = ((self.t, other.t), (self.pos, other.pos), (self.quat, other.quat))
+        same = (self.demonstration, self.t0) == (other.demonstration, other.t0)
+        return same and all(np.array_equal(a, b) for a, b in pairs)
 
     __hash__ = None  # type: ignore[assignment]
 

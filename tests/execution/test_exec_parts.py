@@ -121,7 +121,8 @@ def test_a_turn_about_the_tip_is_repeated_about_the_tip_felt_further_away():
     r = quat_to_matrix([math.cos(ang / 2), 0.0, math.sin(ang / 2), 0.0])
     disp = tuple(tip_demo - r @ tip_demo)
     start = (0.1, 0.2, 0.5)
-    screw = ScrewPath(start, (1.0, 0.0, 0.0, 0.0), (0.0, ang, 0.0), disp, (1.0, 0.0, 0.0, 0.0), "relative", tool)
+    one = (1.0, 0.0, 0.0, 0.0)
+    screw = ScrewPath(start, one, (0.0, ang, 0.0), disp, one, "relative", tool)
     t = np.linspace(0.0, 1.0, 101)
     quats = np.array([[math.cos(a / 2), 0.0, math.sin(a / 2), 0.0] for a in ang * t])
     pos = np.array([np.array([0.0, 0.0, 1.0]) + tip_demo - quat_rotate(q, tip_demo) for q in quats])
@@ -133,7 +134,7 @@ def test_a_turn_about_the_tip_is_repeated_about_the_tip_felt_further_away():
             p, q = path.at(s)
             np.testing.assert_allclose(p + quat_rotate(q, tip_demo + tool), tip_now, atol=1e-9)
     # no tool, no change: the demonstrated pivot
-    p, q = ScrewPath(start, (1.0, 0.0, 0.0, 0.0), (0.0, ang, 0.0), disp, (1.0, 0.0, 0.0, 0.0), "relative").at(1.0)
+    p, q = ScrewPath(start, one, (0.0, ang, 0.0), disp, one, "relative").at(1.0)
     np.testing.assert_allclose(p + quat_rotate(q, tip_demo), np.array(start) + tip_demo, atol=1e-9)
 
 

@@ -382,7 +382,8 @@ def test_joined_tracks_repeat_each_motion_from_where_the_last_ended():
     from dlovr.model.tracks import EdgeTrack, join
 
     t = np.array([0.0, 0.5, 1.0])
-    push = EdgeTrack(0, 0.0, t, np.array([[0.0, 0, 0], [0.05, 0, 0], [0.1, 0, 0]]), np.tile([1.0, 0, 0, 0], (3, 1)))
+    still_q = np.tile([1.0, 0, 0, 0], (3, 1))
+    push = EdgeTrack(0, 0.0, t, np.array([[0.0, 0, 0], [0.05, 0, 0], [0.1, 0, 0]]), still_q)
     c, s = math.cos(math.pi / 8), math.sin(math.pi / 8)
     turn_q = np.array([[1.0, 0, 0, 0], [math.cos(math.pi / 16), 0, 0, math.sin(math.pi / 16)], [c, 0, 0, s]])
     turn = EdgeTrack(1, 3.0, t, np.array([[5.0, 5, 1], [5.0, 5.1, 1], [5.0, 5.2, 1]]), turn_q)
