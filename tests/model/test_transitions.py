@@ -309,6 +309,16 @@ def test_ties_prefer_contacts_absent_from_the_other_situation():
     assert [(ch.x, [c.format() for c in ch.y]) for ch in changes(x, y)] == [((), ["V/VS[b.F2,c.F7,h.F5]"])]
 
 
+def test_ties_a_contact_that_joins_the_principal_set_is_unchanged():
+    # E/E^P[a.F1,a.F2] was there before (below the principal E/F) and is principal now, unchanged:
+    # it merely joined the principal set, so it is no N -> E/E^P (E); the vanished E/F pairs with
+    # the new E/E^P[a.F2,a.F3] (absent before): C only
+    x = P("V/G & E/N & E/F[a.F1] & E/E^P[a.F1,a.F2] & V/N")
+    y = P("V/G & E/N & E/E^P[a.F1,a.F2] & E/E^P[a.F2,a.F3] & V/N")
+    assert [(c.x[0].format(), c.y[0].format()) for c in changes(x, y)] == [("E/F[a.F1]", "E/E^P[a.F2,a.F3]")]
+    assert classify_step(x, y) == ("C",)
+
+
 def test_instable_to_instable_is_I_in_whole_situations():
     a = P("V/G & E/N & V/E^LI[h.F2,h.F5]")
     assert classify_step(a, P("V/G & E/N & V/VI[h.F2,h.F3,h.F5]")) == ("I",)
