@@ -177,7 +177,11 @@ def transition_seen(principals: tuple[str, ...], m: MacroSpec) -> bool:
 
 
 def expectation(m: MacroSpec) -> Expectation:
-    return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established))
+    """What the macro's detectors expect: the contact vectors of the principal contacts its transition
+    ends and begins, and the axes of those that are pinches (docs/model.md, Pinch)."""
+    changing = (*m.released, *m.established)
+    axes = tuple(c.axis for c in changing if c.axis is not None)
+    return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established), axes)
 
 
 def pace(m: MacroSpec, opts: ExecOptions) -> float:

@@ -34,10 +34,12 @@ class ProgramError(ValueError):
 @dataclass(frozen=True)
 class ContactVec:
     """A principal contact as the program writes it (``E/F[table.F1]``) and its contact vector
-    (unit, world frame; ``None`` when it has none)."""
+    (unit, world frame; ``None`` when it has none; zero for a pinch, the DLO clamped between
+    opposite faces, which then has its ``axis``: unit, world frame, docs/model.md)."""
 
     state: str
     vector: tuple[float, float, float] | None
+    axis: tuple[float, float, float] | None = None
 
     @property
     def objects(self) -> frozenset[str]:
@@ -203,11 +205,13 @@ class _Reader:
             w = f"{where}[{i}]"
             if not isinstance(c, dict):
                 raise self.err(w, "must be an object with 'state' and 'vector'")
-            vec = c.get("vector")
-            v = None if vec is None else self.vec(vec, f"{w}.vector", 3)
-            if v is not None and math.sqrt(sum(x * x for x in v)) < 1e-9:
-                v = None
-            out.append(ContactVec(self.text(self.get(c, "state", w), f"{w}.state"), v))  # type: ignore[arg-type]
+            vec, ax = c.get("vector"), c.get("axis")
+            v = None if vec is None else self.vec(vec, f"{w}.vector", 3)  # zero for a pinch, kept
+            a = None if ax is None else self.vec(ax, f"{w}.axis", 3)
+            if a is not None and abs(math.sqrt(sum(x * x for x in a)) - 1.0) > 1e-6:
+                raise self.err(f"{w}.axis", f"must be a unit vector, got {list(a)}")
+            state = self.text(self.get(c, "state", w), f"{w}.state")
+            out.append(ContactVec(state, v, a))  # type: ignore[arg-type]
         return tuple(out)
 
     def motion(self, raw: Any, where: str) -> MotionSpec:

@@ -133,12 +133,15 @@ def _angle(a: np.ndarray, u: np.ndarray) -> float:
 
 
 def _directions(
-    cls: str, released: Sequence[Vec], established: Sequence[Vec]
+    cls: str, released: Sequence[Vec], established: Sequence[Vec], axes: Sequence[Vec] = ()
 ) -> list[tuple[np.ndarray, str]]:
-    """The directions the class's detector watches, with a name for the texts."""
+    """The directions the class's detector watches, with a name for the texts (a pinch's zero
+    vector gives none; ``E`` watches its ``axes`` instead, either sign)."""
     begins = [(u, "-v") for v in established if v is not None and (u := _unit(-np.asarray(v))) is not None]
     if cls == "E":
-        return begins + [(u, "+v") for v in released if (u := _unit(v)) is not None]
+        signs = ((1.0, "+axis"), (-1.0, "-axis"))
+        pinch = [(s * u, name) for a in axes if (u := _unit(a)) is not None for s, name in signs]
+        return begins + [(u, "+v") for v in released if (u := _unit(v)) is not None] + pinch
     if cls == "I":
         return begins
     if cls == "C":
@@ -177,10 +180,12 @@ def derive(
     t: float,
     t_next: float,
     rules: DerivationRules | None = None,
+    axes: Sequence[Vec] = (),
 ) -> Derived:
     """The detector parameters of class ``cls`` for a transition at ``t`` (s), the previous situation
     having held since ``t_prev`` and the new one until ``t_next``; ``released``/``established``: the
-    contact vectors (unit, world) of the principal contacts the transition ends and begins."""
+    contact vectors (unit, world) of the principal contacts the transition ends and begins;
+    ``axes``: the axes (unit, world) of those that are pinches (zero vector, docs/model.md)."""
     if wrench is None or len(wrench.t) == 0:
         return _default(cls, "no wrench signal in the recording")
     r = rules or DerivationRules()
@@ -198,7 +203,7 @@ def derive(
         )  # fmt: skip
     base = before.mean(axis=0)
     step = after.mean(axis=0) - base
-    dirs = _directions(cls, released, established)
+    dirs = _directions(cls, released, established, axes)
     if dirs:
         u, name = max(dirs, key=lambda d: _dot(step, d[0]))
         size = _dot(step, u)

@@ -13,7 +13,8 @@ that begins adds about ``-v * F`` to it and one that ends removes that (adds ``+
 
 - ``E`` (``force_along_contact_vector``): the force rises, from the lowest it has been since the
   macro started, by at least ``force_threshold_n`` along ``-v`` of a contact that begins (or ``+v``
-  of one that ends), the rise within ``max_angle_deg`` of that direction;
+  of one that ends; along either sign of the axis of a pinch, whose ``v`` is zero), the rise within
+  ``max_angle_deg`` of that direction;
 - ``C`` (``force_direction_turn``): the contact force turns from the old contact vector to the new
   one: the change points along ``v_old - v_new`` (within ``max_angle_deg``) and reaches
   ``min_turn_fraction`` of the turn of a force of the size sensed at the start;
@@ -164,10 +165,13 @@ def _step_dir(params: Mapping[str, float]) -> np.ndarray | None:
 @dataclass(frozen=True)
 class Expectation:
     """What a detector knows of the transition: the contact vectors (unit, world) of the principal
-    contacts that end (``released``) and begin (``established``); ``None`` entries have no vector."""
+    contacts that end (``released``) and begin (``established``); ``None`` entries have no vector.
+    ``axes``: the pinch axes (unit, world) of those contacts that are pinches (zero vector, the DLO
+    clamped between opposite faces, docs/model.md): the force changes along that line, either sign."""
 
     released: tuple[tuple[float, float, float] | None, ...] = ()
     established: tuple[tuple[float, float, float] | None, ...] = ()
+    axes: tuple[tuple[float, float, float], ...] = ()
 
 
 class Detector:
@@ -217,7 +221,8 @@ class Detector:
 
 
 class EDetector(Detector):
-    """``E``: the force changes along ``-v`` of a contact that begins or ``+v`` of one that ends.
+    """``E``: the force changes along ``-v`` of a contact that begins or ``+v`` of one that ends
+    (along the line of a pinch's axis, either sign: its ``v`` is zero).
 
     The change is measured from the lowest the force has been along that direction since the macro
     started (not from its first sample), so a force still settling from the previous transition
@@ -230,6 +235,7 @@ class EDetector(Detector):
         super().__init__(params, expect)
         dirs = [-np.asarray(v) for v in expect.established if v is not None]
         dirs += [np.asarray(v, float) for v in expect.released if v is not None]
+        dirs += [s * np.asarray(a, float) for a in expect.axes for s in (1.0, -1.0)]  # a pinch: either sign
         self.dirs = [u for d in dirs if (u := _unit(d)) is not None]
         self._low: list[np.ndarray] = []
 

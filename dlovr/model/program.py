@@ -299,11 +299,13 @@ def detections(
     """The detections of a transition ``prev -> cur`` of these classes, parameters derived from the
     wrench around it (defaults without one)."""
     fr, to = _principals(prev.situation), _principals(cur.situation)
-    released = [c.vector for c in fr if c.state not in {x.state for x in to}]
-    established = [c.vector for c in to if c.state not in {x.state for x in fr}]
+    ends = [c for c in fr if c.state not in {x.state for x in to}]
+    begins = [c for c in to if c.state not in {x.state for x in fr}]
+    released, established = [c.vector for c in ends], [c.vector for c in begins]
+    axes = [c.axis for c in (*ends, *begins) if c.axis is not None]  # pinches (docs/model.md)
     out = []
     for c in classes:
-        d = derive(c, released, established, wrench, prev.t, cur.t, cur.t + cur.duration, rules)
+        d = derive(c, released, established, wrench, prev.t, cur.t, cur.t + cur.duration, rules, axes)
         out.append(Detection(c, DETECTORS[c]["algorithm"], d.params, d.derivation))
     return tuple(out)
 

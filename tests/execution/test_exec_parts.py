@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dlovr.execution.executor import expectation
 from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
 from dlovr.execution.programs import ProgramError, find_recording, load_program, parse_program
 from dlovr.execution.variation import VaryError, parse_varies, parse_vary, perturb
@@ -47,6 +48,19 @@ def test_reader_tolerates_new_fields_and_a_final_macro():
     assert {"force_threshold_n", "max_angle_deg"} <= set(params) and "derived_from" not in params
     assert p.macros[0].expected == "N -> V/F[table.F1]"
     assert p.objects == {"table"}
+
+
+def test_a_pinch_is_read_with_its_zero_vector_and_axis_for_the_detector():
+    """A pinch (docs/model.md): its zero vector is kept, and its axis reaches the E detector."""
+    raw = json.loads((ROOT / "recordings/programs/table.program.json").read_text())
+    first = raw["macros"][0]["to_contacts"][0]
+    first.update(vector=[0.0, 0.0, 0.0], axis=[0.0, 0.0, 1.0])
+    m = parse_program(raw).macros[0]
+    assert m.established[0].vector == (0.0, 0.0, 0.0) and m.established[0].axis == (0.0, 0.0, 1.0)
+    assert expectation(m).axes == ((0.0, 0.0, 1.0),)
+    first.update(axis=[0.0, 0.0, 2.0])
+    with pytest.raises(ProgramError, match=r"to_contacts\[0\].axis: must be a unit vector"):
+        parse_program(raw, "p.json")
 
 
 @pytest.mark.parametrize(

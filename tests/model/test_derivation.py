@@ -122,3 +122,16 @@ def test_the_quiet_level_before_the_transition_raises_the_threshold():
         assert text.startswith(f"derived: 1.25x the {swing:.3g} N largest rise along -v within 0.15 s")
         assert ("weak signal" in text) == weak
         assert d.params["step_n"] == pytest.approx(0.1) and d.params["ref_lag_s"] == 0.15
+
+
+def test_a_pinch_derives_its_e_threshold_along_its_axis():
+    """A pinch begins (zero contact vector, axis z): the step is measured along the axis line, in the
+    sign it took, not in the step's own direction (docs/model.md, Pinch)."""
+    w = series(1.0, [0, 0, 0], [0.3, 0, -0.4])  # 0.4 N down along the axis, 0.3 N sideways
+    d = derive("E", [], [(0.0, 0.0, 0.0)], w, 0.0, 1.0, 2.0, axes=[(0.0, 0.0, 1.0)])
+    assert d.params["step_n"] == pytest.approx(0.4)
+    assert d.params["force_threshold_n"] == pytest.approx(0.4 * 0.4)
+    assert d.derivation["force_threshold_n"] == "derived: 40% of the 0.4 N step along -axis, noise 0 N"
+    assert d.params["max_angle_deg"] == pytest.approx(37 + 15, abs=0.2)  # the step is 37 deg off the axis
+    without = derive("E", [], [(0.0, 0.0, 0.0)], w, 0.0, 1.0, 2.0)
+    assert without.params["step_n"] == pytest.approx(0.5)  # no direction: the whole step

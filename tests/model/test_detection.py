@@ -177,3 +177,19 @@ def test_c_and_i_without_contact_vectors_watch_the_demonstrated_step_direction()
     i = {"min_force_n": 0.04, "max_angle_deg": 20.0, "ref_lag_s": 0.15}
     assert detect("I", {**i, **up}, Expectation(), T, f) is not None
     assert detect("I", {**i, **down}, Expectation(), T, f) is None
+
+
+def test_e_for_a_pinch_watches_the_line_of_its_axis_either_sign():
+    """A pinch (the DLO clamped between a floor and a ceiling) has the zero contact vector: the E
+    detector watches its axis, either sign, not just any change of force (docs/model.md, Pinch)."""
+    pinch = Expectation((), ((0.0, 0.0, 0.0),), axes=((0.0, 0.0, -1.0),))
+    p = {"force_threshold_n": 0.2}
+    for sign in (1.0, -1.0):
+        f = np.tile(WEIGHT, (N, 1))
+        f[START:, 2] += sign * 0.4  # along the axis, up or down
+        k = detect("E", p, pinch, T, f)
+        assert k is not None and START <= k < START + 10, sign
+    across = np.tile(WEIGHT, (N, 1))
+    across[START:, 0] += 0.4  # sideways: no pinch force
+    assert detect("E", p, pinch, T, across) is None
+    assert detect("E", p, Expectation((), ((0.0, 0.0, 0.0),)), T, across) is not None  # without the axis

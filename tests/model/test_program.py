@@ -11,6 +11,7 @@ import jsonschema
 import numpy as np
 import pytest
 
+from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import parse_discrete_situation as P
 from dlovr.model.program import (
     DETECTORS,
@@ -112,6 +113,14 @@ def test_a_pinch_is_expected_with_its_zero_vector_and_axis():
     data = json.loads(prog.dumps())
     jsonschema.validate(data, program_schema())
     assert data["macros"][0]["changes"][0]["to_contact"]["axis"] == [0.0, 0.0, 1.0]
+    # its E detection is derived along the axis (in the sign the step took)
+    t = np.arange(0.0, 2.0, 0.01)
+    f = np.where((t < 1.0)[:, None], 0.0, np.array([0.3, 0.0, -0.4]))
+    states = [TimedSituation(0, 1, a), TimedSituation(1, 1, b)]
+    prog = compile_program(states, straight_track(2), wrench=WrenchSeries(t, f, 0 * f))
+    (det,) = prog.macros[0].detection
+    assert det.params["step_n"] == pytest.approx(0.4)
+    assert "step along -axis" in det.derivation["force_threshold_n"]
 
 
 def test_a_step_without_class_extends_the_next_macros_motion():

@@ -279,6 +279,23 @@ def test_matching_ties_go_to_the_most_overlapping_stretch_of_the_dlo():
     assert [c.y for c in changes(b, a)][1] == ()
 
 
+def test_matching_without_overlap_goes_to_the_nearest_stretch_then_to_shared_objects():
+    # neither old run overlaps the new one: the nearer (the second) continues, the first lifted
+    before = P("V/G & E/N & E/F[t.F1] & E/N & E/F[t.F1] & E/N & V/N")
+    after = P("V/G & E/N & E/E^P[t.F1,t.F2] & E/N & V/N")
+    b = _with_spans(before, [(0, 0), (1, 1), (2, 5), (6, 19), (20, 25), (26, 39), (40, 40)])
+    a = _with_spans(after, [(0, 0), (1, 26), (27, 29), (30, 39), (40, 40)])
+    assert [(c.x[0].span, c.y[0].span if c.y else None) for c in changes(b, a)] == [
+        ((2, 5), None),
+        ((20, 25), (27, 29)),
+    ]
+    # a run without face names may match anything; a run sharing an object is preferred to it,
+    # although the unnamed one overlaps the new run and the named one does not
+    a = successional_contacts(P("V/G & E/F & E/N & E/F[t.F1] & E/N & V/N"))
+    b = successional_contacts(P("V/G & E/E^P[t.F2,t.F3] & E/N & V/N"))
+    assert match(a, b, [(1 / 6, 2 / 6), (3 / 6, 4 / 6)], [(1 / 4, 2 / 4)]) == [(0, None), (1, 0)]
+
+
 def test_ties_pair_principal_contacts_as_sets():
     # principals {E/E^P, E/E^LI} (card 6 both): E/E^P becomes E/F, E/E^LI stays -> C, not S
     before = P("V/G & E/N & E/E^P[a.F1,a.F2] & E/E^LI[a.F3,a.F4] & V/N")
@@ -307,6 +324,32 @@ def test_ties_prefer_contacts_absent_from_the_other_situation():
     x = P("V/G & E/N & E/E^LS[b.F2,h.F5] & V/E^LS[b.F2,h.F5]")
     y = P("V/G & E/N & E/E^LS[b.F2,h.F5] & V/VS[b.F2,h.F5,c.F7]")
     assert [(ch.x, [c.format() for c in ch.y]) for ch in changes(x, y)] == [((), ["V/VS[b.F2,c.F7,h.F5]"])]
+
+
+def test_ties_a_contact_that_joins_the_principal_set_is_unchanged():
+    # E/E^P[a.F1,a.F2] was there before (below the principal E/F) and is principal now, unchanged:
+    # it merely joined the principal set, so it is no N -> E/E^P (E); the vanished E/F pairs with
+    # the new E/E^P[a.F2,a.F3] (absent before): C only
+    x = P("V/G & E/N & E/F[a.F1] & E/E^P[a.F1,a.F2] & V/N")
+    y = P("V/G & E/N & E/E^P[a.F1,a.F2] & E/E^P[a.F2,a.F3] & V/N")
+    assert [(c.x[0].format(), c.y[0].format()) for c in changes(x, y)] == [("E/F[a.F1]", "E/E^P[a.F2,a.F3]")]
+    assert classify_step(x, y) == ("C",)
+
+
+def test_ties_prefer_shared_objects_then_the_nearest_contact():
+    # two principal crossings vanish, one new crossing on b: it continues the crossing on b (C),
+    # although the one on a lies nearer to it; the one on a lifted (E)
+    x = P("V/G & E/N & E/E^P[b.F1,b.F2] & E/E^P[a.F1,a.F2] & V/N")
+    y = P("V/G & E/N & E/E^P[b.F3,b.F4] & V/N")
+    assert [c.x[0].format() for c in changes(x, y)] == ["E/E^P[b.F1,b.F2]", "E/E^P[a.F1,a.F2]"]
+    assert classify_step(x, y) == ("E", "C")
+    # all else equal, the nearest along the DLO: the second crossing continues, the first lifted
+    x = P("V/G & E/N & E/E^P[a.F1,a.F2] & E/E^P[a.F3,a.F4] & V/N")
+    y = P("V/G & E/N & E/E^P[a.F5,a.F6] & V/N")
+    x = _with_spans(x, [(0, 0), (1, 4), (5, 6), (7, 8), (9, 40)])
+    y = _with_spans(y, [(0, 0), (1, 7), (8, 9), (10, 40)])
+    pairs = [(c.x[0].span, c.y[0].span if c.y else None) for c in changes(x, y)]
+    assert pairs == [((5, 6), None), ((7, 8), (8, 9))]
 
 
 def test_instable_to_instable_is_I_in_whole_situations():
