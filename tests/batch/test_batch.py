@@ -205,6 +205,27 @@ def test_network_on_ray_and_local_processes_equals_reading_one_after_the_other(r
     assert r.exit_code == 2 and "broken.mcap" in r.output and "Traceback" not in r.output
 
 
+def test_network_progress_counts_each_recording_as_it_completes(monkeypatch):
+    """The progress bar of ``dlovr network --workers/--cluster`` moves as each recording is read (order
+    of completion), not all at once after the batch."""
+    import dlovr.batch
+    from dlovr.recording.demonstrations import network_from_recordings
+
+    events: list[tuple[str, int]] = []
+    real = dlovr.batch.run_batch
+
+    def logged(*args, **kwargs):
+        for r in real(*args, **kwargs):
+            events.append(("done", r.index))
+            yield r
+
+    monkeypatch.setattr(dlovr.batch, "run_batch", logged)
+    paths = [RECORDINGS / "table.mcap"] * 3
+    network_from_recordings(paths, progress=lambda k: events.append(("progress", k)), workers=2)
+    assert [e for e in events if e[0] == "progress"] == [("progress", 1), ("progress", 2), ("progress", 3)]
+    assert [e[0] for e in events] == ["done", "progress"] * 3
+
+
 def _touch_program(d: Path) -> Path:
     """A 0.9 s demonstration on the table (lower the cable onto it), recorded and compiled."""
     from dlovr.recording import DemoRecorder, compile_recording
