@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from batch_tasks import always_die, die_once, fail_on, seeded, wait_for
+from batch_tasks import always_die, call_or_die, die_once, fail_on, seeded, wait_for
 from click.testing import CliRunner
 
 import dlovr
@@ -168,6 +168,13 @@ def test_ray_streams_results_in_order_of_completion(ray_instance, tmp_path):
     assert sorted(order) == [0, 1, 2] and order.index(1) < order.index(0)
 
 
+def test_ray_and_local_processes_draw_the_progress_bar(ray_instance, capsys):
+    for kw in ({"cluster": "local"}, {"workers": 2}):
+        res = list(run_batch(seeded, seed_tasks(), label="seeding the walks", **kw))
+        assert len(res) == len(SEEDS)
+        assert "seeding the walks" in capsys.readouterr().err, kw
+
+
 def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance, tmp_path):
     src = tmp_path / "in"
     src.mkdir()
@@ -254,6 +261,48 @@ def _outcomes(d: Path) -> list[dict]:
             t[k].pop("wall_time")
         out.append(t)
     return out
+
+
+def _killing(monkeypatch, tmp_path: Path, modes: dict[int, str]) -> None:
+    """Make every batch kill the worker of task ``i`` with SIGKILL (``modes[i]``: "once" or "always")."""
+    import dlovr.batch
+
+    real = dlovr.batch.run_batch
+
+    def run_batch_killing(fn, tasks, **kwargs):
+        tasks = [Task(t.key, (fn, modes.get(i, ""), str(tmp_path / f"killed{i}"), *t.args), t.kwargs)
+                 for i, t in enumerate(tasks)]  # fmt: skip
+        return real(call_or_die, tasks, **kwargs)
+
+    monkeypatch.setattr(dlovr.batch, "run_batch", run_batch_killing)
+
+
+def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_path):
+    """A trial whose worker is killed once runs again; one killed on every attempt is a failed trial;
+    ``run --trials`` and ``record --trials`` say how many of each (summary.json, demos.json, stdout)."""
+    import json
+
+    prog = _touch_program(tmp_path)
+    _killing(monkeypatch, tmp_path, {1: "once", 2: "always"})
+    r = cli("run", prog, "--scene", "table", "--trials", "3", "--seed", "5", "--vary", "dlo.length=5%",
+            "--workers", "2", "-o", tmp_path / "trials")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "2 trials retried (a worker died), 1 lost" in r.output
+    summary = json.loads((tmp_path / "trials" / "summary.json").read_text())
+    assert summary["retried_trials"] == 2 and summary["lost_trials"] == 1
+    lost = json.loads((tmp_path / "trials" / "trial_002.json").read_text())
+    assert lost["program"]["reason"].startswith("trial lost:") and "SIGKILL" in lost["program"]["reason"]
+    assert json.loads((tmp_path / "trials" / "trial_001.json").read_text())["attempts"] == 2
+
+    for k in (1, 2):
+        (tmp_path / f"killed{k}").unlink()
+    script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
+    r = cli("record", "--script", script, "--trials", "3", "--seed", "3", "--vary", "dlo.young=0.5..2",
+            "--workers", "2", "-o", tmp_path / "demos")  # fmt: skip
+    assert r.exit_code == 1 and "1 diverged or failed, 2 retried" in r.output, r.output
+    demos = json.loads((tmp_path / "demos" / "demos.json").read_text())["demonstrations"]
+    assert [d["attempts"] for d in demos] == [1, 2, 3] and demos[2]["path"] is None
+    assert (tmp_path / "demos" / "demo_001.mcap").is_file()
 
 
 def test_run_trials_on_ray_give_the_same_outcomes_as_local_processes(ray_instance, tmp_path):
