@@ -117,6 +117,39 @@ def test_exposure_warning_only_off_loopback():
         assert w is not None and "anyone who can reach port 8080" in w and "write recordings" in w
 
 
+def test_dlovr_serve_on_every_interface_prints_the_warning(tmp_path: Path):
+    """``dlovr serve --host 0.0.0.0`` says on stderr that anyone who can reach the port can drive it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    from dlovr.ui.server import free_port
+
+    port = free_port("0.0.0.0")
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    cmd = [sys.executable, "-m", "dlovr", "serve", "--host", "0.0.0.0", "--port", str(port),
+           "--recordings", str(tmp_path)]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    watchdog = threading.Timer(120, proc.kill)  # a server that never says anything
+    watchdog.start()
+    try:
+        while (line := proc.stdout.readline()) and not line.startswith("dlovr serve: scene table at "):
+            pass  # viser's banner; the warning comes before this line (on stderr)
+        started = bool(line)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        watchdog.cancel()
+        proc.kill()
+    assert started, err
+    warning = next((line for line in err.splitlines() if "WARNING" in line), "")
+    assert f"anyone who can reach port {port} can drive the simulation and write recordings" in warning
+    assert "0.0.0.0" in warning and "Traceback" not in err and "stopped" in out
+
+
 def test_reset_pause_and_scene_switch(server: DemoServer):
     wait_for(lambda: server.status()["t"] > 0.2, what="the simulation to run")
     server.pause(True)
