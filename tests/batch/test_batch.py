@@ -175,6 +175,55 @@ def test_ray_and_local_processes_draw_the_progress_bar(ray_instance, capsys):
         assert "seeding the walks" in capsys.readouterr().err, kw
 
 
+HEAD = """
+import sys
+import ray
+from ray._private.state import jobs
+ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+print(ray.get_runtime_context().gcs_address, flush=True)
+sys.stdin.read()  # until the test closes it
+print(*sorted({int(j["DriverPid"]) for j in jobs()}), flush=True)  # the drivers that joined
+ray.shutdown()
+"""
+
+
+def test_compile_joins_a_running_cluster_at_its_address(tmp_path):
+    """``--cluster HOST:PORT`` joins a cluster started elsewhere (here: another process, with token
+    authentication as Ray sets it up by default, the token given to both as README says): the
+    cluster saw dlovr's driver, and the programs are those of local processes."""
+    import secrets
+    import subprocess
+    import threading
+
+    root = Path(dlovr.__file__).parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+           "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}  # fmt: skip
+    env.pop("RAY_ADDRESS", None)
+    pipe = {"stdin": subprocess.PIPE, "stdout": subprocess.PIPE, "text": True, "env": env}
+    head = subprocess.Popen([sys.executable, "-c", HEAD], **pipe)
+    watchdog = threading.Timer(240, head.kill)
+    watchdog.start()
+    client = None
+    try:
+        address = head.stdout.readline().strip()
+        assert address.rpartition(":")[2].isdigit(), address
+        recs = [str(RECORDINGS / "table.mcap"), str(RECORDINGS / "edges.mcap")]
+        cmd = [sys.executable, "-m", "dlovr", "compile", *recs, "-o", str(tmp_path / "ray")]
+        client = subprocess.Popen([*cmd, "--cluster", address], **pipe, stderr=subprocess.STDOUT)
+        out, _ = client.communicate(timeout=180)
+        drivers, _ = head.communicate("", timeout=60)
+    finally:
+        watchdog.cancel()
+        for proc in (head, client):
+            if proc is not None:
+                proc.kill()
+    assert client.returncode == 0 and "2 compiled, 0 failed, 0 retried" in out, out
+    assert client.pid in {int(pid) for pid in drivers.split()}, drivers  # it ran on that cluster
+    assert cli("compile", *recs, "-o", tmp_path / "local").exit_code == 0
+    for name in ("table.program.json", "edges.program.json"):
+        assert (tmp_path / "ray" / name).read_bytes() == (tmp_path / "local" / name).read_bytes()
+
+
 def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance, tmp_path):
     src = tmp_path / "in"
     src.mkdir()
