@@ -135,6 +135,32 @@ def test_bad_or_unreachable_cluster_is_one_line_exit_2(address, message, tmp_pat
     assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and message in r.output
 
 
+def test_a_cluster_that_refuses_to_be_joined_is_one_line_with_the_token_hint(monkeypatch):
+    """Ray never enables token authentication by itself for an address: when joining fails without it,
+    the one line says what to set."""
+    import socket
+    from types import SimpleNamespace
+
+    from dlovr.batch.on_ray import connect
+
+    def refuse(**kwargs):
+        raise ConnectionError("Failed to connect to Ray cluster at the address.\nSee the logs.")
+
+    fake_ray = SimpleNamespace(is_initialized=lambda: False, init=refuse)
+    with socket.create_server(("127.0.0.1", 0)) as listening:  # reachable, but not joinable
+        address = f"127.0.0.1:{listening.getsockname()[1]}"
+        for mode, hint in ((None, True), ("token", False)):
+            if mode is None:
+                monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+            else:
+                monkeypatch.setenv("RAY_AUTH_MODE", mode)
+            with pytest.raises(BatchError) as e:
+                connect(fake_ray, address, None)
+            msg = e.value.message
+            assert msg.startswith(f"cannot join the Ray cluster at {address}: ConnectionError: Failed")
+            assert "\n" not in msg and ("set RAY_AUTH_MODE=token and its token" in msg) == hint, msg
+
+
 # --------------------------------------------------------------------------------------------------
 # Ray (one instance for the module)
 # --------------------------------------------------------------------------------------------------
