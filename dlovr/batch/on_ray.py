@@ -29,6 +29,13 @@ from dlovr.batch.core import (
 
 # Ray's switch that makes a node use the loopback address (its default on macOS and Windows)
 _LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+# Ray's authentication mode; a cluster with token authentication (Ray's default for a new one when
+# a token exists) refuses a driver that joins by address without it
+_AUTH_ENV = "RAY_AUTH_MODE"
+_AUTH_HINT = (
+    "; if the cluster uses token authentication, set RAY_AUTH_MODE=token and its token "
+    "(RAY_AUTH_TOKEN or ~/.ray/auth_token) here (README, Scaling out)"
+)
 
 
 def _first_sentence(e: BaseException) -> str:
@@ -86,7 +93,9 @@ def connect(ray: Any, cluster: str, workers: int | None) -> bool:
     try:
         ray.init(address=cluster, **quiet)
     except (RuntimeError, ConnectionError, OSError, ValueError) as e:
-        raise BatchError(f"cannot join the Ray cluster at {cluster}: {one_line(e)}") from None
+        # Ray never enables token authentication by itself when given an address: say how
+        hint = "" if os.environ.get(_AUTH_ENV, "").lower() == "token" else _AUTH_HINT
+        raise BatchError(f"cannot join the Ray cluster at {cluster}: {one_line(e)}{hint}") from None
     return True
 
 

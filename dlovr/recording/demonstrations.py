@@ -51,7 +51,8 @@ def network_from_recordings(
     workers: int | None = None,
     cluster: str | None = None,
 ) -> Network:
-    """Build a transition network from recordings of one scene; ``progress(k)`` after each one read.
+    """Build a transition network from recordings of one scene; ``progress(k)`` after each one read
+    (with ``workers`` / ``cluster``: as the k-th completes, in order of completion).
 
     The recordings are read here one after the other, or with ``workers`` / ``cluster`` through
     :func:`dlovr.batch.run_batch` (local processes or Ray; the network is the same, it is built from
@@ -60,7 +61,9 @@ def network_from_recordings(
     the other: checked as soon as the second scene is read, before the rest are).
     """
     demos: list[Demonstration] = []
-    for k, d in enumerate(_demonstrations(paths, hold, workers, cluster), 1):
+    batched = workers is not None or cluster is not None
+    read = _demonstrations(paths, hold, workers, cluster, progress if batched else None)
+    for k, d in enumerate(read, 1):
         if demos and (d.scene_sha256, d.scene_name) != (demos[0].scene_sha256, demos[0].scene_name):
             f = demos[0]
             raise NetworkError(
@@ -68,23 +71,32 @@ def network_from_recordings(
                 f"{f.scene_name} ({f.scene_sha256[:12]}); a network merges recordings of one scene"
             )
         demos.append(d)
-        if progress is not None:
+        if progress is not None and not batched:
             progress(k)
     return build_network(demos)
 
 
 def _demonstrations(
-    paths: Sequence[str | Path], hold: float | None, workers: int | None, cluster: str | None
+    paths: Sequence[str | Path],
+    hold: float | None,
+    workers: int | None,
+    cluster: str | None,
+    progress: Callable[[int], None] | None = None,
 ) -> Iterator[Demonstration]:
-    """The recordings as demonstrations, in input order."""
+    """The recordings as demonstrations, in input order; read through the batch engine (``workers`` or
+    ``cluster``), ``progress(k)`` as the k-th one completes, in order of completion."""
     if workers is None and cluster is None:
         yield from (demonstration(p, hold) for p in paths)
         return
     from dlovr.batch import Task, run_batch
 
     tasks = [Task(f"{i}:{p}", (str(p), hold)) for i, p in enumerate(paths)]
-    batch = run_batch(demonstration, tasks, workers=workers, cluster=cluster, progress=False)
-    done = sorted(batch, key=lambda r: r.index)
+    done = []
+    for r in run_batch(demonstration, tasks, workers=workers, cluster=cluster, progress=False):
+        done.append(r)
+        if progress is not None:
+            progress(len(done))
+    done.sort(key=lambda r: r.index)
     for r in done:
         if not r.ok:
             raise RecordingError(str(r.error))

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from batch_tasks import always_die, die_once, fail_on, seeded, wait_for
+from batch_tasks import always_die, call_or_die, die_once, fail_on, seeded, wait_for
 from click.testing import CliRunner
 
 import dlovr
@@ -135,6 +135,32 @@ def test_bad_or_unreachable_cluster_is_one_line_exit_2(address, message, tmp_pat
     assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and message in r.output
 
 
+def test_a_cluster_that_refuses_to_be_joined_is_one_line_with_the_token_hint(monkeypatch):
+    """Ray never enables token authentication by itself for an address: when joining fails without it,
+    the one line says what to set."""
+    import socket
+    from types import SimpleNamespace
+
+    from dlovr.batch.on_ray import connect
+
+    def refuse(**kwargs):
+        raise ConnectionError("Failed to connect to Ray cluster at the address.\nSee the logs.")
+
+    fake_ray = SimpleNamespace(is_initialized=lambda: False, init=refuse)
+    with socket.create_server(("127.0.0.1", 0)) as listening:  # reachable, but not joinable
+        address = f"127.0.0.1:{listening.getsockname()[1]}"
+        for mode, hint in ((None, True), ("token", False)):
+            if mode is None:
+                monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+            else:
+                monkeypatch.setenv("RAY_AUTH_MODE", mode)
+            with pytest.raises(BatchError) as e:
+                connect(fake_ray, address, None)
+            msg = e.value.message
+            assert msg.startswith(f"cannot join the Ray cluster at {address}: ConnectionError: Failed")
+            assert "\n" not in msg and ("set RAY_AUTH_MODE=token and its token" in msg) == hint, msg
+
+
 # --------------------------------------------------------------------------------------------------
 # Ray (one instance for the module)
 # --------------------------------------------------------------------------------------------------
@@ -166,6 +192,62 @@ def test_ray_streams_results_in_order_of_completion(ray_instance, tmp_path):
     tasks = [Task(str(s), (s, str(tmp_path / "m"))) for s in range(3)]
     order = [r.index for r in run(wait_for, tasks, cluster="local", workers=2)]
     assert sorted(order) == [0, 1, 2] and order.index(1) < order.index(0)
+
+
+def test_ray_and_local_processes_draw_the_progress_bar(ray_instance, capsys):
+    for kw in ({"cluster": "local"}, {"workers": 2}):
+        res = list(run_batch(seeded, seed_tasks(), label="seeding the walks", **kw))
+        assert len(res) == len(SEEDS)
+        assert "seeding the walks" in capsys.readouterr().err, kw
+
+
+HEAD = """
+import sys
+import ray
+from ray._private.state import jobs
+ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+print(ray.get_runtime_context().gcs_address, flush=True)
+sys.stdin.read()  # until the test closes it
+print(*sorted({int(j["DriverPid"]) for j in jobs()}), flush=True)  # the drivers that joined
+ray.shutdown()
+"""
+
+
+def test_compile_joins_a_running_cluster_at_its_address(tmp_path):
+    """``--cluster HOST:PORT`` joins a cluster started elsewhere (here: another process, with token
+    authentication as Ray sets it up by default, the token given to both as README says): the
+    cluster saw dlovr's driver, and the programs are those of local processes."""
+    import secrets
+    import subprocess
+    import threading
+
+    root = Path(dlovr.__file__).parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+           "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}  # fmt: skip
+    env.pop("RAY_ADDRESS", None)
+    pipe = {"stdin": subprocess.PIPE, "stdout": subprocess.PIPE, "text": True, "env": env}
+    head = subprocess.Popen([sys.executable, "-c", HEAD], **pipe)
+    watchdog = threading.Timer(240, head.kill)
+    watchdog.start()
+    client = None
+    try:
+        address = head.stdout.readline().strip()
+        assert address.rpartition(":")[2].isdigit(), address
+        recs = [str(RECORDINGS / "table.mcap"), str(RECORDINGS / "edges.mcap")]
+        cmd = [sys.executable, "-m", "dlovr", "compile", *recs, "-o", str(tmp_path / "ray")]
+        client = subprocess.Popen([*cmd, "--cluster", address], **pipe, stderr=subprocess.STDOUT)
+        out, _ = client.communicate(timeout=180)
+        drivers, _ = head.communicate("", timeout=60)
+    finally:
+        watchdog.cancel()
+        for proc in (head, client):
+            if proc is not None:
+                proc.kill()
+    assert client.returncode == 0 and "2 compiled, 0 failed, 0 retried" in out, out
+    assert client.pid in {int(pid) for pid in drivers.split()}, drivers  # it ran on that cluster
+    assert cli("compile", *recs, "-o", tmp_path / "local").exit_code == 0
+    for name in ("table.program.json", "edges.program.json"):
+        assert (tmp_path / "ray" / name).read_bytes() == (tmp_path / "local" / name).read_bytes()
 
 
 def test_compile_on_ray_writes_the_same_programs_as_local_processes(ray_instance, tmp_path):
@@ -205,6 +287,27 @@ def test_network_on_ray_and_local_processes_equals_reading_one_after_the_other(r
     assert r.exit_code == 2 and "broken.mcap" in r.output and "Traceback" not in r.output
 
 
+def test_network_progress_counts_each_recording_as_it_completes(monkeypatch):
+    """The progress bar of ``dlovr network --workers/--cluster`` moves as each recording is read (order
+    of completion), not all at once after the batch."""
+    import dlovr.batch
+    from dlovr.recording.demonstrations import network_from_recordings
+
+    events: list[tuple[str, int]] = []
+    real = dlovr.batch.run_batch
+
+    def logged(*args, **kwargs):
+        for r in real(*args, **kwargs):
+            events.append(("done", r.index))
+            yield r
+
+    monkeypatch.setattr(dlovr.batch, "run_batch", logged)
+    paths = [RECORDINGS / "table.mcap"] * 3
+    network_from_recordings(paths, progress=lambda k: events.append(("progress", k)), workers=2)
+    assert [e for e in events if e[0] == "progress"] == [("progress", 1), ("progress", 2), ("progress", 3)]
+    assert [e[0] for e in events] == ["done", "progress"] * 3
+
+
 def _touch_program(d: Path) -> Path:
     """A 0.9 s demonstration on the table (lower the cable onto it), recorded and compiled."""
     from dlovr.recording import DemoRecorder, compile_recording
@@ -233,6 +336,48 @@ def _outcomes(d: Path) -> list[dict]:
             t[k].pop("wall_time")
         out.append(t)
     return out
+
+
+def _killing(monkeypatch, tmp_path: Path, modes: dict[int, str]) -> None:
+    """Make every batch kill the worker of task ``i`` with SIGKILL (``modes[i]``: "once" or "always")."""
+    import dlovr.batch
+
+    real = dlovr.batch.run_batch
+
+    def run_batch_killing(fn, tasks, **kwargs):
+        tasks = [Task(t.key, (fn, modes.get(i, ""), str(tmp_path / f"killed{i}"), *t.args), t.kwargs)
+                 for i, t in enumerate(tasks)]  # fmt: skip
+        return real(call_or_die, tasks, **kwargs)
+
+    monkeypatch.setattr(dlovr.batch, "run_batch", run_batch_killing)
+
+
+def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_path):
+    """A trial whose worker is killed once runs again; one killed on every attempt is a failed trial;
+    ``run --trials`` and ``record --trials`` say how many of each (summary.json, demos.json, stdout)."""
+    import json
+
+    prog = _touch_program(tmp_path)
+    _killing(monkeypatch, tmp_path, {1: "once", 2: "always"})
+    r = cli("run", prog, "--scene", "table", "--trials", "3", "--seed", "5", "--vary", "dlo.length=5%",
+            "--workers", "2", "-o", tmp_path / "trials")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "2 trials retried (a worker died), 1 lost" in r.output
+    summary = json.loads((tmp_path / "trials" / "summary.json").read_text())
+    assert summary["retried_trials"] == 2 and summary["lost_trials"] == 1
+    lost = json.loads((tmp_path / "trials" / "trial_002.json").read_text())
+    assert lost["program"]["reason"].startswith("trial lost:") and "SIGKILL" in lost["program"]["reason"]
+    assert json.loads((tmp_path / "trials" / "trial_001.json").read_text())["attempts"] == 2
+
+    for k in (1, 2):
+        (tmp_path / f"killed{k}").unlink()
+    script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
+    r = cli("record", "--script", script, "--trials", "3", "--seed", "3", "--vary", "dlo.young=0.5..2",
+            "--workers", "2", "-o", tmp_path / "demos")  # fmt: skip
+    assert r.exit_code == 1 and "1 diverged or failed, 2 retried" in r.output, r.output
+    demos = json.loads((tmp_path / "demos" / "demos.json").read_text())["demonstrations"]
+    assert [d["attempts"] for d in demos] == [1, 2, 3] and demos[2]["path"] is None
+    assert (tmp_path / "demos" / "demo_001.mcap").is_file()
 
 
 def test_run_trials_on_ray_give_the_same_outcomes_as_local_processes(ray_instance, tmp_path):

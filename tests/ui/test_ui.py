@@ -107,6 +107,22 @@ def test_time_box_stays_inside_the_slider_range(server: DemoServer):
     server.live()
 
 
+def test_the_panel_and_the_readme_name_the_forces_alike(server: DemoServer):
+    """The two forces have one name each, the same in the panel and in the README: the wrench at the
+    gripper and the sum of the contact normal forces (they were "Gripper force" and "Contact force on
+    the cable", defined differently in each)."""
+    import re
+
+    wait_for(lambda: "wrench" in server.state_panel.markdown.content, what="the live situation panel")
+    names = re.findall(r"\*\*([^*]+):\*\*", server.state_panel.markdown.content)
+    forces = [n for n in names if "force" in n.lower() or "wrench" in n.lower()]
+    assert forces == ["Gripper wrench", "Contact normal force (sum)"]
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    for name in forces:
+        assert f"*{name}*" in readme, name
+    assert "Gripper force" not in readme and "Contact force on the cable" not in readme
+
+
 def test_exposure_warning_only_off_loopback():
     from dlovr.ui.server import exposure_warning
 
@@ -115,6 +131,39 @@ def test_exposure_warning_only_off_loopback():
     for host in ("0.0.0.0", "::", "", "192.168.1.4", "example.org"):
         w = exposure_warning(host, 8080)
         assert w is not None and "anyone who can reach port 8080" in w and "write recordings" in w
+
+
+def test_dlovr_serve_on_every_interface_prints_the_warning(tmp_path: Path):
+    """``dlovr serve --host 0.0.0.0`` says on stderr that anyone who can reach the port can drive it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    from dlovr.ui.server import free_port
+
+    port = free_port("0.0.0.0")
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    cmd = [sys.executable, "-m", "dlovr", "serve", "--host", "0.0.0.0", "--port", str(port),
+           "--recordings", str(tmp_path)]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    watchdog = threading.Timer(120, proc.kill)  # a server that never says anything
+    watchdog.start()
+    try:
+        while (line := proc.stdout.readline()) and not line.startswith("dlovr serve: scene table at "):
+            pass  # viser's banner; the warning comes before this line (on stderr)
+        started = bool(line)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        watchdog.cancel()
+        proc.kill()
+    assert started, err
+    warning = next((line for line in err.splitlines() if "WARNING" in line), "")
+    assert f"anyone who can reach port {port} can drive the simulation and write recordings" in warning
+    assert "0.0.0.0" in warning and "Traceback" not in err and "stopped" in out
 
 
 def test_reset_pause_and_scene_switch(server: DemoServer):

@@ -263,11 +263,30 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     page.mouse.move(5, 300)  # leave it: the live faces again
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the live faces back")
 
-    # clicking it scrubs the cable to that situation
-    first.click()
+    # the cable lifted off again: nothing live; hovering the situation on the table shows its face
+    drag(page, line_down(np.array([p0[0], p0[1], 0.48]), 0.72, n=6))
+    wait_for(lambda: "table" not in server.status()["discrete"], timeout=20, what="the cable to lift off")
+    wait_for(lambda: faces.shown == {} and green_fraction(page) < 0.01, timeout=10, what="no live faces")
+    bands = server.session.timeline.bands
+    lit = [i for i, b in enumerate(bands) if b.faces == {"table.F1": Stability.STABLE}]
+    k = max(lit, key=lambda i: bands[i].end - bands[i].start)  # the longest: the easiest to hover
+    on_table = page.locator(f'.dlovr-timeline > div[data-situation="{k}"]')
+    on_table.hover()
+    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the hovered faces")
+    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the hovered face drawn green")
+    shot(page, "faces-hovering-the-table-situation")
+    page.mouse.move(5, 300)
+    wait_for(lambda: faces.shown == {}, timeout=10, what="the live faces (none) back")
+
+    # clicking it scrubs the cable to that situation, its face highlighted
+    on_table.click()
     wait_for(lambda: server._view is not None, timeout=10, what="the click to scrub")
     page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
-    assert server.timeline_panel.slider.value < server.session.timeline.bands[1].start
+    band = server._view.bands[k]
+    assert band.start - 0.01 <= server.timeline_panel.slider.value <= band.end + 0.01
+    page.mouse.move(5, 300)
+    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the clicked faces")
+    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the clicked face drawn green")
     page.close()
 
 
