@@ -129,6 +129,35 @@ def test_model_package_is_pure(module):
     assert out == "", f"{module} imports {out}"
 
 
+def _third_party_imports(path: Path) -> set[str]:
+    """Top-level names of every module ``path`` imports anywhere in its file (function-level imports and
+    ``if TYPE_CHECKING:`` blocks included: the purity rule holds for the source, not only for one run)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_model_sources_name_no_forbidden_library():
+    """Every file under dlovr/model/ (nested packages too), imports inside functions included."""
+    files = sorted((ROOT / "model").rglob("*.py"))
+    assert len(files) >= len(MODEL_MODULES)
+    bad = {
+        str(f.relative_to(ROOT)): sorted(_third_party_imports(f) & set(FORBIDDEN_IN_MODEL)) for f in files
+    }
+    bad = {k: v for k, v in bad.items() if v}
+    assert not bad, f"dlovr/model imports {bad}"
+
+
+def test_forbidden_import_finder_sees_function_level_imports(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def f():\n    import mujoco.viewer\n    from trimesh import Trimesh\n")
+    assert _third_party_imports(f) >= {"mujoco", "trimesh"}
+
+
 def test_modules_and_classes_stay_small():
     too_long = []
     for name, path in _modules().items():
