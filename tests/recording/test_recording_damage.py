@@ -192,7 +192,7 @@ def test_fuzz_recover(m, short):
 # The sample recordings of recordings/ (other scenes, meshes and decompositions embedded, longer),
 # as shipped and without their data CRC: fewer examples, as each may replay a whole recording.
 SAMPLES = sorted((Path(__file__).parents[2] / "recordings").glob("*.mcap"))
-SAMPLE_FUZZ = settings(FUZZ, max_examples=10, deadline=120_000)
+SAMPLE_FUZZ = settings(FUZZ, max_examples=25, deadline=120_000)
 
 
 @pytest.fixture(scope="module")
