@@ -171,3 +171,29 @@ def test_modules_and_classes_stay_small():
                 if size > MAX_CLASS_LINES:
                     too_long.append(f"class {name}.{node.name}: {size} lines")
     assert not too_long, "; ".join(too_long)
+
+
+# The README's data flow: each package imports only the ones below it, ``cli*`` is on top, and
+# ``batch`` imports no other dlovr module.
+LAYERS = ("dlovr.model", "dlovr.geometry", "dlovr.sim", "dlovr.recording", "dlovr.execution", "dlovr.ui")
+
+
+def _package(module: str) -> str:
+    return ".".join(module.split(".")[:2])
+
+
+def test_packages_import_only_the_layers_below_them_and_cli_is_on_top():
+    graph = import_graph()
+    upward = []
+    for name, deps in graph.items():
+        here = _package(name)
+        for d in deps:
+            there = _package(d)
+            if here in LAYERS and there in LAYERS and LAYERS.index(there) > LAYERS.index(here):
+                upward.append(f"{name} -> {d}")
+            top = here.startswith("dlovr.cli") or name.endswith(".cli") or name == "dlovr.__main__"
+            if there.startswith("dlovr.cli") and not top:
+                upward.append(f"{name} -> {d}")
+            if here == "dlovr.batch" and there != "dlovr.batch":
+                upward.append(f"{name} -> {d}")
+    assert not upward, "imports against the README's data flow: " + "; ".join(sorted(upward))
