@@ -197,3 +197,17 @@ def test_packages_import_only_the_layers_below_them_and_cli_is_on_top():
             if here == "dlovr.batch" and there != "dlovr.batch":
                 upward.append(f"{name} -> {d}")
     assert not upward, "imports against the README's data flow: " + "; ".join(sorted(upward))
+
+
+def test_rotation_helpers_live_in_transforms_only():
+    """Quaternions, rotation matrices and rotation vectors: one place, ``dlovr/transforms.py`` (a
+    module-level function whose name speaks of them anywhere else is a second copy)."""
+    words = ("quat", "rotvec", "slerp", "rotation", "matrix")
+    elsewhere = []
+    for name, path in _modules().items():
+        if name == "dlovr.transforms":
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef) and any(w in node.name.lower() for w in words):
+                elsewhere.append(f"{name}.{node.name}")
+    assert not elsewhere, f"rotation helpers outside dlovr.transforms: {elsewhere}"
