@@ -128,6 +128,27 @@ def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
     return axis * angle
 
 
+def rotvec_to_quat(w: Sequence[float]) -> np.ndarray:
+    """Unit quaternion (wxyz) of a rotation vector ``w`` (axis * angle, rad)."""
+    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if th < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    s = math.sin(0.5 * th) / th
+    return np.array([math.cos(0.5 * th), w[0] * s, w[1] * s, w[2] * s])
+
+
+def quat_to_rotvec(q: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
+    """Rotation vector (axis * angle, rad) of a unit quaternion (wxyz), the short way round."""
+    w, x, y, z = (float(c) for c in q)
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-15:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    th = 2.0 * math.atan2(n, w)
+    return (x * th / n, y * th / n, z * th / n)
+
+
 __all__ = [
     "dot",
     "matrix_to_rotvec",
@@ -137,5 +158,7 @@ __all__ = [
     "quat_normalize",
     "quat_rotate",
     "quat_to_matrix",
+    "quat_to_rotvec",
+    "rotvec_to_quat",
     "slerp",
 ]

@@ -129,6 +129,35 @@ def test_model_package_is_pure(module):
     assert out == "", f"{module} imports {out}"
 
 
+def _third_party_imports(path: Path) -> set[str]:
+    """Top-level names of every module ``path`` imports anywhere in its file (function-level imports and
+    ``if TYPE_CHECKING:`` blocks included: the purity rule holds for the source, not only for one run)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_model_sources_name_no_forbidden_library():
+    """Every file under dlovr/model/ (nested packages too), imports inside functions included."""
+    files = sorted((ROOT / "model").rglob("*.py"))
+    assert len(files) >= len(MODEL_MODULES)
+    bad = {
+        str(f.relative_to(ROOT)): sorted(_third_party_imports(f) & set(FORBIDDEN_IN_MODEL)) for f in files
+    }
+    bad = {k: v for k, v in bad.items() if v}
+    assert not bad, f"dlovr/model imports {bad}"
+
+
+def test_forbidden_import_finder_sees_function_level_imports(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text("def f():\n    import mujoco.viewer\n    from trimesh import Trimesh\n")
+    assert _third_party_imports(f) >= {"mujoco", "trimesh"}
+
+
 def test_modules_and_classes_stay_small():
     too_long = []
     for name, path in _modules().items():
@@ -142,3 +171,43 @@ def test_modules_and_classes_stay_small():
                 if size > MAX_CLASS_LINES:
                     too_long.append(f"class {name}.{node.name}: {size} lines")
     assert not too_long, "; ".join(too_long)
+
+
+# The README's data flow: each package imports only the ones below it, ``cli*`` is on top, and
+# ``batch`` imports no other dlovr module.
+LAYERS = ("dlovr.model", "dlovr.geometry", "dlovr.sim", "dlovr.recording", "dlovr.execution", "dlovr.ui")
+
+
+def _package(module: str) -> str:
+    return ".".join(module.split(".")[:2])
+
+
+def test_packages_import_only_the_layers_below_them_and_cli_is_on_top():
+    graph = import_graph()
+    upward = []
+    for name, deps in graph.items():
+        here = _package(name)
+        for d in deps:
+            there = _package(d)
+            if here in LAYERS and there in LAYERS and LAYERS.index(there) > LAYERS.index(here):
+                upward.append(f"{name} -> {d}")
+            top = here.startswith("dlovr.cli") or name.endswith(".cli") or name == "dlovr.__main__"
+            if there.startswith("dlovr.cli") and not top:
+                upward.append(f"{name} -> {d}")
+            if here == "dlovr.batch" and there != "dlovr.batch":
+                upward.append(f"{name} -> {d}")
+    assert not upward, "imports against the README's data flow: " + "; ".join(sorted(upward))
+
+
+def test_rotation_helpers_live_in_transforms_only():
+    """Quaternions, rotation matrices and rotation vectors: one place, ``dlovr/transforms.py`` (a
+    module-level function whose name speaks of them anywhere else is a second copy)."""
+    words = ("quat", "rotvec", "slerp", "rotation", "matrix")
+    elsewhere = []
+    for name, path in _modules().items():
+        if name == "dlovr.transforms":
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef) and any(w in node.name.lower() for w in words):
+                elsewhere.append(f"{name}.{node.name}")
+    assert not elsewhere, f"rotation helpers outside dlovr.transforms: {elsewhere}"

@@ -29,22 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, slerp
+from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, quat_to_rotvec, rotvec_to_quat, slerp
 
 Vec = tuple[float, float, float]
 
 
 def _cross(a: Vec, b: Vec) -> Vec:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _rotvec_quat(w: Vec) -> np.ndarray:
-    """Unit quaternion (wxyz) of a rotation vector (rad)."""
-    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    if th < 1e-12:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    s = math.sin(0.5 * th) / th
-    return np.array([math.cos(0.5 * th), w[0] * s, w[1] * s, w[2] * s])
 
 
 def _screw_coeffs(th: float) -> tuple[float, float]:
@@ -108,7 +99,7 @@ class ScrewPath:
         phi = (s * self.rotation[0], s * self.rotation[1], s * self.rotation[2])
         v = self.twist
         local = _apply_v(phi, (s * v[0], s * v[1], s * v[2]))  # gripper frame at the start
-        dq = _rotvec_quat(phi)
+        dq = rotvec_to_quat(phi)
         frame_q = np.asarray(self.start_quat if self.frame == "relative" else self.demo_quat, dtype=float)
         frame_q = quat_normalize(frame_q)
         offset = quat_rotate(frame_q, np.array(local))
@@ -132,18 +123,6 @@ def tool_shift(pos: np.ndarray, q_ref: np.ndarray, q: np.ndarray, tool: Vec) -> 
     return np.array([float(pos[i]) + float(a[i]) - float(b[i]) for i in range(3)])
 
 
-def _quat_rotvec(q: np.ndarray) -> Vec:
-    """Rotation vector (rad) of a unit quaternion (wxyz), the short way round."""
-    w, x, y, z = (float(c) for c in q)
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    n = math.sqrt(x * x + y * y + z * z)
-    if n < 1e-15:
-        return (2.0 * x, 2.0 * y, 2.0 * z)
-    th = 2.0 * math.atan2(n, w)
-    return (x * th / n, y * th / n, z * th / n)
-
-
 def local_twist(
     times: np.ndarray,
     pos: np.ndarray,
@@ -165,7 +144,7 @@ def local_twist(
         pa, qa, pb, qb = pos[ia], quat_normalize(quat[ia]), pos[ib], quat_normalize(quat[ib])
         inv = np.array([qa[0], -qa[1], -qa[2], -qa[3]])
         d = quat_rotate(inv, np.array([float(pb[i]) - float(pa[i]) for i in range(3)]))
-        phi = _quat_rotvec(quat_mul(inv, qb))
+        phi = quat_to_rotvec(quat_mul(inv, qb))
         dist = math.sqrt(sum(float(c) ** 2 for c in d))
         if dist > 1e-4 or math.sqrt(sum(c * c for c in phi)) > 1e-3:
             k = span / max(float(times[ib]) - float(times[ia]), 1e-9)

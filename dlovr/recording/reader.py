@@ -156,7 +156,13 @@ class Recording:
         return self._counts.get(topic, 0)
 
     def _iter(self, topic: str) -> Iterator[dict[str, Any]]:
-        """The messages of ``topic`` as JSON objects; any decoding problem is a RecordingError."""
+        """The messages of ``topic`` as JSON objects; any decoding problem is a RecordingError.
+
+        Read to the end, they must be as many as the summary's statistics count (when it has them): a
+        chunk whose header was zeroed (no CRC, no compression, no records) reads as an intact empty
+        chunk, and only the count shows that its messages are missing.
+        """
+        n = 0
         try:
             with open(self.path, "rb") as fh:
                 reader = make_reader(fh, validate_crcs=True)
@@ -164,9 +170,15 @@ class Recording:
                     obj = json.loads(msg.data)
                     if not isinstance(obj, dict):
                         raise ValueError(f"a message is {type(obj).__name__}, not an object")
+                    n += 1
                     yield obj
         except DECODE_ERRORS as e:
             raise RecordingError(f"{self.path}: corrupt data in {topic}: {one_line(e)}") from None
+        if self._counts and n != self.count(topic):
+            raise RecordingError(
+                f"{self.path}: corrupt data in {topic}: {n} messages read, the summary counts "
+                f"{self.count(topic)} (a damaged chunk?); try `dlovr recover {self.path} -o FIXED.mcap`"
+            )
 
     def states(self) -> list[dict[str, Any]]:
         """The contact-state messages (reads only their chunks)."""

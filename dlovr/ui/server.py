@@ -380,16 +380,20 @@ def exposure_warning(host: str, port: int) -> str | None:
 
 
 def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
-    """Run the server until Ctrl-C (used by ``dlovr serve``); warns on stderr when ``host`` is not
-    loopback."""
+    """Run the server until Ctrl-C or SIGTERM (used by ``dlovr serve``; SIGTERM exits with 143 once
+    the server stopped, a recording in progress finished and the temporary folders removed); warns on
+    stderr when ``host`` is not loopback."""
+    from dlovr.recording import finish_on_sigterm
+
     srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
     warning = exposure_warning(host, srv.port)
     if warning is not None:
         print(warning, file=sys.stderr, flush=True)
-    print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
     try:
-        while True:
-            time.sleep(0.5)
+        with finish_on_sigterm():  # before the line that tells the server is up
+            print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
+            while True:
+                time.sleep(0.5)
     except KeyboardInterrupt:
         pass
     finally:

@@ -161,13 +161,17 @@ def _pick_handlers(uuid: str | None) -> str:
 
 def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     """Timeline of a recording file (bands from its debounced contact states, cable from its
-    Foxglove frames), its embedded scene (loaded from a temporary directory) and the Recording."""
+    Foxglove frames), its embedded scene (loaded from a temporary directory, which the scene's meshes
+    are read from later and which is removed when the process exits) and the Recording."""
+    import atexit
+    import shutil
     import tempfile
 
     from dlovr.recording import load_embedded_scene, situation_from_payload
 
     rec = Recording(path)
     tmp = tempfile.mkdtemp(prefix="dlovr-ui-")
+    atexit.register(shutil.rmtree, tmp, ignore_errors=True)
     scene = load_embedded_scene(rec, tmp)
     kept = kept_states(rec)
     tl = Timeline(source=Path(path).name)

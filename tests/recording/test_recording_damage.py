@@ -56,15 +56,20 @@ def short(tmp_path_factory) -> Path:
 def short_without_data_crc(short, tmp_path_factory) -> Path:
     """The same file with its data-section CRC set to 0 ("not computed", as in older files), so that
     damage must be caught where it is decoded (chunk CRCs, decompression, record parsing)."""
-    raw = bytearray(short.read_bytes())
+    out = tmp_path_factory.mktemp("nocrc") / "short.mcap"
+    out.write_bytes(without_data_crc(short.read_bytes()))
+    assert replay(out, verify=True).divergence is None
+    return out
+
+
+def without_data_crc(data: bytes) -> bytes:
+    """``data`` with its data-section CRC set to 0 (found through the footer's summary offset)."""
+    raw = bytearray(data)
     summary_start = struct.unpack_from("<Q", raw, len(raw) - 8 - 29 + 9)[0]
     data_end = summary_start - 13
     assert raw[data_end] == 0x0F
     raw[data_end + 9 : data_end + 13] = b"\0\0\0\0"
-    out = tmp_path_factory.mktemp("nocrc") / "short.mcap"
-    out.write_bytes(bytes(raw))
-    assert replay(out, verify=True).divergence is None
-    return out
+    return bytes(raw)
 
 
 def contents(path: Path):
@@ -181,6 +186,67 @@ def test_fuzz_recover(m, short):
     if r.exit_code == 0:
         assert (bad.parent / "fixed.mcap").is_file()
         check_clean(cli("states", bad.parent / "fixed.mcap"))
+    shutil.rmtree(bad.parent)
+
+
+# The sample recordings of recordings/ (other scenes, meshes and decompositions embedded, longer),
+# as shipped and without their data CRC: fewer examples, as each may replay a whole recording.
+SAMPLES = sorted((Path(__file__).parents[2] / "recordings").glob("*.mcap"))
+SAMPLE_FUZZ = settings(FUZZ, max_examples=25, deadline=120_000)
+
+
+@pytest.fixture(scope="module")
+def samples(tmp_path_factory) -> dict[tuple[str, str], tuple[Path, str]]:
+    """(sample name, "crc" / "no-crc") -> (file, its `states --format json` output)."""
+    d = tmp_path_factory.mktemp("samples")
+    out = {}
+    for p in SAMPLES:
+        for variant, data in (("crc", p.read_bytes()), ("no-crc", without_data_crc(p.read_bytes()))):
+            f = d / variant / p.name
+            f.parent.mkdir(exist_ok=True)
+            f.write_bytes(data)
+            r = cli("states", f, "--format", "json")
+            assert r.exit_code == 0, r.output
+            out[(p.name, variant)] = (f, r.output)
+    return out
+
+
+@pytest.mark.parametrize("variant", ["crc", "no-crc"])
+@pytest.mark.parametrize("sample", [p.name for p in SAMPLES])
+@SAMPLE_FUZZ
+@given(m=MUTATIONS)
+def test_fuzz_sample_recordings_through_states_and_recover(m, sample, variant, samples):
+    src, want = samples[(sample, variant)]
+    bad = damaged(src, m)
+    r = cli("states", bad, "--format", "json")
+    check_clean(r)
+    if r.exit_code == 0:  # only what was recorded (or its metadata changed)
+        same = contents(bad)
+        assert r.output == want or (same is not None and same[1] != contents(src)[1]), m
+    else:
+        assert str(bad) in r.output
+    check_clean(cli("recover", bad, "-o", bad.parent / "fixed.mcap"))
+    shutil.rmtree(bad.parent)
+
+
+@pytest.mark.parametrize("variant", ["crc", "no-crc"])
+@SAMPLE_FUZZ
+@given(m=MUTATIONS)
+def test_fuzz_a_sample_recording_through_replay_verify_and_compile(m, variant, samples):
+    """l_block.mcap: the shortest replay of the samples."""
+    src = samples[("l_block.mcap", variant)][0]
+    bad = damaged(src, m)
+    r = cli("replay", bad, "--verify")
+    check_clean(r, (0, 1, 2))
+    if "verified" in r.output:
+        assert r.exit_code == 0
+        assert contents(bad) is not None and contents(bad)[0] == contents(src)[0], m
+    elif r.exit_code == 2:
+        assert str(bad) in r.output
+    r = cli("compile", bad, "-o", bad.parent / "out")
+    check_clean(r)
+    if r.exit_code == 2:
+        assert "FAILED" in r.output and str(bad) in r.output and "0 compiled, 1 failed" in r.output
     shutil.rmtree(bad.parent)
 
 
@@ -359,3 +425,42 @@ def test_compile_of_a_folder_with_a_damaged_file_compiles_the_others(short, tmp_
         assert (tmp_path / f"out{workers}" / "a.program.json").is_file()
     again = cli("compile", src, "-o", tmp_path / "out1")
     assert "0 compiled, 2 skipped (unchanged), 1 failed" in again.output and again.exit_code == 2
+
+
+# --------------------------------------------------------------------------------------------------
+# A chunk whose header reads as an empty chunk
+# --------------------------------------------------------------------------------------------------
+
+
+def _chunks_of(path: Path, topic: str) -> list[int]:
+    """Offsets of the chunks that hold messages of ``topic`` only (from the summary's chunk index)."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    return [
+        ci.chunk_start_offset
+        for ci in summary.chunk_indexes
+        if {summary.channels[c].topic for c in ci.message_index_offsets} == {topic}
+    ]
+
+
+@pytest.mark.parametrize("topic", ["/dlovr/checkpoint", "/dlovr/contact_states"])
+def test_a_chunk_that_reads_as_empty_is_not_silently_skipped(short_without_data_crc, tmp_path, topic):
+    """Zeroed from its length to its records' length (CRC 0: unchecked; compression "": none), a chunk
+    parses as an intact chunk without messages: what it held is missing, and the summary's message
+    counts say so. Found by fuzzing a sample recording (l_block.mcap without its data CRC), whose
+    replay was then "verified" with one checkpoint fewer."""
+    raw = short_without_data_crc.read_bytes()
+    offsets = _chunks_of(short_without_data_crc, topic)
+    assert offsets, topic
+    pos = offsets[len(offsets) // 2]
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(raw[: pos + 1] + bytes(48) + raw[pos + 49 :])
+    r = cli("replay", bad, "--verify")
+    check_clean(r, (2,))
+    assert "verified" not in r.output and str(bad) in r.output and topic in r.output, r.output
+    if topic == "/dlovr/contact_states":
+        r = cli("states", bad)
+        check_clean(r, (2,))
+        assert str(bad) in r.output and topic in r.output, r.output
