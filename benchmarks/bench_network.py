@@ -1,11 +1,14 @@
 """The network target side by side in one run: a network program, the single-demonstration program
 and the open-loop replay on the same perturbed peg_in_hole trials.
 
-Run: ``.venv/bin/python benchmarks/bench_network.py [--demos 20] [--trials 50] [--workers 2] [--keep DIR]``
+Run: ``.venv/bin/python benchmarks/bench_network.py [--demos 20] [--from runs|script] [--trials 50]
+[--workers 2] [--keep DIR]``
 
-1. ``--demos`` perturbed demonstrations of ``scenes/peg_in_hole.script.toml`` from seed 1
-   (``dlovr record --trials``), merged into a network (``dlovr network``) and compiled into a network
-   program (``dlovr compile --network``);
+1. ``--demos`` demonstrations in scenes perturbed from seed 1, merged into a network (``dlovr
+   network``) and compiled into a network program (``dlovr compile --network``). ``--from runs``
+   (default): recorded runs of the sample program (``dlovr run --trials --record``), a demonstrator
+   who adapts to each scene as a person does; ``--from script``: the scripted demonstration replayed
+   open loop in each scene (``dlovr record --trials``), which reaches the goal in about a quarter;
 2. ``--trials`` trials from seed 0 with the same variation (cable length +-10 %, stiffness x0.5-2,
    friction +-30 %, obstacles +-5 mm): the network program, then the sample program with
    ``--baseline replay``;
@@ -41,6 +44,7 @@ def dlovr(*args: str) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--demos", type=int, default=20)
+    ap.add_argument("--from", dest="source", choices=("runs", "script"), default="runs")
     ap.add_argument("--trials", type=int, default=50)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--keep", help="write everything here instead of a temporary directory")
@@ -50,8 +54,14 @@ def main() -> None:
         d = Path(a.keep) if a.keep else Path(tmp)
         d.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        dlovr("record", "--script", "scenes/peg_in_hole.script.toml", "--trials", str(a.demos), "--seed", "1",
-              *vary, "--workers", str(a.workers), "--force", "-o", str(d / "demos"))  # fmt: skip
+        if a.source == "script":
+            dlovr("record", "--script", "scenes/peg_in_hole.script.toml", "--trials", str(a.demos),
+                  "--seed", "1", *vary, "--workers", str(a.workers), "--force",
+                  "-o", str(d / "demos"))  # fmt: skip
+        else:
+            dlovr("run", "recordings/programs/peg_in_hole.program.json", "--trials", str(a.demos),
+                  "--seed", "1", *vary, "--record", "--workers", str(a.workers),
+                  "-o", str(d / "demos"))  # fmt: skip
         t_demos = time.perf_counter() - t0
         dlovr("network", str(d / "demos"), "-o", str(d / "net.json"))
         dlovr("compile", "--network", str(d / "net.json"), "-o", str(d / "net.prog.json"))
@@ -68,7 +78,8 @@ def main() -> None:
         net = json.loads((d / "network" / "summary.json").read_text())
         single = json.loads((d / "single" / "summary.json").read_text())
     s = prog["summary"]
-    print(f"peg_in_hole, {a.trials} trials (seed 0), {a.demos} demonstrations (seed 1), {a.workers} workers")
+    what = "recorded program runs" if a.source == "runs" else "scripted demonstrations"
+    print(f"peg_in_hole, {a.trials} trials (seed 0), {a.demos} {what} (seed 1), {a.workers} workers")
     print(f"network: {s['nodes']} situations, {s['edges']} transitions, P(goal) from the start "
           f"{s['plan_reach_probability']:.3f} over {s['plan_macros']} macros "
           f"({t_demos:.0f} s to record)")  # fmt: skip

@@ -96,10 +96,14 @@ def test_bad_facts_file(tmp_path):
 
 
 def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
-    """One face for an edge, two for a vertex, no E contact between the ends: one line each, exit 2."""
+    """One face for an edge, two for a vertex, five of one object for a vertex, three of one object for
+    an edge, no E contact between the ends: one line each, exit 2. (Five faces of two objects are a
+    vertex on an edge, which simulations give: accepted.)"""
     for line, message in (
         ("V/G & E/N & V/E^LS[a.F1]", "names at least 2 faces, got 1"),
         ("V/G & E/N & V/VS[a.F1,a.F2]", "names at least 3 faces, got 2"),
+        ("V/G & E/N & V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]", "names 5 faces of a; a vertex contact touches at"),
+        ("V/G & E/N & E/E^P[a.F1,a.F2,a.F3] & V/N", "names 3 faces of a; an edge contact touches at most 2"),
         ("V/G & V/N", "at least one E contact"),
     ):
         f = tmp_path / "seq.txt"
@@ -110,6 +114,10 @@ def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
         assert r.returncode == 2, (line, r.stdout)
         assert f"{f}:2:" in r.stderr and message in r.stderr and "Traceback" not in r.stderr
         assert len(r.stderr.strip().splitlines()) == 1
+    f = tmp_path / "seq.txt"
+    f.write_text("V/G & E/N & V/N\nV/G & E/N & V/VI[block.F3,block.F5,hb.F2,hb.F11,hb.F4]\n")
+    r = subprocess.run([sys.executable, "-m", "dlovr", "transitions", str(f)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
 
 
 def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):

@@ -13,10 +13,19 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from dlovr.model.discrete import DiscreteSituation, FactBook, ModelParams, Vec3, discretize, parse_any
+from dlovr.model.discrete import (
+    DiscreteSituation,
+    FactBook,
+    ModelParams,
+    Vec3,
+    discretize,
+    face_object,
+    parse_any,
+)
 from dlovr.model.topology import NotationError, Situation
 from dlovr.model.transitions import (
     DEFAULT_FLIGHT_S,
@@ -59,6 +68,29 @@ class KeptLine:
     classes: tuple[str, ...]
 
 
+#: Most faces a written contact names of one object: a face contact one, an edge two (the faces that
+#: meet there), a vertex four. A simulation may name more in all (a vertex of one object on another's
+#: edge: 3 + 2), so recordings are read without this check; sequences typed by hand are checked.
+FACES_PER_OBJECT = {"F": 1, "E^P": 2, "E^L": 2, "V": 4}
+
+
+def check_faces_per_object(sit: DiscreteSituation) -> None:
+    """Raise :class:`NotationError` for a contact naming more faces of one object than
+    :data:`FACES_PER_OBJECT` allows (``V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]``)."""
+    for k, c in enumerate(sit.contacts, 1):
+        limit = FACES_PER_OBJECT.get(c.state.env)
+        if limit is None:
+            continue
+        per = Counter(face_object(f) for f in c.faces)
+        for obj, n in sorted(per.items()):
+            if n > limit:
+                what = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}[c.state.env]
+                raise NotationError(
+                    f"contact {k}: {c.format()} names {n} faces of {obj}; {what} contact touches at most "
+                    f"{limit} of one object"
+                )
+
+
 def split_time(text: str) -> tuple[float | None, str]:
     """``"0.012  V/G & E/N & V/N"`` -> ``(0.012, "V/G & E/N & V/N")``; untimed -> ``(None, text)``."""
     m = _TIMED_RE.match(text)
@@ -97,6 +129,8 @@ def parse_sequence(
                 raise SequenceError(lineno, f"time {t:g} s is before the previous line's {out[-1].t:g} s")
         try:
             sit = parse_any(text)
+            if isinstance(sit, DiscreteSituation):
+                check_faces_per_object(sit)
         except NotationError as e:
             raise SequenceError(lineno, str(e)) from None
         if isinstance(sit, DiscreteSituation):
