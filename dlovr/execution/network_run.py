@@ -7,20 +7,24 @@ The loop, from the network's start node and the scene's gripper position:
    the macro toward the goal (its network edges, classes, summed mean displacement and rotation) and
    the nodes its transition may lead to (successors with their expected contact vectors);
 2. the macro runs as a guarded motion like a compiled program's (:mod:`dlovr.execution.executor`):
-   from where the gripper is, along the demonstrated mean motion, ended by the detectors of its
-   classes (or, with ``detect="oracle"``, by the contact tracker), failed at its allowance;
-3. after the detection (or, for a transition without a force signal, the end of its motion) the
-   gripper holds still ``sense_settle`` s, and the **sensed contact vector** is taken from the
-   wrench: the sensed force minus the force sensed in free space (the cable's weight ``-m g`` along
-   z, known from the scene as a robot knows its payload; the first samples of a run are not settled
-   enough to tare on), negated and normalised -- a contact that begins adds about ``-v * F`` to the
-   sensed force (:mod:`dlovr.model.detection`), so the environment's share is ``-v`` times its size;
-   below ``free_force`` N, or half the detection threshold that fired when that is smaller, it is no
-   contact (the zero vector). :func:`dlovr.model.planning.identify` picks the successor whose
-   expected vector (the one its demonstrations sensed, else the sum of its principal contacts') is
-   closest; farther than ``tolerance`` from every one is **a situation outside the network**: the run
-   stops with a report of the sensed vector and the expected ones. With the oracle the node is the
-   one whose principal contacts the tracker sees;
+   from where the gripper is, along its edges' own demonstrated tracks joined one after the other
+   (:func:`plan_track`; each edge keeps the reference demonstration's track where that took it, see
+   :mod:`dlovr.model.network`), ended by the detectors of its classes (or, with
+   ``detect="oracle"``, by the contact tracker), failed at its allowance; the tip's first touch
+   tells where the tip is, as for a compiled program;
+3. after the detection the gripper holds still ``sense_settle`` s, and the **sensed contact vector**
+   is taken from the wrench: the sensed force minus the force sensed in free space (the cable's
+   weight ``-m g`` along z, known from the scene as a robot knows its payload; the first samples of
+   a run are not settled enough to tare on), negated and normalised -- a contact that begins adds
+   about ``-v * F`` to the sensed force (:mod:`dlovr.model.detection`), so the environment's share
+   is ``-v`` times its size; below ``free_force`` N, or half the detection threshold that fired when
+   that is smaller, it is no contact (the zero vector). :func:`dlovr.model.planning.identify` picks
+   the successor whose expected vector (the one its demonstrations sensed, else the sum of its
+   principal contacts') is closest; farther than ``tolerance`` from every one is **a situation
+   outside the network**: the run stops with a report of the sensed vector and the expected ones.
+   With the oracle the node is the one whose principal contacts the tracker sees. A macro that ended
+   by its motion (its transition shows the force no step) is taken to reach its planned target, as
+   in a compiled program;
 4. from the identified node the planner chooses again (``replan`` event when it is not the node
    the previous plan expected); the goal node ends the run, a node with no demonstrated path to the
    goal stops it.
@@ -66,13 +70,16 @@ class NetworkOptions:
     distance between unit vectors) for :func:`dlovr.model.planning.identify`; ``sense_settle`` (s)
     held still before sensing; ``free_force`` (N): a contact force below it is no contact;
     ``max_macros``: the run stops after that many macros; ``tracks``: macros follow their edges' own
-    demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions."""
+    demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions;
+    ``blind_motion``: a macro that ended by its motion (its transition shows no force signal) is taken
+    to have reached its planned target, as in a compiled program, instead of being identified."""
 
     tolerance: float = 0.8
     sense_settle: float = 0.05
     free_force: float = 0.05
     max_macros: int = 50
     tracks: bool = True
+    blind_motion: bool = True
 
 
 @dataclass(frozen=True)
@@ -265,6 +272,10 @@ def run_network_in(
             sensed = sensed_contact_vector(ses.f, tare, _free_force(m, nopts.free_force))
             if opts.detect == "oracle":
                 found = next((s for s in choice.successors if s.node == tn), None)
+            elif run.ended == "motion" and nopts.blind_motion:
+                # a transition without force signal gives the wrench nothing to tell: as a compiled
+                # program does, take the demonstrated motion to have made the planned transition
+                found = next((s for s in choice.successors if s.node == plan.target), None)
             else:
                 from dlovr.model.planning import identify
 
@@ -284,7 +295,7 @@ def run_network_in(
                                        run.ended_at, "outside", sv, None, tn, tp, reason))  # fmt: skip
                 break
             macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
-                                   run.ended_at, "detected", sv, found.node, tn, tp))  # fmt: skip
+                                   run.ended_at, run.ended, sv, found.node, tn, tp))  # fmt: skip
             if found.node != plan.target:
                 replans += 1
                 what = f"reached {found.node} ({found.situation}), not {plan.target}: planning again"

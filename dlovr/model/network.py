@@ -469,6 +469,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
             )
             steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
     sensed = sensed_vectors(demos, demo_keys)
+    reference = reference_demonstration(demo_keys, list(ids.values()))
     by_id = {v: k for k, v in ids.items()}
     nodes = []
     for nid in ids.values():
@@ -505,7 +506,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         edges.append(
             Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
                  tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,
-                 _edge_track(demos, xs, steps[(u, v)]))
+                 _edge_track(demos, xs, steps[(u, v)], reference))
         )  # fmt: skip
     order = list(ids.values())
     net = Network(
@@ -517,13 +518,28 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     return net
 
 
-def _edge_track(demos: Sequence[Demonstration], xs: Sequence[Any], steps: Sequence[Any]) -> EdgeTrack | None:
-    """The representative occurrence's commanded track (:mod:`dlovr.model.tracks`), among the
-    occurrences whose demonstration has commands."""
+def reference_demonstration(demo_keys: Sequence[Sequence[str]], order: Sequence[str]) -> int:
+    """The demonstration whose edges' tracks the network takes where it can: among those that ended in
+    the goal (the most common last situation), one that took the most common sequence of situations
+    (the first such); its tracks were made with one cable, so they join without mixing its length."""
+    goal = _most_common(Counter(k[-1] for k in demo_keys), order)
+    done = [i for i, k in enumerate(demo_keys) if k[-1] == goal]
+    paths = Counter(tuple(demo_keys[i]) for i in done)
+    best = max(paths.values())
+    return next(i for i in done if paths[tuple(demo_keys[i])] == best)
+
+
+def _edge_track(
+    demos: Sequence[Demonstration], xs: Sequence[Any], steps: Sequence[Any], reference: int = -1
+) -> EdgeTrack | None:
+    """The edge's track (:mod:`dlovr.model.tracks`): the reference demonstration's first occurrence
+    when it took the edge, else the representative occurrence among those whose demonstration has
+    commands."""
     have = [k for k, x in enumerate(xs) if demos[x[0]].commands is not None]
     if not have:
         return None
-    k = have[representative([xs[i][2].world for i in have])]
+    mine = [k for k in have if xs[k][0] == reference]
+    k = mine[0] if mine else have[representative([xs[i][2].world for i in have])]
     a, b, _ = steps[k]
     return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)  # type: ignore[arg-type]
 

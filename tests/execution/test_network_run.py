@@ -126,3 +126,20 @@ def test_bad_network_program_is_one_line_exit_2(net, tmp_path):
     assert r.exit_code == 2 and "a program for another scene?" in r.output
     r = cli("run", d / "prog.json", "--trials", 2, "--baseline", "replay", "-o", tmp_path / "t")
     assert r.exit_code == 2 and "no single demonstration" in r.output
+
+
+def test_a_macro_without_force_signal_is_taken_to_reach_its_planned_target(net):
+    """A transition whose demonstrations show no force step ends its macro by motion; the wrench then
+    has nothing to tell, so the run goes on from the planned target (as a compiled program does)
+    instead of stopping at a sensed vector the network did not expect."""
+    _, raw = net
+    raw = copy.deepcopy(raw)
+    raw["nodes"][1]["vector"] = raw["nodes"][1]["sensed"] = TILTED
+    (det,) = raw["edges"][0]["detection"]
+    det["params"].update(force_threshold_n=0.5, step_n=0.01)  # a threshold above the step: no signal
+    res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
+    assert res.success, res.reason
+    assert res.macros[0].ended == "motion" and res.macros[0].identified == "n2"
+    strict = NetworkOptions(tolerance=0.3, blind_motion=False)
+    res = run_network(program(raw), load_scene("table"), ExecOptions(), strict)
+    assert not res.success and res.macros[0].ended == "outside"

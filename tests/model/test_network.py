@@ -356,22 +356,32 @@ def test_merged_detections_take_the_median_of_the_derived_parameters():
 # --------------------------------------------------------------------------------------------------
 
 
-def test_each_edge_keeps_its_representative_occurrences_own_track():
-    """The occurrence nearest the median displacement is the edge's track: commanded poses from
-    entering the source to entering the target, every 10 ms; the JSON round trip is exact."""
+def test_each_edge_keeps_the_reference_demonstrations_track_else_the_representative_one():
+    """An edge the reference demonstration took (one of the most common path to the goal) keeps its
+    track: commanded poses from entering the source to entering the target, every 10 ms. Another
+    edge keeps the occurrence nearest the median displacement. The JSON round trip is exact."""
+    from dlovr.model.network import reference_demonstration
     from dlovr.model.tracks import SAMPLE_S
 
-    cmds = [line_track(v, 40) for v in (0.01, 0.02, 0.012)]
-    demos = [replace(demo(n, [FREE, TIP], [1.0, 1.0], line_track(v)), commands=c)
-             for n, v, c in zip("ABC", (0.01, 0.02, 0.012), cmds, strict=True)]  # fmt: skip
+    def d(name, seq, v):
+        return replace(demo(name, seq, [1.0] * len(seq), line_track(v)), commands=line_track(v, 40))
+
+    lie, groove = [FREE, TIP, LIE], [FREE, GROOVE]
+    demos = [d("A", groove, 0.05), d("B", lie, 0.01), d("C", lie, 0.02), d("D", groove, 0.03),
+             d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]  # fmt: skip
     net = build_network(demos)
-    (e,) = net.edges
-    assert e.track is not None and e.track.demonstration == 2  # 0.012 m/s: the median displacement
-    assert e.track.t[0] == 0.0 and e.track.t[-1] == 1.0 and len(e.track.t) == round(1.0 / SAMPLE_S) + 1
-    np.testing.assert_allclose(e.track.pos[-1] - e.track.pos[0], [0.012, 0.0, 0.0], atol=1e-9)
+    assert net.goal == net.locate(LIE)
+    paths = [["n1", "n4"], ["n1", "n2", "n3"], ["n1", "n2", "n3"]]
+    assert reference_demonstration(paths, ["n1", "n2", "n3", "n4"]) == 1
+    by = {(net.node(e.source).situation, net.node(e.target).situation): e for e in net.edges}
+    tip = by[(FREE, TIP)].track
+    assert tip is not None and tip.demonstration == 1  # B: the first of the most common path to the goal
+    assert tip.t[0] == 0.0 and tip.t[-1] == 1.0 and len(tip.t) == round(1.0 / SAMPLE_S) + 1
+    np.testing.assert_allclose(tip.pos[-1] - tip.pos[0], [0.01, 0.0, 0.0], atol=1e-9)
+    assert by[(FREE, GROOVE)].track.demonstration == 5  # 0.035 m/s: nearest the median of A, D, F
     back = Network.loads(net.dumps())
-    assert back == net and back.edges[0].track == e.track
-    assert build_network([replace(d, commands=None) for d in demos]).edges[0].track is None
+    assert back == net and back.edges[0].track == net.edges[0].track
+    assert build_network([replace(x, commands=None) for x in demos]).edges[0].track is None
 
 
 def test_joined_tracks_repeat_each_motion_from_where_the_last_ended():
