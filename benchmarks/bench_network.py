@@ -4,11 +4,13 @@ and the open-loop replay on the same perturbed peg_in_hole trials.
 Run: ``.venv/bin/python benchmarks/bench_network.py [--demos 20] [--from runs|script] [--trials 50]
 [--workers 2] [--keep DIR]``
 
-1. ``--demos`` demonstrations in scenes perturbed from seed 1, merged into a network (``dlovr
-   network``) and compiled into a network program (``dlovr compile --network``). ``--from runs``
-   (default): recorded runs of the sample program (``dlovr run --trials --record``), a demonstrator
-   who adapts to each scene as a person does; ``--from script``: the scripted demonstration replayed
-   open loop in each scene (``dlovr record --trials``), which reaches the goal in about a quarter;
+1. the sample demonstration (``recordings/peg_in_hole.mcap``, given first: the network's reference
+   demonstration) and ``--demos`` demonstrations in scenes perturbed from seed 1, merged into a
+   network (``dlovr network``) and compiled into a network program (``dlovr compile --network``).
+   ``--from runs`` (default): recorded runs of the sample program (``dlovr run --trials --record``),
+   a demonstrator who adapts to each scene as a person does; ``--from script``: the scripted
+   demonstration replayed open loop in each scene (``dlovr record --trials``), which reaches the
+   goal in about a quarter;
 2. ``--trials`` trials from seed 0 with the same variation (cable length +-10 %, stiffness x0.5-2,
    friction +-30 %, obstacles +-5 mm): the network program, then the sample program with
    ``--baseline replay``;
@@ -63,7 +65,8 @@ def main() -> None:
                   "--seed", "1", *vary, "--record", "--workers", str(a.workers),
                   "-o", str(d / "demos"))  # fmt: skip
         t_demos = time.perf_counter() - t0
-        dlovr("network", str(d / "demos"), "-o", str(d / "net.json"))
+        # the sample demonstration first: the network's reference, whose tracks its macros follow
+        dlovr("network", "recordings/peg_in_hole.mcap", str(d / "demos"), "-o", str(d / "net.json"))
         dlovr("compile", "--network", str(d / "net.json"), "-o", str(d / "net.prog.json"))
         prog = json.loads((d / "net.prog.json").read_text())
         t0 = time.perf_counter()

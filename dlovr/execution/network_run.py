@@ -143,11 +143,80 @@ def plan_track(nprog: Any, plan: Any) -> DemoTrack | None:
     return DemoTrack(pt.t, pt.pos, pt.quat)
 
 
+def _reference_steps(net: Any) -> list[tuple[float, float, Any]]:
+    """The reference demonstration's transitions in time order: (entry into the source, entry into
+    the target, edge), s on its own clock."""
+    ref = net.reference
+    steps = [
+        (e.track.t0, e.track.t0 + float(e.track.t[-1]), e)
+        for e in net.edges
+        if ref is not None and e.track is not None and e.track.demonstration == ref.demonstration
+    ]
+    return sorted(steps, key=lambda x: x[0])
+
+
+def reference_span(nprog: Any, plan: Any, node: str) -> tuple[float, float] | None:
+    """Where the macro lies in the reference demonstration (start and end, s, its own clock), or
+    None: from the reference's latest entry into ``node`` to its entry into the macro's target, when
+    the macro's last (classed) edge is the reference's own (the unclassed steps between are not
+    chosen, as in a compiled program); or, when the macro's transition is spontaneous or instable
+    (``S``, ``I``: the motion does not choose where it leads) and so was the reference's next one
+    from ``node``, to the reference's entry into that transition's target."""
+    net = nprog.network
+    if net.reference is None or not plan.edges:
+        return None
+    steps = _reference_steps(net)
+    last = next((x for x in steps if x[2].id == plan.edges[-1]), None)
+    entries = [t0 for t0, _, e in steps if e.source == node and (last is None or t0 <= last[0] + 1e-9)]
+    if not entries:
+        return None
+    start = max(entries) if last is not None else min(entries)
+    if last is not None:
+        return start, last[1]
+    if not {"S", "I"} & set(plan.classes):
+        return None
+    nxt = next((x for x in steps if x[0] >= start - 1e-9 and x[2].classes), None)
+    return (start, nxt[1]) if nxt is not None and {"S", "I"} & set(nxt[2].classes) else None
+
+
+def reference_goal_entry(nprog: Any) -> float | None:
+    """When the reference demonstration entered the goal (s, its own clock), or None."""
+    net = nprog.network
+    at = [t1 for _, t1, e in _reference_steps(net) if e.target == net.goal]
+    return max(at) if at else None
+
+
+def reference_track(nprog: Any) -> DemoTrack | None:
+    """The reference demonstration's whole commanded track on its own clock (s), or None."""
+    ref = nprog.network.reference
+    return None if ref is None else DemoTrack(ref.t0 + ref.t, ref.pos, ref.quat)
+
+
+@dataclass(frozen=True)
+class _Final:
+    """The plan of the motion after the goal is reached along the reference (no edges, no detection)."""
+
+    edges: tuple[str, ...] = ()
+    classes: tuple[str, ...] = ()
+    target: str = ""
+    final: bool = True
+    world: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    duration: float = 0.0
+    detection: tuple[Any, ...] = ()
+
+
+def _pose_at(track: DemoTrack, t: float) -> tuple[np.ndarray, np.ndarray]:
+    i = max(int(np.searchsorted(track.t, t, side="right")) - 1, 0)
+    return track.pos[i], track.quat[i]
+
+
 def _macro_spec(
-    index: int, nprog: Any, node: str, plan: Any, sim: Any, track: DemoTrack | None = None
+    index: int, nprog: Any, node: str, plan: Any, sim: Any, track: DemoTrack | None = None,
+    span: tuple[float, float] | None = None,
 ) -> MacroSpec:
     """The executor's macro for a network macro plan, starting at the gripper's pose now (with
-    ``track``: its motion is that track's, from ``t = 0`` to its end)."""
+    ``track``: its motion is that track's between the times ``span``, s, or all of it)."""
     net = nprog.network
     src, dst = net.node(node), net.node(plan.target)
     mid = sim.built.mocap_id
@@ -155,11 +224,13 @@ def _macro_spec(
     q = tuple(float(x) for x in sim.data.mocap_quat[mid])
     inv = np.array([q[0], -q[1], -q[2], -q[3]])
     world, rot, duration = tuple(plan.world), tuple(plan.rotation), float(plan.duration)
+    t_end = 0.0
     if track is not None:
-        world = tuple(float(x) for x in track.pos[-1] - track.pos[0])
-        q0, q1 = track.quat[0], track.quat[-1]
+        t0, t_end = span if span is not None else (0.0, float(track.t[-1]))
+        (p0, q0), (p1, q1) = (_pose_at(track, t0), _pose_at(track, t_end))
+        world = tuple(float(x) for x in p1 - p0)
         rot = tuple(float(x) for x in matrix_to_rotvec(quat_to_matrix(q0).T @ quat_to_matrix(q1)))
-        duration = float(track.t[-1])
+        duration = t_end - t0
     rel = tuple(float(x) for x in quat_rotate(inv, np.asarray(world, float)))
     motion = MotionSpec(world, rel, rot, duration, here, q)  # type: ignore[arg-type]
 
@@ -173,7 +244,6 @@ def _macro_spec(
         else DetectionSpec(c, "", {})
         for c in plan.classes
     )  # fmt: skip
-    t_end = duration if track is not None else 0.0
     return MacroSpec(index, tuple(plan.classes), t_end, src.situation, dst.situation, contacts(src),
                      contacts(dst), motion, det, final=plan.final, frame="world")  # fmt: skip
 
@@ -188,9 +258,10 @@ def _free_force(m: MacroSpec, free_force: float) -> float:
 
 
 def _hold(ses: _Session, seconds: float) -> None:
+    """Hold the commanded pose ``seconds``: the gripper, which lags its target at speed, catches up
+    (holding where it is instead would drop the motion still under way)."""
     sim = ses.sim
-    mid = sim.built.mocap_id
-    pos, quat = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
+    pos, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
     for _ in range(round(seconds / ses.dt)):
         ses.step(pos, quat)
 
@@ -229,6 +300,8 @@ def run_network_in(
     head = f"network program {nprog.name}: start {net.start}, goal {net.goal}, detection {opts.detect}"
     ses.emit("start", 0, head)
     node, path, macros, replans = net.start, [net.start], [], 0
+    ref_track, resume = reference_track(nprog), None
+    last_end: float | None = None  # where the last macro ended on the reference's clock (s)
     reason, arrived = "", False
     from dlovr.sim import SimulationDiverged
 
@@ -247,8 +320,12 @@ def run_network_in(
                 break
             plan = choice.macro
             k = len(macros) + 1
-            track = plan_track(nprog, plan) if nopts.tracks else None
-            m = _macro_spec(k, nprog, node, plan, sim, track)
+            span = reference_span(nprog, plan, node) if nopts.tracks else None
+            if span is not None:  # along the reference demonstration: its own track, as a program
+                track = ref_track
+            else:
+                track, resume = (plan_track(nprog, plan) if nopts.tracks else None), None
+            m = _macro_spec(k, nprog, node, plan, sim, track, span)
             ses.emit("plan", k, f"at {node}: edges {' '.join(plan.edges)} toward {plan.target}, "
                                 f"P(goal)={choice.reach_probability:.3f}")  # fmt: skip
             t0 = float(sim.time)
@@ -260,7 +337,9 @@ def run_network_in(
                                        "final", None, node, tn, tp))  # fmt: skip
                 path.append(node)
                 continue
-            run = _run_macro(m, ses, track)
+            run = _run_macro(m, ses, track, False, resume)
+            resume = run.resume_at if span is not None else None
+            last_end = None if span is None else (resume if resume is not None else span[1])
             if run.ended not in ENDED_OK:
                 tn, tp = _true_node(nprog, sim)
                 macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
@@ -307,6 +386,13 @@ def run_network_in(
             ses.emit("failed", 0, reason)
         if arrived or node == net.goal:
             arrived = True
+            # the reference's motion after it entered the goal, as a program's final macro (from
+            # where the last macro stopped on its clock when that followed it)
+            since = last_end if last_end is not None else reference_goal_entry(nprog)
+            if since is not None and ref_track is not None and float(ref_track.t[-1]) > since:
+                span = (since, float(ref_track.t[-1]))
+                fin = _macro_spec(len(macros) + 1, nprog, node, _Final(target=node), sim, ref_track, span)
+                _run_final(fin, ses, ref_track)
             _hold(ses, opts.final_settle)
             ses.emit("end", 0, "network program done")
     except SimulationDiverged as e:

@@ -183,6 +183,7 @@ class Network:
     start: str
     goal: str
     version: int = NETWORK_VERSION
+    reference: EdgeTrack | None = None  # the reference demonstration's whole commanded track
 
     def node(self, node_id: str) -> Node:
         for n in self.nodes:
@@ -219,6 +220,7 @@ class Network:
             "goal": self.goal,
             "starts": [_endpoint_json(p) for p in self.starts],
             "ends": [_endpoint_json(p) for p in self.ends],
+            **({} if self.reference is None else {"reference": self.reference.to_json()}),
             "nodes": [
                 {
                     "id": n.id,
@@ -267,6 +269,7 @@ class Network:
                 f"transition network format {data.get('version')}, this dlovr reads {NETWORK_VERSION}"
             )
         try:
+            ref = data.get("reference")
             nodes = tuple(
                 Node(str(n["id"]), str(n["situation"]), tuple(map(str, n["principal"])), str(n["stability"]),
                      None if n["vector"] is None else _vec(n["vector"]), int(n["visits"]),
@@ -286,6 +289,7 @@ class Network:
                 str(data["scene_name"]), str(data["scene_sha256"]), tuple(map(str, data["demonstrations"])),
                 nodes, edges, tuple(map(_endpoint_from_json, data["starts"])),
                 tuple(map(_endpoint_from_json, data["ends"])), str(data["start"]), str(data["goal"]),
+                NETWORK_VERSION, None if data.get("reference") is None else EdgeTrack.from_json(ref),
             )  # fmt: skip
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise NetworkError(f"bad transition network: {type(e).__name__}: {e}") from None
@@ -513,20 +517,25 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
         _endpoints(firsts, order), _endpoints(lasts, order),
         _most_common(Counter(k for k, _ in firsts), order), _most_common(Counter(k for k, _ in lasts), order),
+        NETWORK_VERSION, _whole_track(demos[reference], reference),
     )  # fmt: skip
     _check(net)
     return net
 
 
 def reference_demonstration(demo_keys: Sequence[Sequence[str]], order: Sequence[str]) -> int:
-    """The demonstration whose edges' tracks the network takes where it can: among those that ended in
-    the goal (the most common last situation), one that took the most common sequence of situations
-    (the first such); its tracks were made with one cable, so they join without mixing its length."""
+    """The demonstration whose tracks the network's macros follow where they can: the first one given
+    that ended in the goal (the most common last situation). Its tracks were made with one cable in
+    one scene, so they join without mixing them; give the demonstration you trust most first."""
     goal = _most_common(Counter(k[-1] for k in demo_keys), order)
-    done = [i for i, k in enumerate(demo_keys) if k[-1] == goal]
-    paths = Counter(tuple(demo_keys[i]) for i in done)
-    best = max(paths.values())
-    return next(i for i in done if paths[tuple(demo_keys[i])] == best)
+    return next(i for i, k in enumerate(demo_keys) if k[-1] == goal)
+
+
+def _whole_track(demo: Demonstration, index: int) -> EdgeTrack | None:
+    """The demonstration's whole commanded track (None without commands): network macros along its
+    path follow it as a compiled program follows its demonstration."""
+    c = demo.commands
+    return None if c is None else stretch(c, index, float(c.t[0]), float(c.t[-1]))
 
 
 def _edge_track(

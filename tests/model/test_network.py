@@ -357,7 +357,7 @@ def test_merged_detections_take_the_median_of_the_derived_parameters():
 
 
 def test_each_edge_keeps_the_reference_demonstrations_track_else_the_representative_one():
-    """An edge the reference demonstration took (one of the most common path to the goal) keeps its
+    """An edge the reference demonstration took (the first given that ended in the goal) keeps its
     track: commanded poses from entering the source to entering the target, every 10 ms. Another
     edge keeps the occurrence nearest the median displacement. The JSON round trip is exact."""
     from dlovr.model.network import reference_demonstration
@@ -371,11 +371,11 @@ def test_each_edge_keeps_the_reference_demonstrations_track_else_the_representat
              d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]  # fmt: skip
     net = build_network(demos)
     assert net.goal == net.locate(LIE)
-    paths = [["n1", "n4"], ["n1", "n2", "n3"], ["n1", "n2", "n3"]]
+    paths = [["n1", "n4"], ["n1", "n3"], ["n1", "n2", "n3"], ["n1", "n2", "n3"]]
     assert reference_demonstration(paths, ["n1", "n2", "n3", "n4"]) == 1
     by = {(net.node(e.source).situation, net.node(e.target).situation): e for e in net.edges}
     tip = by[(FREE, TIP)].track
-    assert tip is not None and tip.demonstration == 1  # B: the first of the most common path to the goal
+    assert tip is not None and tip.demonstration == 1  # B: the first that ended in the goal
     assert tip.t[0] == 0.0 and tip.t[-1] == 1.0 and len(tip.t) == round(1.0 / SAMPLE_S) + 1
     np.testing.assert_allclose(tip.pos[-1] - tip.pos[0], [0.01, 0.0, 0.0], atol=1e-9)
     assert by[(FREE, GROOVE)].track.demonstration == 5  # 0.035 m/s: nearest the median of A, D, F
@@ -402,3 +402,28 @@ def test_joined_tracks_repeat_each_motion_from_where_the_last_ended():
     np.testing.assert_allclose(out.pos[-1], [0.1, 0.2, 0.0], atol=1e-12)
     np.testing.assert_allclose(out.quat[-1], [c, 0.0, 0.0, s], atol=1e-12)
     np.testing.assert_allclose(out.pos[2], [0.1, 0.0, 0.0])
+
+
+def test_network_macros_follow_the_reference_demonstration_where_it_went():
+    """Along the reference's own edges a macro lies on its clock (from its entry into the node to its
+    entry into the target); an instable transition the plan takes elsewhere than the reference (its
+    motion does not choose where it leads) follows the reference's motion through its own one."""
+    from dlovr.execution.network_run import reference_goal_entry, reference_span
+
+    inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
+    goal = "V/G & E/N & V/F[box.F2]"
+
+    def d(name, seq):
+        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
+
+    demos = [d(n, [FREE, TIP, inst, goal]) for n, inst in (("A", inst_x), ("B", inst_y), ("C", inst_y))]
+    prog = NetworkProgram(build_network(demos))
+    net = prog.network
+    assert net.reference is not None and net.reference.demonstration == 0
+    first = prog.replan(net.start, None)
+    assert reference_span(prog, first.macro, net.start) == (0.0, 1.0)
+    tip = net.locate(TIP)
+    at_tip = prog.replan(tip, None)
+    assert at_tip.macro.target == net.locate(inst_y) and at_tip.macro.classes == ("I",)
+    assert reference_span(prog, at_tip.macro, tip) == (1.0, 2.0)  # A's own I, from TIP to inst_x
+    assert reference_goal_entry(prog) == 3.0
