@@ -52,7 +52,7 @@ def network_cmd(
     from dlovr.recording import RecordingError, find_recordings
     from dlovr.recording.demonstrations import network_from_recordings
 
-    paths = find_recordings(recordings)
+    paths = find_recordings(recordings, in_order=True)  # the first is the reference if it reached the goal
     if not paths:
         raise NetworkInputError(f"no recordings found in {', '.join(recordings)}")
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)

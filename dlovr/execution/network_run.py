@@ -72,7 +72,9 @@ class NetworkOptions:
     ``max_macros``: the run stops after that many macros; ``tracks``: macros follow their edges' own
     demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions;
     ``blind_motion``: a macro that ended by its motion (its transition shows no force signal) is taken
-    to have reached its planned target, as in a compiled program, instead of being identified."""
+    to have reached its planned target, as in a compiled program, instead of being identified;
+    ``sigma``: identification weighs each successor's probability by how well its vector fits
+    (:func:`dlovr.model.planning.identify`; None: the nearest vector alone)."""
 
     tolerance: float = 0.8
     sense_settle: float = 0.05
@@ -80,6 +82,7 @@ class NetworkOptions:
     max_macros: int = 50
     tracks: bool = True
     blind_motion: bool = True
+    sigma: float | None = 0.25
 
 
 @dataclass(frozen=True)
@@ -358,7 +361,7 @@ def run_network_in(
             else:
                 from dlovr.model.planning import identify
 
-                found = identify(choice.successors, sensed, nopts.tolerance)
+                found = identify(choice.successors, sensed, nopts.tolerance, nopts.sigma)
             sv = None if sensed is None else tuple(round(float(x), 4) + 0.0 for x in sensed)  # no -0.0
             if found is None:
                 exp = ", ".join(f"{s.node} {list(s.vector) if s.vector is not None else '-'}"

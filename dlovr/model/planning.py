@@ -136,30 +136,42 @@ def _expected(node: Any) -> Vec3 | None:
 
 
 def identify(
-    successors: Sequence[Successor], sensed_vector: Sequence[float] | None, tolerance: float | None = None
+    successors: Sequence[Successor],
+    sensed_vector: Sequence[float] | None,
+    tolerance: float | None = None,
+    sigma: float | None = None,
 ) -> Successor | None:
-    """The successor whose expected contact vector is closest (Euclidean) to the sensed one.
+    """The successor the sensed contact vector shows.
 
     ``sensed_vector`` (world frame, the convention of eq. 2) is normalised; ``None`` or a vector
-    shorter than 1e-9 means no contact (the zero vector). Ties go to the more probable successor, then
-    the smaller node id; successors without a vector are skipped. Returns None when none has a vector
-    or (with ``tolerance``) when the closest is farther than ``tolerance``: a situation outside the
-    network.
+    shorter than 1e-9 means no contact (the zero vector). Without ``sigma``: the successor whose
+    expected vector is closest (Euclidean); ties go to the more probable successor, then the smaller
+    node id. With ``sigma`` (the spread of sensed vectors, a distance between unit vectors): the most
+    probable one given the sensed vector, ``probability * exp(-d^2 / (2 sigma^2))`` (its probability
+    as the prior, a Gaussian in the distance ``d`` as the likelihood; ties to the smaller node id), so
+    that a likely successor a little farther away wins over an unlikely one that happens to be nearer.
+    Successors without a vector are skipped. Returns None when none has a vector or (with
+    ``tolerance``) when the closest is farther than ``tolerance``: a situation outside the network.
     """
     s = np.zeros(3) if sensed_vector is None else np.asarray(sensed_vector, float).reshape(3)
     n = math.sqrt(float(np.sum(s * s)))
     s = s / n if n > 1e-9 else np.zeros(3)
-    best: tuple[float, float, str] | None = None
-    found = None
-    for c in successors:
-        if c.vector is None:
-            continue
-        key = (_dist(s, c.vector), -c.probability, c.node)
-        if best is None or key < best:
-            best, found = key, c
-    if best is None or (tolerance is not None and best[0] > tolerance):
+    scored = [(_dist(s, c.vector), c) for c in successors if c.vector is not None]
+    if not scored:
         return None
-    return found
+    nearest = min(scored, key=lambda x: (x[0], -x[1].probability, x[1].node))
+    if tolerance is not None and nearest[0] > tolerance:
+        return None
+    if sigma is None:
+        return nearest[1]
+    if tolerance is not None:
+        scored = [x for x in scored if x[0] <= tolerance]
+    def posterior(x: tuple[float, Successor]) -> tuple[float, int]:
+        d, c = x
+        num = int(c.node[1:]) if c.node[1:].isdigit() else 0
+        return c.probability * math.exp(-(d**2) / (2.0 * sigma**2)), -num
+
+    return max(scored, key=posterior)[1]
 
 
 class NetworkProgram:

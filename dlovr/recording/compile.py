@@ -62,16 +62,14 @@ class CompileResult:
     warning: str | None = None
 
 
-def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
-    """Recordings named by files or found (``*.mcap``, recursively) in directories, sorted, unique."""
-    out: set[Path] = set()
+def find_recordings(inputs: Sequence[str | Path], in_order: bool = False) -> list[Path]:
+    """Recordings named by files or found (``*.mcap``, recursively) in directories, sorted, unique;
+    ``in_order``: in the order given instead (a directory's sorted), each once, first place kept."""
+    found: list[Path] = []
     for i in inputs:
         p = Path(i)
-        if p.is_dir():
-            out.update(q for q in p.rglob("*.mcap") if q.is_file())
-        else:
-            out.add(p)
-    return sorted(out)
+        found.extend(sorted(q for q in p.rglob("*.mcap") if q.is_file()) if p.is_dir() else [p])
+    return list(dict.fromkeys(found)) if in_order else sorted(set(found))
 
 
 def _sha256(path: Path) -> str:

@@ -283,6 +283,20 @@ def test_identify_ties_tolerance_and_no_vectors():
     assert identify([Successor("n4", "s4", (), None, 1.0)], (0, 0, -1)) is None
 
 
+def test_identify_with_sigma_weighs_probability_by_fit():
+    """With ``sigma`` the successor's probability is the prior and the fit of its vector the
+    likelihood: a likely successor 0.38 away beats an unlikely one that fits exactly at sigma 0.25,
+    not when it is twice as far; outside the tolerance is still outside."""
+    groove = Successor("n12", "groove", (), (-0.21, 0.06, -0.98), 0.75)
+    edge = Successor("n8", "edge", (), (-0.54, 0.0, -0.84), 0.05)
+    sensed = (-0.54, 0.0, -0.84)
+    assert identify([groove, edge], sensed).node == "n8"  # nearest alone
+    assert identify([groove, edge], sensed, 0.8, sigma=0.25).node == "n12"
+    far = Successor("n12", "groove", (), (0.2, 0.0, -0.98), 0.75)
+    assert identify([far, edge], sensed, 0.8, sigma=0.25).node == "n8"
+    assert identify([groove, edge], (1.0, 0.0, 0.0), 0.5, sigma=0.25) is None
+
+
 def test_a_situation_outside_the_network_is_reported():
     prog = NetworkProgram(snapping_network())
     with pytest.raises(NetworkError, match="n99 is not in the network"):
