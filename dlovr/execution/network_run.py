@@ -24,7 +24,7 @@ The loop, from the network's start node and the scene's gripper position:
    outside the network**: the run stops with a report of the sensed vector and the expected ones.
    With the oracle the node is the one whose principal contacts the tracker sees. A macro that ended
    by its motion (its transition shows the force no step) is taken to reach its planned target, as
-   in a compiled program;
+   in a compiled program, unless its transition is spontaneous (``S``: where it landed is sensed);
 4. from the identified node the planner chooses again (``replan`` event when it is not the node
    the previous plan expected); the goal node ends the run, a node with no demonstrated path to the
    goal stops it.
@@ -72,7 +72,8 @@ class NetworkOptions:
     ``max_macros``: the run stops after that many macros; ``tracks``: macros follow their edges' own
     demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions;
     ``blind_motion``: a macro that ended by its motion (its transition shows no force signal) is taken
-    to have reached its planned target, as in a compiled program, instead of being identified;
+    to have reached its planned target, as in a compiled program, instead of being identified (a
+    spontaneous one, ``S``, is identified all the same);
     ``sigma``: identification weighs each successor's probability by how well its vector fits
     (:func:`dlovr.model.planning.identify`; None: the nearest vector alone)."""
 
@@ -354,9 +355,11 @@ def run_network_in(
             sensed = sensed_contact_vector(ses.f, tare, _free_force(m, nopts.free_force))
             if opts.detect == "oracle":
                 found = next((s for s in choice.successors if s.node == tn), None)
-            elif run.ended == "motion" and nopts.blind_motion:
+            elif run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes:
                 # a transition without force signal gives the wrench nothing to tell: as a compiled
                 # program does, take the demonstrated motion to have made the planned transition
+                # (not a spontaneous one, whose outcome the motion does not choose: where the DLO
+                # landed is sensed)
                 found = next((s for s in choice.successors if s.node == plan.target), None)
             else:
                 from dlovr.model.planning import identify

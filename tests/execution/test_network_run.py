@@ -131,7 +131,8 @@ def test_bad_network_program_is_one_line_exit_2(net, tmp_path):
 def test_a_macro_without_force_signal_is_taken_to_reach_its_planned_target(net):
     """A transition whose demonstrations show no force step ends its macro by motion; the wrench then
     has nothing to tell, so the run goes on from the planned target (as a compiled program does)
-    instead of stopping at a sensed vector the network did not expect."""
+    instead of stopping at a sensed vector the network did not expect. A spontaneous one (S) is
+    sensed all the same: where it lands is not the motion's choice."""
     _, raw = net
     raw = copy.deepcopy(raw)
     raw["nodes"][1]["vector"] = raw["nodes"][1]["sensed"] = TILTED
@@ -142,4 +143,10 @@ def test_a_macro_without_force_signal_is_taken_to_reach_its_planned_target(net):
     assert res.macros[0].ended == "motion" and res.macros[0].identified == "n2"
     strict = NetworkOptions(tolerance=0.3, blind_motion=False)
     res = run_network(program(raw), load_scene("table"), ExecOptions(), strict)
+    assert not res.success and res.macros[0].ended == "outside"
+    # a spontaneous transition's outcome is not the motion's to choose: where the DLO landed is sensed
+    raw["edges"][0]["classes"], raw["edges"][0]["label"] = ["S", "E"], "S,E"
+    jump = {"cls": "S", "algorithm": "force_jump", "params": {"jump_n": 0.5, "step_n": 0.01}}
+    raw["edges"][0]["detection"] = [jump, det]
+    res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
     assert not res.success and res.macros[0].ended == "outside"
