@@ -57,6 +57,7 @@ from dlovr.execution.executor import (
 )
 from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, MotionSpec, ProgramSpec
 from dlovr.model.derivation import THRESHOLD_PARAM
+from dlovr.model.program import PoseTrack
 from dlovr.model.tracks import join
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
 
@@ -210,11 +211,6 @@ class _Final:
     detection: tuple[Any, ...] = ()
 
 
-def _pose_at(track: DemoTrack, t: float) -> tuple[np.ndarray, np.ndarray]:
-    i = max(int(np.searchsorted(track.t, t, side="right")) - 1, 0)
-    return track.pos[i], track.quat[i]
-
-
 def _macro_spec(
     index: int, nprog: Any, node: str, plan: Any, sim: Any, track: DemoTrack | None = None,
     span: tuple[float, float] | None = None,
@@ -231,7 +227,8 @@ def _macro_spec(
     t_end = 0.0
     if track is not None:
         t0, t_end = span if span is not None else (0.0, float(track.t[-1]))
-        (p0, q0), (p1, q1) = (_pose_at(track, t0), _pose_at(track, t_end))
+        poses = PoseTrack(track.t, track.pos, track.quat)
+        (p0, q0), (p1, q1) = poses.at(t0), poses.at(t_end)
         world = tuple(float(x) for x in p1 - p0)
         rot = tuple(float(x) for x in matrix_to_rotvec(quat_to_matrix(q0).T @ quat_to_matrix(q1)))
         duration = t_end - t0

@@ -134,8 +134,9 @@ class Edge:
     departures from ``source``; ``durations`` (s) one per demonstrated occurrence, in input order;
     ``demonstrations`` the indices of the demonstrations that took it (with repeats); ``detection``:
     per class, the detection its macro ends with (parameters merged over the occurrences); ``track``:
-    the representative occurrence's commanded gripper track (:mod:`dlovr.model.tracks`; None when
-    the demonstrations carry no commands)."""
+    one occurrence's commanded gripper track, the reference demonstration's where it took the edge,
+    else the representative one (:mod:`dlovr.model.tracks`; None when the demonstrations carry no
+    commands)."""
 
     source: str
     target: str
