@@ -548,6 +548,8 @@ _DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$"
 FACE_COUNTS: dict[str, tuple[int, int | None]] = {
     "F": (1, None), "E^P": (2, None), "E^L": (2, None), "V": (3, None)
 }  # fmt: skip
+#: What a contact on each kind of environment is, for messages.
+CONTACT_KIND = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}
 
 
 def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact:
@@ -572,7 +574,7 @@ def parse_discrete_contact(text: str, where: str = "contact") -> DiscreteContact
             raise NotationError(f"{where}: face {twice[0]} is listed twice in {t!r}")
         lo, hi = FACE_COUNTS[st.env]
         if len(names) < lo or (hi is not None and len(names) > hi):
-            what = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}[st.env]
+            what = CONTACT_KIND[st.env]
             want = f"{lo} to {hi}" if hi is not None else f"at least {lo}"
             raise NotationError(
                 f"{where}: {st.name} is {what} contact and names {want} faces, got {len(names)} in {t!r}"
@@ -603,8 +605,9 @@ def parse_any(text: str) -> Situation | DiscreteSituation:
 
 
 __all__ = [
-    "AUX_STATES", "FACE_COUNTS", "STATES", "ContactFacts", "DiscreteContact", "DiscreteSituation",
-    "DiscreteState", "Discretizer", "FaceFact", "FactBook", "ModelParams", "PairFact", "Stability",
-    "classify_contact", "contact_vector", "discretize", "discretize_contact", "face_object", "parse_any",
+    "AUX_STATES", "CONTACT_KIND", "FACE_COUNTS", "STATES", "ContactFacts", "DiscreteContact",
+    "DiscreteSituation", "DiscreteState", "Discretizer", "FaceFact", "FactBook", "ModelParams", "PairFact",
+    "Stability", "classify_contact", "contact_vector", "discretize", "discretize_contact", "face_object",
+    "parse_any",
     "parse_discrete_contact", "parse_discrete_situation", "pinch_axis", "state",
 ]  # fmt: skip

@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from dlovr.model.discrete import (
+    CONTACT_KIND,
     DiscreteSituation,
     FactBook,
     ModelParams,
@@ -84,9 +85,9 @@ def check_faces_per_object(sit: DiscreteSituation) -> None:
         per = Counter(face_object(f) for f in c.faces)
         for obj, n in sorted(per.items()):
             if n > limit:
-                what = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}[c.state.env]
                 raise NotationError(
-                    f"contact {k}: {c.format()} names {n} faces of {obj}; {what} contact touches at most "
+                    f"contact {k}: {c.format()} names {n} faces of {obj}; {CONTACT_KIND[c.state.env]} "
+                    "contact touches at most "
                     f"{limit} of one object"
                 )
 
