@@ -2,7 +2,8 @@
 
 A network edge merges every occurrence of one transition; its mean displacement is a motion no
 demonstration made (a turn about an edge averaged with a push is neither). So each edge also keeps
-one occurrence's own commanded gripper track: the **representative** occurrence, the one whose world
+one occurrence's own commanded gripper track: the reference demonstration's where it took the edge
+(:mod:`dlovr.model.network`), else the **representative** occurrence, the one whose world
 displacement is nearest the median displacement of all of them (ties: the first). A network macro
 follows the tracks of its edges one after the other, each repeated from where the previous ended
 (:func:`join`), as a compiled program follows its demonstration's track.
@@ -96,17 +97,16 @@ def join(tracks: Sequence[EdgeTrack]) -> PoseTrack:
     and rotation (world frame) from the pose where the one before it ended."""
     if not tracks:
         raise ValueError("no tracks to join")
-    ts: list[np.ndarray] = []
+    ts: list[float] = []
     ps: list[np.ndarray] = []
     qs: list[np.ndarray] = []
     t_end, p_end, q_end = 0.0, tracks[0].pos[0], tracks[0].quat[0]
     for k, tr in enumerate(tracks):
         inv0 = np.array([tr.quat[0][0], -tr.quat[0][1], -tr.quat[0][2], -tr.quat[0][3]])
-        lead = np.array(q_end, dtype=float)
         first = 0 if k == 0 else 1  # the joint's pose is the previous track's last
         for i in range(first, len(tr.t)):
-            ts.append(np.array(t_end + float(tr.t[i])))
+            ts.append(t_end + float(tr.t[i]))
             ps.append(p_end + (tr.pos[i] - tr.pos[0]))
-            qs.append(quat_normalize(quat_mul(quat_mul(tr.quat[i], inv0), lead)))
-        t_end, p_end, q_end = float(ts[-1]), ps[-1], qs[-1]
+            qs.append(quat_normalize(quat_mul(quat_mul(tr.quat[i], inv0), q_end)))
+        t_end, p_end, q_end = ts[-1], ps[-1], qs[-1]
     return PoseTrack(np.array(ts, dtype=float), np.array(ps), np.array(qs))
