@@ -44,6 +44,11 @@ DETECT_MODES = ("force", "oracle")
 #: step, see :mod:`dlovr.model.derivation`) -- its demonstrated motion completed.
 ENDED_OK = ("detected", "motion")
 
+#: Time (s) the gripper holds its last pose after a program (or a replay) before the goal is judged: a
+#: soft, high-friction cable still creeps into place after the motion stops (a tip sliding into a
+#: corner goes on at a few mm/s for a second), and the goal is a situation the cable rests in.
+FINAL_SETTLE_S = 2.0
+
 
 @dataclass(frozen=True)
 class ExecOptions:
@@ -54,7 +59,8 @@ class ExecOptions:
     detectors' low-pass filter; ``allowance``: how far the motion may go, as a multiple of the
     demonstrated one; ``settle`` (s): how long to wait at the end of the allowance; ``min_duration``
     (s): the shortest time a macro's demonstrated motion is repeated in; ``final_settle`` (s): time
-    simulated after the last macro before the goal is judged; ``frame``: ``world`` or ``relative``
+    the gripper holds its last pose after the last macro before the goal is judged
+    (:data:`FINAL_SETTLE_S`); ``frame``: ``world`` or ``relative``
     (see :mod:`dlovr.execution.motion`), unless a macro names its own; ``oracle_hold`` (s): how long
     the oracle wants the expected contacts before it ends a macro; ``start_settle`` (s): the gripper
     holds its start pose this long before the first macro (default none: the demonstrations start
@@ -82,7 +88,7 @@ class ExecOptions:
     max_angular_speed: float = 2.0
     min_duration: float = 0.1
     settle: float = 0.3
-    final_settle: float = 0.3
+    final_settle: float = FINAL_SETTLE_S
     frame: str = "world"
     oracle_hold: float = 0.02
     start_settle: float = 0.0

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.execution.executor import DemoTrack, ExecOptions, execute, principal_states
+from dlovr.execution.executor import FINAL_SETTLE_S, DemoTrack, ExecOptions, execute, principal_states
 from dlovr.execution.programs import ProgramError, ProgramSpec, find_recording
 from dlovr.execution.scoring import RunResult, score
 
@@ -141,10 +141,11 @@ class OpenLoopResult:
 
 
 def run_openloop(
-    program: ProgramSpec, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = 0.3
+    program: ProgramSpec, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = FINAL_SETTLE_S
 ) -> OpenLoopResult:
     """Replay ``track`` (every step's commanded gripper pose) in a fresh simulation of ``scene``, then
-    ``settle`` s more, and judge the last debounced situation against ``program``'s goal."""
+    hold the last command ``settle`` s more (as long as a program holds its last pose), and judge the
+    last debounced situation against ``program``'s goal."""
     from dlovr.sim import SimulationDiverged
 
     wall0 = time.perf_counter()
