@@ -290,7 +290,7 @@ class Network:
                 str(data["scene_name"]), str(data["scene_sha256"]), tuple(map(str, data["demonstrations"])),
                 nodes, edges, tuple(map(_endpoint_from_json, data["starts"])),
                 tuple(map(_endpoint_from_json, data["ends"])), str(data["start"]), str(data["goal"]),
-                NETWORK_VERSION, None if data.get("reference") is None else EdgeTrack.from_json(ref),
+                NETWORK_VERSION, None if ref is None else EdgeTrack.from_json(ref),
             )  # fmt: skip
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise NetworkError(f"bad transition network: {type(e).__name__}: {e}") from None
