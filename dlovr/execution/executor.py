@@ -36,7 +36,7 @@ from dlovr.model.detection import (
     make_detector,
 )
 from dlovr.model.transitions import principal, successional_contacts
-from dlovr.transforms import quat_rotate
+from dlovr.transforms import dot, norm, quat_rotate
 
 DETECT_MODES = ("force", "oracle")
 #: How a macro may end and the program go on: its transition detected, or -- a macro whose
@@ -362,7 +362,7 @@ def touches_tip(m: MacroSpec) -> bool:
     ``E`` that releases nothing and establishes only tip (``V/``) contacts, its demonstrated motion
     within 25 degrees of the gripper's -z axis (the cable leaves the gripper along -z)."""
     mo = m.motion
-    d = math.sqrt(sum(float(x) ** 2 for x in mo.relative))
+    d = norm(mo.relative)
     return (
         m.classes == ("E",) and not m.released and bool(m.established)
         and all(c.state.startswith("V/") for c in m.established)
@@ -377,7 +377,7 @@ def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
     p1, _ = path.at(1.0)
     ps, qs = path.at(s)
     down = quat_rotate(np.asarray(qs, dtype=float), np.array([0.0, 0.0, -1.0]))
-    along = sum((float(p1[i]) - float(ps[i])) * float(down[i]) for i in range(3))
+    along = dot([float(p1[i]) - float(ps[i]) for i in range(3)], down)
     return (0.0, 0.0, -along)
 
 
