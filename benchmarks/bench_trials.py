@@ -3,7 +3,7 @@
 Run: ``.venv/bin/python benchmarks/bench_trials.py [--program recordings/programs/peg_in_hole.program.json]
 [--trials 3] [--baseline]``
 
-Runs ``--trials`` perturbed trials (the issue's variation: cable length +-10 %, stiffness x0.5-2,
+Runs ``--trials`` perturbed trials (the variation of docs/programs.md: cable length +-10 %, stiffness x0.5-2,
 friction +-30 %, obstacles +-5 mm) one after the other in this process, with force detection and
 the demonstration's recorded path, and prints wall time per trial, simulated seconds per trial,
 trials per minute on one core (with ``--baseline`` a trial includes the open-loop replay) and the

@@ -12,7 +12,7 @@ decoded (viser's wire format: zstd-compressed msgpack) and timestamped as it arr
   from sending it until the first frame carrying both the cable and a moved gripper (they are
   published together). Median and 90th percentile over ``--trials``.
 
-Targets (issue 21): at least 60 updates/s, at most 50 ms median latency. The server's own publish rate
+Targets: at least 60 updates/s, at most 50 ms median latency. The server's own publish rate
 is printed beside the count that reaches the page: on a loaded machine the two differ when the
 server's send loop runs late and sends two publishes in one frame.
 """

@@ -1,4 +1,4 @@
-"""What the CLI says (issue 15, items 6 and 7): scenes named by --scene and by scripts, a diverged run,
+"""What the CLI says: scenes named by --scene and by scripts, a diverged run,
 times and counts in tables, CSV and JSON, --help summaries, and replay of an embedded scene beyond
 the documented limits (refused; its temporary folder removed on every exit path)."""
 

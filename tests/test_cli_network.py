@@ -1,4 +1,4 @@
-"""`dlovr network` and `dlovr compile --network` on the sample recordings (issue 19), and the HTML view
+"""`dlovr network` and `dlovr compile --network` on the sample recordings, and the HTML view
 in headless Chromium (Debian's ``chromium``; skipped without it, as in tests/ui/test_ui.py)."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """A non-editable install has everything: the wheel carries the built-in scenes, scripts and meshes
-(issue 15, item 8).
+(in ``dlovr/_scenes``).
 
 The wheel is built from a copy of the package's sources (``--no-build-isolation --no-index``: the
 test environment's setuptools and wheel, no network), installed into a fresh virtual environment

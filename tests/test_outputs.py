@@ -1,5 +1,5 @@
 """Output files of every command: unwritable paths give one line and exit 2, missing parent
-directories are created, and a failed write leaves no partial file (issue 15, item 4)."""
+directories are created, and a failed write leaves no partial file."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Scene files (issue 3): built-in scenes, validation errors (one test per kind), the CLI."""
+"""Scene files: built-in scenes, validation errors (one test per kind), the CLI."""
 
 from __future__ import annotations
 

@@ -58,7 +58,7 @@ class _PairFacts(_Classifier):
         return self._book
 
     def pair_fact(self, a: str, b: str) -> PairFact:
-        """Concave/convex and free-space opening angle of two faces (any objects), NOTES.md method.
+        """Concave/convex and free-space opening angle of two faces (any objects), docs/model.md 3.2.
 
         From the closest points of the two faces, probe in-plane toward the other face's outward side
         (a distance of the DLO radius): the pair is concave iff both faces continue there, exposed.

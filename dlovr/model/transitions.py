@@ -428,7 +428,7 @@ def kept_classes(kept: Sequence[_KeptLike]) -> list[tuple[str, ...]]:
 S = TypeVar("S", bound=Hashable)
 
 DEFAULT_HOLD_S = 0.01
-"""Default flicker hold time (s): NOTES.md measured that about 10 ms keeps real semi-stable states."""
+"""Default flicker hold time (s): about 10 ms suppresses flicker and still keeps real semi-stable states."""
 
 DEFAULT_FLIGHT_S = 0.3
 """Default flight time (s): a DLO tip falls 4 cm in about 0.09 s."""

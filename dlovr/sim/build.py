@@ -1,6 +1,6 @@
 """Building the MuJoCo model of a scene: obstacles, the cable rod and the gripper.
 
-The model (see ``../shared/NOTES.md``, "The cable in MuJoCo 4.0"):
+The model (MuJoCo 4.0):
 
 - obstacles: one static body per scene object, one mesh geom per *convex piece* of the object
   (geom name ``"<object>.P<k>"``), so that every contact names its object and piece;
@@ -56,7 +56,7 @@ GRIPPER = "gripper"
 TIMESTEP = 0.002
 CONTACT_SOLREF = (0.004, 1.0)
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
-#: Detect-only band (no force) beyond the surface: cuts contact flicker (NOTES.md).
+#: Detect-only band (no force) beyond the surface: cuts contact flicker.
 CONTACT_GAP = 0.001
 EQ_SOLREF = (0.004, 1.0)
 EQ_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)

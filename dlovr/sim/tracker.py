@@ -2,7 +2,7 @@
 
 No MuJoCo: it reads the cable points and, when given, the raw contact arrays of
 :class:`dlovr.sim.ContactArrays` (to know which points to classify and to attach normal forces).
-Contacts are labelled geometrically (NOTES.md): a point touches a piece when its centerline is within
+Contacts are labelled geometrically (docs/model.md): a point touches a piece when its centerline is within
 ``radius + enter_tol`` of it, and keeps touching until it is farther than ``radius + leave_tol``
 (hysteresis). The per-step situations are debounced (docs/model.md: flicker, brief intermediate
 states, flights) into the demonstration's kept situations.

@@ -1,7 +1,7 @@
 """The real-time thread of :class:`dlovr.ui.server.DemoServer`: steps the simulation paced to the wall
 clock, applies a new gripper target at once, and publishes at ``publish_hz``.
 
-What bounded the publish rate before (issue 21): the simulation was stepped in chunks of 5 steps and
+What bounded the publish rate before: the simulation was stepped in chunks of 5 steps and
 the publish time was only checked between chunks, so on a loaded machine (a step taking a few ms of
 wall time) publishes came late and the schedule slipped; the schedule itself was 40 Hz. Now the
 stepping stops at the next publish time (:meth:`dlovr.ui.session.Session.advance` takes a deadline),

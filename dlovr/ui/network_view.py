@@ -1,4 +1,4 @@
-"""The current scene's transition network in the browser UI (no viser; issue 19): where it comes
+"""The current scene's transition network in the browser UI (no viser): where it comes
 from, and the HTML (inline SVG of :mod:`dlovr.network_html`) with the live situation highlighted.
 
 The network of a scene is the file ``<scene>.network.json`` (written by ``dlovr network``) in the

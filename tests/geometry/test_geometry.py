@@ -1,4 +1,4 @@
-"""Geometry (issue 3): decomposition, face names, point classification, pair facts, edge table."""
+"""Geometry: decomposition, face names, point classification, pair facts, edge table."""
 
 from __future__ import annotations
 

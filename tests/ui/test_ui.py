@@ -60,7 +60,7 @@ def test_server_runs_in_real_time_and_reports_the_table_contact(server: DemoServ
     with server.lock:
         classes = point_classes(server.session.state, len(server.session.record.points))
     assert Stability.STABLE in classes  # points on the table are coloured as stable
-    # the contact normal forces flicker with the stiff contacts (NOTES.md): some steps carry none
+    # the contact normal forces flicker with the stiff contacts: some steps carry none
     wait_for(lambda: server.status()["force"] > 0, what="a contact normal force")
     assert len(st["gripper_force"]) == 3
     # bounded speed: the gripper never jumped to the target

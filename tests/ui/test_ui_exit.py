@@ -1,4 +1,4 @@
-"""The UI's temporary folders and its end (issue 15, item 6: temporary folders removed on every exit
+"""The UI's temporary folders and its end (temporary folders removed on every exit
 path): opening a recording unpacks its embedded scene into a ``dlovr-ui-*`` folder, which goes when
 the process ends, normally or on SIGTERM; ``dlovr serve`` ends on SIGTERM as on Ctrl-C, finishing a
 recording in progress."""

@@ -1,4 +1,4 @@
-"""Running a program in `dlovr serve` (issue 18, in the browser) and the network view (issue 19), in
+"""Running a program in `dlovr serve` (in the browser) and the network view, in
 headless chromium. Screenshots go to ``tests/artifacts/`` (ignored by git; or ``DLOVR_UI_ARTIFACTS``).
 """
 

@@ -1,4 +1,4 @@
-"""The demonstrator's view of `dlovr serve` in headless chromium (issue 21): framing, the force plot,
+"""The demonstrator's view of `dlovr serve` in headless chromium: framing, the force plot,
 the faces in contact, the program after a recording.
 
 Each test saves a screenshot of the state it checked under ``tests/artifacts/`` (or the folder named
