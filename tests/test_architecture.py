@@ -1,5 +1,5 @@
 """The package layout holds: the model is pure, dlovr's modules import each other without cycles, and
-no module or class outgrows a reader (README, "Layout")."""
+no module or class outgrows a reader (docs/architecture.md, "Layout")."""
 
 from __future__ import annotations
 
@@ -173,7 +173,7 @@ def test_modules_and_classes_stay_small():
     assert not too_long, "; ".join(too_long)
 
 
-# The README's data flow: each package imports only the ones below it, ``cli*`` is on top, and
+# The data flow of docs/architecture.md: each package imports only the ones below it, ``cli*`` is on top, and
 # ``batch`` imports no other dlovr module.
 LAYERS = ("dlovr.model", "dlovr.geometry", "dlovr.sim", "dlovr.recording", "dlovr.execution", "dlovr.ui")
 
@@ -196,7 +196,7 @@ def test_packages_import_only_the_layers_below_them_and_cli_is_on_top():
                 upward.append(f"{name} -> {d}")
             if here == "dlovr.batch" and there != "dlovr.batch":
                 upward.append(f"{name} -> {d}")
-    assert not upward, "imports against the README's data flow: " + "; ".join(sorted(upward))
+    assert not upward, "imports against the data flow of docs/architecture.md: " + "; ".join(sorted(upward))
 
 
 def test_rotation_helpers_live_in_transforms_only():

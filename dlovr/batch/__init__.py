@@ -18,7 +18,7 @@ task's value depends on its arguments only, not on where it ran. A task whose wo
 (at most ``retries`` more times) and reported; a task that raises is not run again (its error is its
 result). Every task yields exactly one result. Files a task writes land where the task writes them:
 with a remote cluster, inputs and outputs must be on storage every node sees under the same paths
-(README, "Scaling out").
+(docs/scaling.md).
 
 Modules: :mod:`dlovr.batch.core` (tasks, results, bookkeeping), :mod:`dlovr.batch.local` (this
 process, worker processes), :mod:`dlovr.batch.on_ray` (Ray).

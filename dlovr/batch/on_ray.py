@@ -34,7 +34,7 @@ _LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
 _AUTH_ENV = "RAY_AUTH_MODE"
 _AUTH_HINT = (
     "; if the cluster uses token authentication, set RAY_AUTH_MODE=token and its token "
-    "(RAY_AUTH_TOKEN or ~/.ray/auth_token) here (README, Scaling out)"
+    "(RAY_AUTH_TOKEN or ~/.ray/auth_token) here (docs/scaling.md)"
 )
 
 

@@ -215,7 +215,7 @@ ray.shutdown()
 
 def test_compile_joins_a_running_cluster_at_its_address(tmp_path):
     """``--cluster HOST:PORT`` joins a cluster started elsewhere (here: another process, with token
-    authentication as Ray sets it up by default, the token given to both as README says): the
+    authentication as Ray sets it up by default, the token given to both as docs/scaling.md says): the
     cluster saw dlovr's driver, and the programs are those of local processes."""
     import secrets
     import subprocess

@@ -146,7 +146,7 @@ def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
 
 
 def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose(peg):
-    """Trial 12 of seed 0 (README): a 5.5 % longer cable, 0.67x as stiff, with 23 % more friction.
+    """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more friction.
     Its tip lands in the hole 2 cm short of the corner, and when the last slide stops it is still
     creeping toward it at a few mm/s. It arrives more than 0.3 s into the final hold (the hold was
     0.3 s, and this trial failed): the program holds its last pose FINAL_SETTLE_S before it is judged,

@@ -108,7 +108,7 @@ def test_time_box_stays_inside_the_slider_range(server: DemoServer):
 
 
 def test_the_panel_and_the_readme_name_the_forces_alike(server: DemoServer):
-    """The two forces have one name each, the same in the panel and in the README: the wrench at the
+    """The two forces have one name each, the same in the panel and in docs/ui.md: the wrench at the
     gripper and the sum of the contact normal forces (they were "Gripper force" and "Contact force on
     the cable", defined differently in each)."""
     import re
@@ -117,7 +117,7 @@ def test_the_panel_and_the_readme_name_the_forces_alike(server: DemoServer):
     names = re.findall(r"\*\*([^*]+):\*\*", server.state_panel.markdown.content)
     forces = [n for n in names if "force" in n.lower() or "wrench" in n.lower()]
     assert forces == ["Gripper wrench", "Contact normal force (sum)"]
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "ui.md").read_text(encoding="utf-8")
     for name in forces:
         assert f"*{name}*" in readme, name
     assert "Gripper force" not in readme and "Contact force on the cable" not in readme
