@@ -1,9 +1,14 @@
-"""Quaternions, rotations and poses: the one place for them (pure Python + numpy).
+"""Vectors, quaternions, rotations and poses: the one place for them (pure Python + numpy).
 
 Quaternions are ``[w, x, y, z]`` (MuJoCo's order; Foxglove's is xyzw). Rotation vectors are
 axis * angle in radians. The helpers that feed the simulation (:func:`dot`, :func:`norm`,
 :func:`quat_normalize`, :func:`quat_mul`, :func:`quat_rotate`, :func:`slerp`) round the same on every
 processor: they avoid BLAS, so a recording replays bit for bit on another machine.
+
+The vector helpers (:func:`dot`, :func:`norm`, :func:`unit`, :func:`units`, :func:`angle_deg`) share
+one zero-vector rule: a vector of zero length, or shorter than the caller's tolerance, has no
+direction. :func:`unit` returns None for it, :func:`units` (row by row) a zero row, and
+:func:`angle_deg` 180 degrees (no direction agrees with it).
 """
 
 from __future__ import annotations
@@ -33,6 +38,35 @@ def dot(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> flo
 def norm(v: Sequence[float] | np.ndarray) -> float:
     """Euclidean length of a short vector, the same on every machine (see :func:`dot`)."""
     return math.sqrt(dot(v, v))
+
+
+def unit(v: Sequence[float] | np.ndarray, tol: float = 0.0) -> np.ndarray | None:
+    """``v / |v|`` (float64), or None when ``v`` has no direction: its length is zero or below
+    ``tol`` (the zero-vector rule, see the module docstring). The length is :func:`norm`'s: it rounds
+    as numpy's ``sqrt((v * v).sum())`` for vectors of fewer than 8 entries."""
+    a = np.asarray(v, dtype=float)
+    n = norm(a)
+    return None if n < tol or n == 0.0 else a / n
+
+
+def units(v: np.ndarray) -> np.ndarray:
+    """Unit vectors of the rows of ``v`` (along its last axis; a single vector too), lengths as
+    ``np.linalg.norm(v, axis=-1)``; a row of zero length stays zero (the zero-vector rule, see the
+    module docstring: no direction)."""
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n == 0.0, 1.0, n)
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray, tol: float = 1e-12) -> float:
+    """Angle between ``a`` and ``b`` in degrees (0..180); 180 when either is shorter than ``tol``
+    (the zero-vector rule: no direction agrees with it). Lengths and the dot product as :func:`norm`
+    and :func:`dot` round them."""
+    na, nb = norm(a), norm(b)
+    if na < tol or nb < tol:
+        return 180.0
+    c = dot(a, b) / (na * nb)
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
 def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -150,6 +184,7 @@ def quat_to_rotvec(q: Sequence[float] | np.ndarray) -> tuple[float, float, float
 
 
 __all__ = [
+    "angle_deg",
     "dot",
     "matrix_to_rotvec",
     "norm",
@@ -161,4 +196,6 @@ __all__ = [
     "quat_to_rotvec",
     "rotvec_to_quat",
     "slerp",
+    "unit",
+    "units",
 ]

@@ -211,3 +211,22 @@ def test_rotation_helpers_live_in_transforms_only():
             if isinstance(node, ast.FunctionDef) and any(w in node.name.lower() for w in words):
                 elsewhere.append(f"{name}.{node.name}")
     assert not elsewhere, f"rotation helpers outside dlovr.transforms: {elsewhere}"
+
+
+#: Names of vector helpers (with or without leading underscores): ``dlovr.transforms`` has them.
+_VECTOR_HELPERS = ("unit", "units", "norm", "dot", "angle", "angle_deg", "normalize", "normalise")
+
+
+def test_vector_helpers_live_in_transforms_only():
+    """Dot products, lengths, unit vectors and angles: one place, ``dlovr/transforms.py``, with one
+    zero-vector rule (a module-level function of such a name anywhere else is a second copy, likely
+    with a rule of its own). The compiled kernels' ``dot3``/``norm3`` (numba, scalar arguments,
+    rounded as the numpy code they replaced) are kernel arithmetic, not copies."""
+    elsewhere = []
+    for name, path in _modules().items():
+        if name == "dlovr.transforms":
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef) and node.name.lstrip("_").lower() in _VECTOR_HELPERS:
+                elsewhere.append(f"{name}.{node.name}")
+    assert not elsewhere, f"vector helpers outside dlovr.transforms: {elsewhere}"

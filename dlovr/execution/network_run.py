@@ -59,7 +59,7 @@ from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, Motio
 from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.program import PoseTrack
 from dlovr.model.tracks import join
-from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
+from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix, unit
 
 #: Gravity (m/s^2) for the cable's weight, the force sensed in free space.
 GRAVITY = 9.81
@@ -453,9 +453,7 @@ def format_network_result(res: NetworkRunResult) -> str:
 def sensed_contact_vector(force: Any, tare: Any, free_force: float) -> np.ndarray | None:
     """The sensed contact vector: ``-(force - tare)`` normalised (world frame); None below
     ``free_force`` N (no contact). See the module docstring for the sign."""
-    d = -(np.asarray(force, float) - np.asarray(tare, float))
-    n = float(np.sqrt((d * d).sum()))
-    return None if n < free_force else d / n
+    return unit(-(np.asarray(force, float) - np.asarray(tare, float)), free_force)
 
 
 def load_network_program(path: str | Any) -> Any:

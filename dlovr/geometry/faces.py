@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from dlovr.geometry.vectors import _unit
+from dlovr.transforms import units
 
 _ANGLE_TOL = 1e-5  # rad: triangles whose normals differ less are coplanar (one face)
 
@@ -59,7 +59,7 @@ def object_faces(mesh: trimesh.Trimesh) -> list[ObjectFace]:
     for r in np.unique(roots):
         tris = np.nonzero(roots == r)[0]
         w = tri_area[tris]
-        n = _unit((mesh.face_normals[tris] * w[:, None]).sum(axis=0))
+        n = units((mesh.face_normals[tris] * w[:, None]).sum(axis=0))
         area = float(w.sum())
         cen = (tri_cent[tris] * w[:, None]).sum(axis=0) / max(area, 1e-300)
         off = float(n @ cen)

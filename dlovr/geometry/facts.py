@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dlovr.geometry.classify import _Classifier
-from dlovr.geometry.vectors import _points_in_triangles, _unit
+from dlovr.geometry.vectors import _points_in_triangles
 from dlovr.model.discrete import ContactFacts, FaceFact, FactBook, PairFact
 from dlovr.model.topology import Contact
+from dlovr.transforms import units
 
 if TYPE_CHECKING:
     from dlovr.geometry.objects import GeomObject
@@ -69,14 +70,14 @@ class _PairFacts(_Classifier):
         cosang = float(np.clip(na @ nb, -1.0, 1.0))
         alpha = float(np.degrees(np.arccos(cosang)))
         cross = np.cross(na, nb)
-        crease = tuple(float(x) for x in _unit(cross)) if np.linalg.norm(cross) > 1e-9 else None
+        crease = tuple(float(x) for x in units(cross)) if np.linalg.norm(cross) > 1e-9 else None
         if np.linalg.norm(cross) <= 1e-12:
             # parallel (same side: one plane; opposite: facing walls, a slot): treat as concave
             return PairFact(a, b, True, 180.0 - alpha, None)
         ta, tb = oa.face_tris[ka], ob.face_tris[kb]
         pa, pb = _closest_between_triangle_sets(ta, tb)
-        ua = _unit(nb - cosang * na)
-        ub = _unit(na - cosang * nb)
+        ua = units(nb - cosang * na)
+        ub = units(na - cosang * nb)
         s = max(self.radius, 1e-6)
         tol = 1e-9 * max(1.0, float(np.abs(pa).max()))
 
@@ -118,7 +119,7 @@ def _shared_edge_middle(
     on = (np.abs((verts - pa) @ na) <= tol) & (np.abs((verts - pa) @ nb) <= tol)
     if on.sum() < 2:
         return pa, pb
-    c = _unit(crease)
+    c = units(crease)
     t = (verts[on] - pa) @ c
     mid = pa + 0.5 * (t.min() + t.max()) * c
     if _points_in_triangles(mid[None], ta, tol)[0] and _points_in_triangles(mid[None], tb, tol)[0]:
@@ -133,7 +134,7 @@ def _closest_between_triangle_sets(ta: np.ndarray, tb: np.ndarray) -> tuple[np.n
     def vert_tri(vs: np.ndarray, tris: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         # closest points from vertices vs (m,3) to triangles (t,3,3); via face projection or edges
         a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-        n = _unit(np.cross(b - a, c - a))
+        n = units(np.cross(b - a, c - a))
         dd = np.einsum("mtk,tk->mt", vs[:, None] - a[None], n)
         proj = vs[:, None] - dd[..., None] * n[None]
         ins = np.ones(dd.shape, dtype=bool)

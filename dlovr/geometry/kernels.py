@@ -16,13 +16,28 @@ multiply-adds, x first; BLAS rounds differently on other processors, these kerne
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from dlovr.geometry.packing import E_, EXTERNAL, F_, HEAD, INTERNAL, MIXED, O_, P_, T_
+from dlovr.geometry.packing import (
+    E_,
+    EXTERNAL,
+    F_,
+    FLOAT_SECTIONS,
+    HEAD,
+    INT_SECTIONS,
+    INTERNAL,
+    MIXED,
+    O_,
+    P_,
+    T_,
+)
 from dlovr.jit import check_cache, fma, njit
 
-_FO = HEAD  # float section offsets
-_IO = HEAD + 12  # integer section offsets
+# the header's offsets (packing's layout): the float sections' and their end, then the integer ones'
+_N_FO, _N_IO = len(FLOAT_SECTIONS) + 1, len(INT_SECTIONS) + 1
+_FO, _IO = HEAD, HEAD + _N_FO
 _INF = np.inf
 
 # --------------------------------------------------------------------------------------------------
@@ -106,32 +121,58 @@ def block_sum(a: np.ndarray, lo: int, n: int) -> float:
     return res
 
 
+class Pieces(NamedTuple):
+    """The sections of the packed pieces (:func:`unpack`; world frame, metres; see
+    :class:`dlovr.geometry.packing.PackedPieces`), P pieces of at most F faces, E edges, T exposed
+    triangles, O outline segments."""
+
+    normals: np.ndarray  # (P,F,3) unit outward face normals
+    offsets: np.ndarray  # (P,F) face plane offsets
+    lo: np.ndarray  # (P,3) box
+    hi: np.ndarray  # (P,3)
+    eps: np.ndarray  # (P,) tolerance
+    edge_a: np.ndarray  # (E,3) edge end points
+    edge_b: np.ndarray  # (E,3)
+    tri_start: np.ndarray  # (T,3,3) triangle edge start points
+    tri_in: np.ndarray  # (T,3,3) triangle inward in-plane edge normals
+    outline_a: np.ndarray  # (O,3) outline segment end points
+    outline_b: np.ndarray  # (O,3)
+    nfaces: np.ndarray  # (P,) faces per piece
+    label: np.ndarray  # (P,F) EXTERNAL, INTERNAL or MIXED
+    name: np.ndarray  # (P,F) face id, -1 for none
+    owner: np.ndarray  # (P,) object index
+    edge_range: np.ndarray  # (P+1,) each piece's edges
+    edge_faces: np.ndarray  # (E,2) the two faces of each edge
+    tri_range: np.ndarray  # (P*F+1,) each face's exposed triangles
+    outline_range: np.ndarray  # (P*F+1,) each face's outline segments
+
+
 @njit(inner=True)
-def unpack(gf: np.ndarray, gi: np.ndarray):
+def unpack(gf: np.ndarray, gi: np.ndarray) -> Pieces:
     """The sections of the packed pieces as views (see :class:`dlovr.geometry.packing.PackedPieces`)."""
     n_p, n_f, n_e, n_t, n_o = gi[P_], gi[F_], gi[E_], gi[T_], gi[O_]
-    fo = gi[_FO : _FO + 12]
-    io = gi[_IO : _IO + 9]
-    return (
-        gf[fo[0] : fo[1]].reshape((n_p, n_f, 3)),  # 0 normals
-        gf[fo[1] : fo[2]].reshape((n_p, n_f)),  # 1 offsets
-        gf[fo[2] : fo[3]].reshape((n_p, 3)),  # 2 lo
-        gf[fo[3] : fo[4]].reshape((n_p, 3)),  # 3 hi
-        gf[fo[4] : fo[5]],  # 4 eps
-        gf[fo[5] : fo[6]].reshape((n_e, 3)),  # 5 edge_a
-        gf[fo[6] : fo[7]].reshape((n_e, 3)),  # 6 edge_b
-        gf[fo[7] : fo[8]].reshape((n_t, 3, 3)),  # 7 triangle edge starts
-        gf[fo[8] : fo[9]].reshape((n_t, 3, 3)),  # 8 triangle inward edge normals
-        gf[fo[9] : fo[10]].reshape((n_o, 3)),  # 9 outline_a
-        gf[fo[10] : fo[11]].reshape((n_o, 3)),  # 10 outline_b
-        gi[io[0] : io[1]],  # 11 nfaces
-        gi[io[1] : io[2]].reshape((n_p, n_f)),  # 12 label
-        gi[io[2] : io[3]].reshape((n_p, n_f)),  # 13 name
-        gi[io[3] : io[4]],  # 14 owner
-        gi[io[4] : io[5]],  # 15 edge_range
-        gi[io[5] : io[6]].reshape((n_e, 2)),  # 16 edge_faces
-        gi[io[6] : io[7]],  # 17 tri_range
-        gi[io[7] : io[8]],  # 18 outline_range
+    fo = gi[_FO : _FO + _N_FO]
+    io = gi[_IO : _IO + _N_IO]
+    return Pieces(
+        gf[fo[0] : fo[1]].reshape((n_p, n_f, 3)),
+        gf[fo[1] : fo[2]].reshape((n_p, n_f)),
+        gf[fo[2] : fo[3]].reshape((n_p, 3)),
+        gf[fo[3] : fo[4]].reshape((n_p, 3)),
+        gf[fo[4] : fo[5]],
+        gf[fo[5] : fo[6]].reshape((n_e, 3)),
+        gf[fo[6] : fo[7]].reshape((n_e, 3)),
+        gf[fo[7] : fo[8]].reshape((n_t, 3, 3)),
+        gf[fo[8] : fo[9]].reshape((n_t, 3, 3)),
+        gf[fo[9] : fo[10]].reshape((n_o, 3)),
+        gf[fo[10] : fo[11]].reshape((n_o, 3)),
+        gi[io[0] : io[1]],
+        gi[io[1] : io[2]].reshape((n_p, n_f)),
+        gi[io[2] : io[3]].reshape((n_p, n_f)),
+        gi[io[3] : io[4]],
+        gi[io[4] : io[5]],
+        gi[io[5] : io[6]].reshape((n_e, 2)),
+        gi[io[6] : io[7]],
+        gi[io[7] : io[8]],
     )
 
 
@@ -251,10 +292,11 @@ def classify_point(
     ``with_slack``). Active faces: the closest feature's and those of every edge within ``ttol`` of
     the closest point; internal faces, a mixed face's internal part and covered faces are dropped."""
     g = unpack(gf, gi)
-    normals, offsets, lo, hi, eps_, edge_a, edge_b = g[0], g[1], g[2], g[3], g[4], g[5], g[6]
-    starts, inwards, out_a, out_b = g[7], g[8], g[9], g[10]
-    nfaces, label, name, owner, edge_range, edge_faces = g[11], g[12], g[13], g[14], g[15], g[16]
-    tri_range, out_range = g[17], g[18]
+    normals, offsets, lo, hi, eps_ = g.normals, g.offsets, g.lo, g.hi, g.eps
+    edge_a, edge_b = g.edge_a, g.edge_b
+    starts, inwards, out_a, out_b = g.tri_start, g.tri_in, g.outline_a, g.outline_b
+    nfaces, label, name, owner, edge_range = g.nfaces, g.label, g.name, g.owner, g.edge_range
+    edge_faces, tri_range, out_range = g.edge_faces, g.tri_range, g.outline_range
     n_f = normals.shape[1]
     reach = r + contact_tol
     slack = _INF
@@ -414,8 +456,9 @@ def pair_hits(
     :class:`dlovr.geometry.LabelBudgets`).
     """
     g = unpack(gf, gi)
-    normals, offsets, label, name, owner, nfaces = g[0], g[1], g[12], g[13], g[14], g[11]
-    starts, inwards, out_a, out_b, tri_range, out_range = g[7], g[8], g[9], g[10], g[17], g[18]
+    normals, offsets, label, name, owner, nfaces = g.normals, g.offsets, g.label, g.name, g.owner, g.nfaces
+    starts, inwards, out_a, out_b = g.tri_start, g.tri_in, g.outline_a, g.outline_b
+    tri_range, out_range = g.tri_range, g.outline_range
     n_f = normals.shape[1]
     k_n = 0 if every_piece else pi.shape[0]
     reach = r + contact_tol
@@ -549,7 +592,7 @@ def inside_other_points(
     """:func:`inside_other` for every point of ``q`` (into ``out``)."""
     g = unpack(gf, gi)
     for i in range(q.shape[0]):
-        out[i] = inside_other(q[i, 0], q[i, 1], q[i, 2], obj, margin, g[0], g[1], g[11], g[14])
+        out[i] = inside_other(q[i, 0], q[i, 1], q[i, 2], obj, margin, g.normals, g.offsets, g.nfaces, g.owner)
 
 
 check_cache(__name__)

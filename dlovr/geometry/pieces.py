@@ -8,7 +8,8 @@ from typing import Literal
 
 import numpy as np
 
-from dlovr.geometry.vectors import _clip_polygon, _polygon_area, _unit
+from dlovr.geometry.vectors import _clip_polygon, _polygon_area
+from dlovr.transforms import units
 
 FaceLabel = Literal["external", "internal", "mixed"]
 
@@ -77,7 +78,7 @@ def _hull_planes(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.
     for n, d in zip(normals, offsets, strict=True):
         on = pts[np.abs(pts @ n - d) < 1e-9 * scale]
         c = on.mean(axis=0)
-        u = _unit(on[0] - c) if np.linalg.norm(on[0] - c) > 0 else _unit(np.cross(n, [1.0, 0, 0]))
+        u = units(on[0] - c) if np.linalg.norm(on[0] - c) > 0 else units(np.cross(n, [1.0, 0, 0]))
         w = np.cross(n, u)
         ang = np.arctan2((on - c) @ w, (on - c) @ u)
         polys.append(on[np.argsort(ang)])
@@ -125,7 +126,7 @@ def _build_piece(
             shared = pts[on_face[i] & on_face[j]]
             if len(shared) < 2:
                 continue
-            e = _unit(np.cross(normals[i], normals[j]))
+            e = units(np.cross(normals[i], normals[j]))
             s = shared @ e
             ea.append(shared[int(np.argmin(s))])
             eb.append(shared[int(np.argmax(s))])

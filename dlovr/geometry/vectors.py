@@ -1,14 +1,11 @@
-"""Small vector and polygon helpers of the geometry package (world or local frame, metres)."""
+"""Polygon and triangle helpers of the geometry package (world or local frame, metres); the vector
+helpers are :mod:`dlovr.transforms`'s."""
 
 from __future__ import annotations
 
 import numpy as np
 
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n == 0.0, 1.0, n)
+from dlovr.transforms import units
 
 
 def _polygon_area(poly: np.ndarray) -> float:
@@ -50,7 +47,7 @@ def _tri_frames(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if hit is not None and hit[0] is tris:
         return hit[1], hit[2]
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    n = _unit(np.cross(b - a, c - a))  # (t,3)
+    n = units(np.cross(b - a, c - a))  # (t,3)
     starts, inwards = [], []
     for u, v in ((a, b), (b, c), (c, a)):
         inward = np.cross(n, v - u)
@@ -70,14 +67,3 @@ def _points_in_triangles(q: np.ndarray, tris: np.ndarray, tol: float) -> np.ndar
     starts, inwards = _tri_frames(tris)
     s = np.einsum("mtek,tek->mte", q[:, None, None, :] - starts[None], inwards)  # (m,t,3)
     return (s >= -tol).all(axis=2).any(axis=1)
-
-
-def _closest_on_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points on segments (E) to points p (m,3): returns (q (m,E,3), dist (m,E))."""
-    ab = b - a
-    den = np.einsum("ek,ek->e", ab, ab)
-    den = np.where(den == 0.0, 1.0, den)
-    t = np.einsum("mek,ek->me", p[:, None, :] - a[None], ab) / den
-    t = np.clip(t, 0.0, 1.0)
-    q = a[None] + t[..., None] * ab[None]
-    return q, np.linalg.norm(p[:, None, :] - q, axis=2)

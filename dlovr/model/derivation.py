@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dlovr.transforms import dot, norm, unit
+
 #: The classes' default parameters (forces N, angles degrees, times s, rates Hz): used where the
 #: demonstration gives no signal (the same values as :data:`dlovr.model.detection.DEFAULTS`).
 DEFAULT_PARAMS: dict[str, dict[str, float]] = {
@@ -47,6 +49,9 @@ THRESHOLD_PARAM = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "ris
                    "I": "min_force_n", "S": "jump_n"}  # fmt: skip
 #: Classes whose cone (``max_angle_deg``) is widened to the demonstrated step's direction.
 CONE_CLASSES = ("E", "C", "I")
+#: A contact vector, axis or turn (unit vectors, or differences of them) shorter than this has no
+#: direction to watch.
+_NO_DIRECTION = 1e-9
 
 Vec = tuple[float, float, float] | None
 
@@ -107,41 +112,29 @@ class Derived:
     derivation: dict[str, str]
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """Dot product without BLAS (whose rounding depends on the processor: programs must compile
-    bit for bit the same everywhere)."""
-    return float((np.asarray(a, float) * np.asarray(b, float)).sum())
-
-
-def _norm(a: np.ndarray) -> float:
-    return float(np.sqrt(_dot(a, a)))
-
-
-def _unit(v: Sequence[float] | np.ndarray | None) -> np.ndarray | None:
-    if v is None:
-        return None
-    a = np.asarray(v, float)
-    n = _norm(a)
-    return None if n < 1e-9 else a / n
-
-
-def _angle(a: np.ndarray, u: np.ndarray) -> float:
-    n = _norm(a)
-    if n < 1e-12:
-        return 180.0
-    return float(np.degrees(np.arccos(np.clip(_dot(a, u) / n, -1.0, 1.0))))
-
-
 def _directions(
     cls: str, released: Sequence[Vec], established: Sequence[Vec], axes: Sequence[Vec] = ()
 ) -> list[tuple[np.ndarray, str]]:
     """The directions the class's detector watches, with a name for the texts (a pinch's zero
     vector gives none; ``E`` watches its ``axes`` instead, either sign)."""
-    begins = [(u, "-v") for v in established if v is not None and (u := _unit(-np.asarray(v))) is not None]
+    begins = [
+        (u, "-v")
+        for v in established
+        if v is not None and (u := unit(-np.asarray(v, float), _NO_DIRECTION)) is not None
+    ]
     if cls == "E":
         signs = ((1.0, "+axis"), (-1.0, "-axis"))
-        pinch = [(s * u, name) for a in axes if (u := _unit(a)) is not None for s, name in signs]
-        return begins + [(u, "+v") for v in released if (u := _unit(v)) is not None] + pinch
+        pinch = [
+            (s * u, name)
+            for a in axes
+            if a is not None and (u := unit(a, _NO_DIRECTION)) is not None
+            for s, name in signs
+        ]
+        return (
+            begins
+            + [(u, "+v") for v in released if v is not None and (u := unit(v, _NO_DIRECTION)) is not None]
+            + pinch
+        )
     if cls == "I":
         return begins
     if cls == "C":
@@ -149,7 +142,7 @@ def _directions(
         new = [np.asarray(v, float) for v in established if v is not None]
         if not old or not new:
             return []
-        u = _unit(sum(old, np.zeros(3)) / len(old) - sum(new, np.zeros(3)) / len(new))
+        u = unit(sum(old, np.zeros(3)) / len(old) - sum(new, np.zeros(3)) / len(new), _NO_DIRECTION)
         return [] if u is None else [(u, "v_old - v_new")]
     return []  # T, S: the step's own direction
 
@@ -205,13 +198,13 @@ def derive(
     step = after.mean(axis=0) - base
     dirs = _directions(cls, released, established, axes)
     if dirs:
-        u, name = max(dirs, key=lambda d: _dot(step, d[0]))
-        size = _dot(step, u)
+        u, name = max(dirs, key=lambda d: dot(step, d[0]))
+        size = dot(step, u)
         noise = float((before * u).sum(axis=1).std())
     else:
-        n = _norm(step)
+        n = norm(step)
         u, name, size = (step / n if n > 1e-12 else None), "its own direction", n
-        noise = _norm(before.std(axis=0))
+        noise = norm(before.std(axis=0))
     p = dict(DEFAULT_PARAMS[cls])
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
@@ -267,7 +260,8 @@ def derive(
         texts.pop("min_turn_fraction", None)
         p.pop("min_turn_fraction", None)
     if cls in CONE_CLASSES and dirs and u is not None and size > 0:
-        ang = _angle(step, u)
+        n = norm(step)  # the angle to the unit u, rounded as numpy's arccos (programs stay bit for bit)
+        ang = 180.0 if n < 1e-12 else float(np.degrees(np.arccos(np.clip(size / n, -1.0, 1.0))))
         cone = min(max(DEFAULT_PARAMS[cls]["max_angle_deg"], ang + r.cone_margin_deg), r.max_cone_deg)
         p["max_angle_deg"] = round(cone, 3)
         texts["max_angle_deg"] = (

@@ -42,11 +42,12 @@ take the defaults of :data:`DEFAULTS`.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from dlovr.transforms import angle_deg, norm, unit
 
 #: Default parameters per class (forces N, angles degrees, times s, rates Hz).
 DEFAULTS: dict[str, dict[str, float]] = {
@@ -63,6 +64,8 @@ ALGORITHMS = {
     "I": "force_enters_instable_vector",
     "S": "force_jump",
 }
+#: A direction (contact vector, axis, step; any unit) shorter than this has none to watch.
+_NO_DIRECTION = 1e-12
 #: Time constant (s) of the shared low-pass filter when the program gives none.
 DEFAULT_FILTER_TAU_S = 0.004
 #: Ratio of torque noise (N m) to force noise (N) of :class:`NoiseModel` (a lever of 5 cm).
@@ -141,25 +144,11 @@ class WrenchConditioner:
 # Detectors
 
 
-def _unit(v: Sequence[float] | np.ndarray) -> np.ndarray | None:
-    a = np.asarray(v, dtype=float)
-    n = float(np.sqrt((a * a).sum()))
-    return None if n < 1e-12 else a / n
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    na, nb = float(np.sqrt((a * a).sum())), float(np.sqrt((b * b).sum()))
-    if na < 1e-12 or nb < 1e-12:
-        return 180.0
-    c = float((a * b).sum()) / (na * nb)
-    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
-
-
 def _step_dir(params: Mapping[str, float]) -> np.ndarray | None:
     """The demonstrated step's direction the program carries (``dir_x``, ``dir_y``, ``dir_z``), if any."""
     if not all(k in params for k in ("dir_x", "dir_y", "dir_z")):
         return None
-    return _unit([params["dir_x"], params["dir_y"], params["dir_z"]])
+    return unit([params["dir_x"], params["dir_y"], params["dir_z"]], _NO_DIRECTION)
 
 
 @dataclass(frozen=True)
@@ -236,7 +225,7 @@ class EDetector(Detector):
         dirs = [-np.asarray(v) for v in expect.established if v is not None]
         dirs += [np.asarray(v, float) for v in expect.released if v is not None]
         dirs += [s * np.asarray(a, float) for a in expect.axes for s in (1.0, -1.0)]  # a pinch: either sign
-        self.dirs = [u for d in dirs if (u := _unit(d)) is not None]
+        self.dirs = [u for d in dirs if (u := unit(d, _NO_DIRECTION)) is not None]
         self._low: list[np.ndarray] = []
 
     def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
@@ -246,14 +235,14 @@ class EDetector(Detector):
     def _signal(self, t: float, df: np.ndarray) -> float:
         thr, cone = self.params["force_threshold_n"], self.params["max_angle_deg"]
         if not self.dirs:  # no vector known: any change of that size
-            return float(np.sqrt((df * df).sum())) / thr
+            return norm(df) / thr
         best = 0.0
         for k, u in enumerate(self.dirs):
             if self.lag <= 0.0 and float((df * u).sum()) < float((self._low[k] * u).sum()):
                 self._low[k] = df.copy()  # (a sliding reference follows the force by itself)
             rise = df - self._low[k]
             along = float((rise * u).sum())
-            if along > 0 and _angle_deg(rise, u) <= cone:
+            if along > 0 and angle_deg(rise, u) <= cone:
                 best = max(best, along / thr)
         return best
 
@@ -271,8 +260,8 @@ class CDetector(Detector):
         turn = (sum(old, np.zeros(3)) / len(old) if old else np.zeros(3)) - (
             sum(new, np.zeros(3)) / len(new) if new else np.zeros(3)
         )
-        self.turn = float(np.sqrt((turn * turn).sum()))
-        self.dir = _unit(turn)
+        self.turn = norm(turn)
+        self.dir = unit(turn, _NO_DIRECTION)
         if self.dir is None:
             self.dir = _step_dir(self.params)
         self._scale = 0.0
@@ -280,7 +269,7 @@ class CDetector(Detector):
     def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
         super().start(t, force, torque)
         f = np.asarray(force, float)
-        self._scale = float(np.sqrt((f * f).sum()))
+        self._scale = norm(f)
 
     def threshold(self) -> float:
         if "force_threshold_n" in self.params:
@@ -290,9 +279,9 @@ class CDetector(Detector):
     def _signal(self, t: float, df: np.ndarray) -> float:
         thr = self.threshold()
         if self.dir is None:
-            return float(np.sqrt((df * df).sum())) / thr
+            return norm(df) / thr
         along = float((df * self.dir).sum())
-        if along <= 0 or _angle_deg(df, self.dir) > self.params["max_angle_deg"]:
+        if along <= 0 or angle_deg(df, self.dir) > self.params["max_angle_deg"]:
             return 0.0
         return along / thr
 
@@ -309,16 +298,16 @@ class TDetector(Detector):
 
     def _signal(self, t: float, df: np.ndarray) -> float:
         rise = self.params["rise_n"]
-        mag = float(np.sqrt((df * df).sum()))
+        mag = norm(df)
         if self._peak is None:
             if mag >= rise:
                 self._peak = df.copy()
             return 0.5 * min(mag / rise, 1.0)
-        pk = float(np.sqrt((self._peak * self._peak).sum()))
-        if mag > pk and _angle_deg(df, self._peak) < 0.5 * self.params["max_angle_deg"]:
+        pk = norm(self._peak)
+        if mag > pk and angle_deg(df, self._peak) < 0.5 * self.params["max_angle_deg"]:
             self._peak = df.copy()  # still rising the same way
             return 0.5
-        turned = _angle_deg(df, self._peak) / self.params["max_angle_deg"]
+        turned = angle_deg(df, self._peak) / self.params["max_angle_deg"]
         fell = (pk - mag) / (0.5 * pk) if pk > 0 else 0.0
         return max(0.5, turned, fell)
 
@@ -330,17 +319,17 @@ class IDetector(Detector):
 
     def __init__(self, params: Mapping[str, float], expect: Expectation):
         super().__init__(params, expect)
-        dirs = [_unit(-np.asarray(v, float)) for v in expect.established if v is not None]
+        dirs = [unit(-np.asarray(v, float), _NO_DIRECTION) for v in expect.established if v is not None]
         self.dirs = [u for u in dirs if u is not None]
         if not self.dirs and (d := _step_dir(self.params)) is not None:
             self.dirs = [d]
 
     def _signal(self, t: float, df: np.ndarray) -> float:
-        mag = float(np.sqrt((df * df).sum()))
+        mag = norm(df)
         size = min(mag / self.params["min_force_n"], 1.0)
         if not self.dirs:  # no vector known: a change of that size
             return size
-        if min(_angle_deg(df, u) for u in self.dirs) > self.params["max_angle_deg"]:
+        if min(angle_deg(df, u) for u in self.dirs) > self.params["max_angle_deg"]:
             return 0.0
         return size
 
@@ -371,7 +360,7 @@ class SDetector(Detector):
         while len(self._hist) > 2 and self._hist[1][0] <= t - w - 1e-12:
             self._hist.pop(0)
         d = f - self._hist[0][1]
-        self.signal = float(np.sqrt((d * d).sum())) / self.params["jump_n"]
+        self.signal = norm(d) / self.params["jump_n"]
         if self.signal >= 1.0:
             self.fired_at = t
         return self.fired_at is not None

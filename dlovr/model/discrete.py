@@ -36,6 +36,7 @@ from dlovr.model.topology import (
     sort_faces,
     successional_runs,
 )
+from dlovr.transforms import norm, unit
 
 # --------------------------------------------------------------------------------------------------
 # States
@@ -199,16 +200,13 @@ def contact_vector(facts: ContactFacts, gripper: bool = False, merge_deg: float 
     if gripper:
         if facts.gripper_z is None:
             raise ValueError("a gripper contact needs the gripper's z axis")
-        z = np.asarray(facts.gripper_z, dtype=float)
-        return z / np.linalg.norm(z)
+        return _required(unit(facts.gripper_z))
     real = {f.name: f for f in facts.faces if not f.internal}
     if not real:
         return np.zeros(3)
     c = -np.sum([np.asarray(f.normal, dtype=float) for f in real.values()], axis=0)
-    norm = float(np.linalg.norm(c))
-    if norm < _pinch_tol(len(real), merge_deg):
-        return np.zeros(3)  # a pinch
-    return c / norm
+    u = unit(c, _pinch_tol(len(real), merge_deg))
+    return np.zeros(3) if u is None else u  # None: a pinch
 
 
 def pinch_axis(facts: ContactFacts, merge_deg: float = 0.01) -> np.ndarray | None:
@@ -221,8 +219,8 @@ def pinch_axis(facts: ContactFacts, merge_deg: float = 0.01) -> np.ndarray | Non
     real = _real_faces(facts)
     if not real:
         return None
-    normals = np.array([_unit(f.normal) for f in real])
-    if float(np.linalg.norm(normals.sum(axis=0))) >= _pinch_tol(len(real), merge_deg):
+    normals = np.array([_required(unit(f.normal)) for f in real])
+    if norm(normals.sum(axis=0)) >= _pinch_tol(len(real), merge_deg):
         return None
     if _rank(normals, merge_deg) != 1:
         return None
@@ -243,12 +241,12 @@ def _real_faces(facts: ContactFacts) -> list[FaceFact]:
 # --------------------------------------------------------------------------------------------------
 
 
-def _unit(v: Vec3 | np.ndarray) -> np.ndarray:
-    a = np.asarray(v, dtype=float)
-    n = float(np.linalg.norm(a))
-    if n == 0.0:
+def _required(u: np.ndarray | None) -> np.ndarray:
+    """A direction the classifier needs: ``None`` (:func:`dlovr.transforms.unit` of a zero vector,
+    which has none) is an error."""
+    if u is None:
         raise ValueError("zero-length vector")
-    return a / n
+    return u
 
 
 def normal_clusters(normals: np.ndarray, merge_deg: float) -> list[int]:
@@ -320,7 +318,7 @@ def _classify_faces(
     if not real:
         return DiscreteState(dlo, "N")
     names = list(real)
-    normals = np.array([_unit(real[n].normal) for n in names])
+    normals = np.array([_required(unit(real[n].normal)) for n in names])
     rank = _rank(normals, params.normal_merge_deg)
     if rank == 1:
         return DiscreteState(dlo, "F")
@@ -355,7 +353,7 @@ def _classify_faces(
 def _crease(facts: ContactFacts, normals: np.ndarray) -> np.ndarray:
     """The unit direction of an edge contact's crease (world frame): the caller's, else from the
     real faces' ``normals``."""
-    return _unit(facts.crease) if facts.crease is not None else _null_direction(normals)
+    return _required(unit(facts.crease)) if facts.crease is not None else _null_direction(normals)
 
 
 _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contact?)"
@@ -364,7 +362,7 @@ _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contac
 def _point_or_line(stab: str, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams) -> DiscreteState:
     """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
     ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease."""
-    d = _unit(dlo_vector)
+    d = _required(unit(dlo_vector))
     angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
     if angle <= params.parallel_tol_deg:
         return DiscreteState("E", "E^L", stab)  # type: ignore[arg-type]

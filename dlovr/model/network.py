@@ -41,6 +41,7 @@ from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
 from dlovr.model.tracks import EdgeTrack, representative, stretch
 from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
+from dlovr.transforms import norm
 
 NETWORK_VERSION = 1
 """Version of the network JSON format (``version`` field); bump on incompatible changes."""
@@ -408,7 +409,7 @@ def situation_vector(situation: DiscreteSituation) -> np.ndarray | None:
     s = np.zeros(3)
     for c in pcs:
         s = s + np.asarray(c.vector, float)
-    n = float(np.sqrt(np.sum(s * s)))
+    n = norm(s)
     return s / n if n > 1e-9 else np.zeros(3)
 
 
@@ -483,7 +484,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         vec = None
         if vs:
             m = np.mean(vs, axis=0)
-            n = float(np.sqrt(np.sum(m * m)))
+            n = norm(m)
             vec = _vec(m / n if n > 1e-9 else np.zeros(3))
         h = held[nid]
         nodes.append(
@@ -581,13 +582,13 @@ def sensed_vectors(
             if len(f) == 0:  # held shorter than the wrench's sampling period
                 continue
             v = -(f.mean(axis=0) - tare)
-            n = float(np.sqrt(np.sum(v * v)))
+            n = norm(v)
             per.setdefault(nid, []).append(v / n if n >= floor else np.zeros(3))
     out = {}
     for nid, vs in per.items():
         zeros = sum(1 for v in vs if not v.any())
         m = np.mean([v for v in vs if v.any()] or [np.zeros(3)], axis=0)
-        n = float(np.sqrt(np.sum(m * m)))
+        n = norm(m)
         out[nid] = _vec(np.zeros(3) if zeros * 2 > len(vs) or n < 1e-9 else m / n)
     return out
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from dlovr.model.network import RISKS, Edge, Network, NetworkError, Vec3
 from dlovr.model.program import Detection
+from dlovr.transforms import norm
 
 PROGRAM_VERSION = 1
 """Version of the network-program JSON format."""
@@ -154,7 +155,7 @@ def identify(
     ``tolerance``) when the closest is farther than ``tolerance``: a situation outside the network.
     """
     s = np.zeros(3) if sensed_vector is None else np.asarray(sensed_vector, float).reshape(3)
-    n = math.sqrt(float(np.sum(s * s)))
+    n = norm(s)
     s = s / n if n > 1e-9 else np.zeros(3)
     scored = [(_dist(s, c.vector), c) for c in successors if c.vector is not None]
     if not scored:

@@ -20,7 +20,6 @@ from dlovr.sim.kernels import (
     C_LAYOUT,
     C_NFATAL,
     C_NGEOM,
-    C_NHOLD,
     C_NQ,
     C_NV,
     C_NVERT,
@@ -39,6 +38,7 @@ from dlovr.sim.kernels import (
     T_POINT,
     T_POS,
     T_SEGMENT,
+    pack_config,
 )  # fmt: skip  # fmt: skip
 
 
@@ -173,16 +173,15 @@ class MjViews:
         self._head[[C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT]] = (
             x, q, len(data.qpos), v, len(data.qvel), len(xpos)
         )
-        self._tail = [
+        self._tail = (
             np.asarray(fatal, np.int64) * (number.strides[0] // 4),
             np.asarray(piece_of_geom, np.int64),
             np.asarray(obj_of_geom, np.int64),
-        ]
+        )
         self.cfg = self._pack(np.zeros(0, np.int64))
 
     def _pack(self, hold_rows: np.ndarray) -> np.ndarray:
-        self._head[C_NHOLD] = len(hold_rows)
-        return np.concatenate([self._head, *self._tail, hold_rows.astype(np.int64)])
+        return pack_config(self._head, *self._tail, hold_rows)
 
     def set_hold_rows(self, rows: np.ndarray) -> None:
         """The constraint rows of the holding constraints (3 per constraint)."""
@@ -207,11 +206,11 @@ class MjViews:
                     raise RuntimeError("unexpected MuJoCo contact layout")
                 return delta // unit
 
-            self._head[C_LAYOUT : C_LAYOUT + 11] = (
+            self._head[C_LAYOUT:C_HEAD] = (
                 stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
                 off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4),
             )  # fmt: skip
-            self.cfg[C_LAYOUT : C_LAYOUT + 11] = self._head[C_LAYOUT : C_LAYOUT + 11]
+            self.cfg[C_LAYOUT:C_HEAD] = self._head[C_LAYOUT:C_HEAD]
             size = int(self._data.narena) // 8
             self.arena = np.ctypeslib.as_array((ctypes.c_double * size).from_address(base))
         return self.arena

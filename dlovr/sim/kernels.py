@@ -11,6 +11,8 @@ distance, normal (3, obstacle toward rod), position (3, MuJoCo's midway point), 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from dlovr.geometry.kernels import block_sum, dot3
@@ -19,13 +21,47 @@ from dlovr.jit import check_cache, njit
 T_POINT, T_SEGMENT, T_GEOM, T_OBJ, T_PIECE, T_DIST = 0, 1, 2, 3, 4, 5
 T_NORMAL, T_POS, T_FORCE, T_ACTIVE, T_WIDTH = 6, 9, 12, 13, 14
 
-# layout of MuJoCo's contact structs (see dlovr.sim.contacts.contact_layout): float64 units, then int32
+# layout of MuJoCo's contact structs (see dlovr.sim.contacts.MjViews.contacts): float64 units, then int32
 L_STRIDE_F, L_DIST, L_POS, L_FRAME, L_STRIDE_I, L_DIM, L_GEOM, L_FLEX, L_ELEM, L_VERT, L_EFC = range(11)
+L_COUNT = 11
 
-# the simulator's configuration (cfg, int64): header, then sections
+# the simulator's configuration (cfg, int64): header (the contact structs' layout at its end), then
+# the sections of Config (:func:`pack_config`)
 C_WARN_BASE, C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM, C_NHOLD = 0, 1, 2, 3, 4, 5
 C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT, C_LAYOUT = 6, 7, 8, 9, 10, 11, 12
-C_HEAD = C_LAYOUT + 11  # then: fatal warning indices, piece and object of each geom, hold rows
+C_HEAD = C_LAYOUT + L_COUNT
+
+
+class Config(NamedTuple):
+    """The sections of the simulator's configuration after its header (views)."""
+
+    fatal: np.ndarray  # the fatal warnings' indices (in int32 units of the warning structs)
+    piece_of_geom: np.ndarray  # the obstacle piece of each geom (-1 for none)
+    obj_of_geom: np.ndarray  # the object of each geom
+    hold_rows: np.ndarray  # the holding constraints' rows (3 per constraint)
+    layout: np.ndarray  # (L_COUNT,) the contact structs' layout (``L_*``)
+
+
+def pack_config(
+    head: np.ndarray,
+    fatal: np.ndarray,
+    piece_of_geom: np.ndarray,
+    obj_of_geom: np.ndarray,
+    hold_rows: np.ndarray,
+) -> np.ndarray:
+    """The configuration array: ``head`` (``C_HEAD`` entries; ``C_NHOLD`` is set here), then the
+    sections of :class:`Config`."""
+    head[C_NHOLD] = len(hold_rows)
+    return np.concatenate([head, fatal, piece_of_geom, obj_of_geom, hold_rows.astype(np.int64)])
+
+
+@njit(inner=True)
+def _config(cfg: np.ndarray) -> Config:
+    n_fatal, n_geom, n_hold = cfg[C_NFATAL], cfg[C_NGEOM], cfg[C_NHOLD]
+    a = C_HEAD + n_fatal
+    b = a + 2 * n_geom
+    layout = cfg[C_LAYOUT:C_HEAD]
+    return Config(cfg[C_HEAD:a], cfg[a : a + n_geom], cfg[a + n_geom : b], cfg[b : b + n_hold], layout)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -61,12 +97,9 @@ def step_record(
     of the fatal warnings differs from the baseline, 2 NaN/inf in qpos or qvel, 3 in the cable
     points, 4 segment ``index`` stretched by ``value`` (relative) beyond the largest stretch.
     """
-    n_fatal, n_geom, n_hold = cfg[C_NFATAL], cfg[C_NGEOM], cfg[C_NHOLD]
-    fatal = cfg[C_HEAD : C_HEAD + n_fatal]
-    piece_of_geom = cfg[C_HEAD + n_fatal : C_HEAD + n_fatal + n_geom]
-    obj_of_geom = cfg[C_HEAD + n_fatal + n_geom : C_HEAD + n_fatal + 2 * n_geom]
-    hold_rows = cfg[C_HEAD + n_fatal + 2 * n_geom : C_HEAD + n_fatal + 2 * n_geom + n_hold]
-    layout = cfg[C_LAYOUT : C_LAYOUT + 11]
+    conf = _config(cfg)
+    fatal, piece_of_geom, obj_of_geom = conf.fatal, conf.piece_of_geom, conf.obj_of_geom
+    hold_rows, layout, n_hold = conf.hold_rows, conf.layout, cfg[C_NHOLD]
     code, index, value = 0, -1, 0.0
     count = 0
     for w in fatal:
@@ -174,7 +207,7 @@ def hold_torque(efc_force: np.ndarray, hold_rows: np.ndarray, quat: np.ndarray, 
 def self_pairs(ncon: int, arena: np.ndarray, cfg: np.ndarray, out: np.ndarray) -> None:
     """The segment pairs (sorted) of the rod's self-contacts among MuJoCo's first ``ncon``."""
     k = 0
-    ci, layout, flex = arena.view(np.int32), cfg[C_LAYOUT : C_LAYOUT + 11], cfg[C_FLEX]
+    ci, layout, flex = arena.view(np.int32), _config(cfg).layout, cfg[C_FLEX]
     si = layout[L_STRIDE_I]
     for i in range(ncon):
         bi = i * si

@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import norm, quat_normalize, quat_rotate, slerp
+from dlovr.transforms import dot, norm, quat_normalize, quat_rotate, slerp
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -263,7 +263,7 @@ class Simulator:
             # in Python floats (not np.linalg.norm: this feeds MuJoCo), the roundings of target - pos,
             # dlovr.transforms.norm (its sum from 0.0, left to right) and pos + delta * (vmax / dist)
             d0, d1, d2 = t[0] - p[0], t[1] - p[1], t[2] - p[2]
-            dist = math.sqrt(0.0 + d0 * d0 + d1 * d1 + d2 * d2)
+            dist = norm([d0, d1, d2])
             vmax = self.max_speed * dt
             if dist <= vmax:
                 pos[:] = target
@@ -272,7 +272,7 @@ class Simulator:
                 pos[:] = [p[0] + d0 * f, p[1] + d1 * f, p[2] + d2 * f]
         q, tq = self._mocap_quat.tolist(), self.target_quat.tolist()
         if q != tq:
-            c = 0.0 + q[0] * tq[0] + q[1] * tq[1] + q[2] * tq[2] + q[3] * tq[3]  # dlovr.transforms.dot's
+            c = dot(q, tq)
             angle = 2.0 * math.acos(min(1.0, abs(c)))
             wmax = self.max_angular_speed * dt
             self._mocap_quat[:] = self.target_quat if angle <= wmax else slerp(q, tq, wmax / angle)

@@ -21,9 +21,14 @@ argument's type, and returning arrays costs more than passing them):
   pairs, each query point's cable point (``owner``), each contact's cable point (``point_of``) and
   the points to label again; ``work_f`` (float64): the query points (cable points, then one per
   segment contact) and the forces per span.
+
+Their layout lives here alone: :func:`new_work` and :func:`no_labels` make the arrays, :class:`Work`
+(:func:`work_views`) and :class:`Labels` name their sections.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -47,10 +52,27 @@ L_K, L_Q, L_H, L_N, L_HEAD = 0, 1, 2, 3, 4
 P_RADIUS, P_TOL, P_TTOL, P_ENTER, P_LEAVE = 0, 1, 2, 3, 4
 
 
-@njit(inner=True)
-def _work(work_i: np.ndarray, work_f: np.ndarray):
+class Work(NamedTuple):
+    """The sections of the work arrays (views; see the module docstring): W the most faces of a hit,
+    H the kept hits' room, N1 the cable points."""
+
+    touching: np.ndarray  # (H,) the touching keys, cable point << 20 | piece id, sorted
+    kept: np.ndarray  # (H, 1 + W) the kept hits: cable point, face ids
+    group: np.ndarray  # (H, W) their face rows grouped by cable point
+    start: np.ndarray  # (N1 + 1,) where each point's group starts
+    changed: np.ndarray  # (N1,) the points whose group changed
+    pairs: np.ndarray  # (K, 2) the queried pairs: query point, piece id
+    owner: np.ndarray  # each query point's cable point
+    point_of: np.ndarray  # each contact's cable point (-1 for none)
+    again: np.ndarray  # the query points to label again
+    qpts: np.ndarray  # (Q, 3) float: the query points
+    forces: np.ndarray  # float: the forces per span
+
+
+def work_views(work_i: np.ndarray, work_f: np.ndarray) -> Work:
+    """The sections of the work arrays (called from kernels and from Python alike)."""
     n1, w, cap_h = work_i[W_POINTS], work_i[W_WIDTH], work_i[W_CAP_H]
-    return (
+    return Work(
         work_i[work_i[W_TOUCH] : work_i[W_TOUCH] + cap_h],
         work_i[work_i[W_KEPT] : work_i[W_GROUP]].reshape((cap_h, w + 1)),
         work_i[work_i[W_GROUP] : work_i[W_START]].reshape((cap_h, w)),
@@ -65,11 +87,59 @@ def _work(work_i: np.ndarray, work_f: np.ndarray):
     )
 
 
+_work = njit(work_views, inner=True)
+
+# the work_i sections that last from step to step (copied over when the arrays grow)
+_LASTING_COUNTS = (W_TOUCH_N, W_CHANGED_N, W_KEPT_N)
+
+
+def new_work(
+    n1: int, width: int, n_pieces: int, cap_c: int, cap_h: int, old: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Work arrays (``work_i``, ``work_f``) for ``n1`` cable points, pieces of at most ``width``
+    faces, ``n_pieces`` pieces, room for ``cap_c`` contacts and ``cap_h`` kept hits; from ``old``
+    (the last ``work_i`` for the same points) the counts, touching keys and groups that last."""
+    cap_q = n1 + cap_c
+    cap_k = n1 * n_pieces + 2 * cap_c + cap_h
+    sections = (W_TOUCH, W_KEPT, W_GROUP, W_START, W_CHANGED, W_PAIRS, W_OWNER, W_POINT_OF, W_AGAIN)
+    sizes = (cap_h, cap_h * (width + 1), cap_h * width, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
+    offsets = np.cumsum((W_HEAD, *sizes))
+    wi = np.zeros(int(offsets[-1]), np.int64)
+    wi[[W_POINTS, W_WIDTH, W_CAP_H]] = n1, width, cap_h
+    wi[list(sections)] = offsets[:-1]
+    wi[W_QPTS], wi[W_FORCES] = 0, 3 * cap_q
+    if old is not None:
+        for slot in _LASTING_COUNTS:
+            wi[slot] = old[slot]
+        old_h = old[W_CAP_H]
+        for sec, n in ((W_TOUCH, old_h), (W_KEPT, old_h * (width + 1)), (W_GROUP, old_h * width),
+                       (W_START, n1 + 1)):  # fmt: skip
+            wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
+    return wi, np.zeros(3 * cap_q + 2 * n1 + 8)
+
+
+class Labels(NamedTuple):
+    """The sections of the label arrays (views; see the module docstring): K pairs, Q queried points,
+    H hit rows, N query points, W the most faces of a hit."""
+
+    pairs: np.ndarray  # (K, 2) the labelled pairs: query point, piece id
+    queried: np.ndarray  # (Q,) the queried points
+    hits: np.ndarray  # (H, 4 + W) query point, piece id, within enter, within leave, face ids
+    points: np.ndarray  # (N, 3) float: where each query point was labelled
+    slack2: np.ndarray  # (Q,) float: the queried points' squared slacks
+    budgets: np.ndarray  # (K, 6) float: the pairs' budgets
+
+
+def no_labels() -> tuple[np.ndarray, np.ndarray]:
+    """Label arrays (``lab_i``, ``lab_f``) that hold no labels (an empty header)."""
+    return np.full(64, -1, np.int64), np.zeros(64)
+
+
 @njit(inner=True)
-def _labels(lab_i: np.ndarray, lab_f: np.ndarray, width: int):
+def _labels(lab_i: np.ndarray, lab_f: np.ndarray, width: int) -> Labels:
     k, q, h, n = lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N]
     a, b = L_HEAD + 2 * k, L_HEAD + 2 * k + q
-    return (
+    return Labels(
         lab_i[L_HEAD:a].reshape((k, 2)),
         lab_i[a:b],
         lab_i[b : b + h * (4 + width)].reshape((h, 4 + width)),
@@ -113,7 +183,8 @@ def track_step(
     them, keeping their contents, and call again; nothing was changed) or ``BAD_PIECE`` (row
     ``bad row`` of the table names a piece that ``piece_map`` lacks).
     """
-    touching, _, _, _, _, pairs, owner, point_of, again, qpts, forces = _work(work_i, work_f)
+    w = _work(work_i, work_f)
+    touching, pairs, owner, point_of, again, qpts = w.touching, w.pairs, w.owner, w.point_of, w.again, w.qpts
     width, n_pieces = work_i[W_WIDTH], gi[0]
     n1 = pts.shape[0]
     k = np.int64(0)  # not a literal: a literal would compile the callees twice
@@ -169,8 +240,8 @@ def track_step(
     if outcome == FULL or outcome == PARTIAL:
         if not _relabel(outcome == FULL, k, nq, n_pieces, gf, gi, params, lab_i, lab_f, work_i, work_f):
             return GROW, False, -1
-    changed = update_hits(_labels(lab_i, lab_f, width)[2], work_i, work_f)
-    span_forces(spans, point_of, table, forces)
+    changed = update_hits(_labels(lab_i, lab_f, width).hits, work_i, work_f)
+    span_forces(spans, point_of, table, w.forces)
     return outcome, changed, -1
 
 
@@ -184,7 +255,8 @@ def _outcome(
     ``again`` (their number in the work header), or FULL."""
     if not (reuse and lab_i[L_K] >= 0 and k == lab_i[L_K] and nq == lab_i[L_N]):
         return FULL
-    lab_pairs, lab_q, _, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, work_i[W_WIDTH])
+    lab = _labels(lab_i, lab_f, work_i[W_WIDTH])
+    lab_pairs, lab_q, lab_pts, lab_s2 = lab.pairs, lab.queried, lab.points, lab.slack2
     for j in range(k):
         if pairs[j, 0] != lab_pairs[j, 0] or pairs[j, 1] != lab_pairs[j, 1]:
             return FULL
@@ -204,7 +276,7 @@ def _outcome(
         i = pairs[j, 0]
         if moved[i]:
             mx, my, mz = qpts[i, 0] - lab_pts[i, 0], qpts[i, 1] - lab_pts[i, 1], qpts[i, 2] - lab_pts[i, 2]
-            if not keeps(lab_budgets, j, mx, my, mz):
+            if not keeps(lab.budgets, j, mx, my, mz):
                 redo[i] = True
     n_again = 0
     for i in range(nq):
@@ -223,7 +295,8 @@ def _relabel(
     """Label every queried pair (``full``) or the pairs of the points to label again (a point's
     labels depend on it alone) and splice them into the labels, in place; False (nothing changed)
     when the labels or the work arrays lack room (the room needed goes into the work header)."""
-    _, _, _, _, _, pairs, _, _, again, qpts, _ = _work(work_i, work_f)
+    w = _work(work_i, work_f)
+    pairs, again, qpts = w.pairs, w.again, w.qpts
     width = work_i[W_WIDTH]
     redo = np.zeros(nq, np.bool_)
     if full:
@@ -270,50 +343,75 @@ def _relabel(
         yes, not yes, hit_i, hit_f, slack, budgets,
     )  # fmt: skip
     if full:
-        q = _unique(pi)
-        lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N] = k, q.shape[0], h, nq
-        lab_pairs, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
-        for j in range(k):
-            lab_pairs[j, 0], lab_pairs[j, 1] = pairs[j, 0], pairs[j, 1]
-            for c in range(6):
-                lab_budgets[j, c] = budgets[j, c]
-        for i in range(nq):
-            lab_pts[i, 0], lab_pts[i, 1], lab_pts[i, 2] = qp[i, 0], qp[i, 1], qp[i, 2]
-        for m in range(q.shape[0]):
-            lab_q[m] = q[m]
-            lab_s2[m] = slack[q[m]] * slack[q[m]]
-        for r in range(h):
-            _hit_row(lab_hits, r, hit_i, r, hit_f[r, 0], enter, leave)
-        return True
-    _, lab_q, lab_hits, lab_pts, lab_s2, lab_budgets = _labels(lab_i, lab_f, width)
-    for s in range(n_sub):
+        _store_labels(k, nq, pairs, pi, qp, hit_i, hit_f, h, slack, budgets, lab_i, lab_f, width, thresholds)
+    else:
+        _splice_labels(redo, sub, qpts, hit_i, hit_f, h, slack, budgets, lab_i, lab_f, width, thresholds)
+    return True
+
+
+@njit(inner=True)
+def _store_labels(
+    k: int, nq: int, pairs: np.ndarray, pi: np.ndarray, qp: np.ndarray, hit_i: np.ndarray,
+    hit_f: np.ndarray, h: int, slack: np.ndarray, budgets: np.ndarray, lab_i: np.ndarray,
+    lab_f: np.ndarray, width: int, thresholds: np.ndarray,
+) -> None:  # fmt: skip
+    """The labels of every queried pair: the ``k`` pairs at the ``nq`` query points ``qp``, the
+    ``h`` hits of :func:`pair_hits` (``hit_*``), the query points' slacks and the pairs' budgets
+    (``thresholds``: the enter and the leave distance)."""
+    enter, leave = thresholds[0], thresholds[1]
+    q = _unique(pi)
+    lab_i[L_K], lab_i[L_Q], lab_i[L_H], lab_i[L_N] = k, q.shape[0], h, nq
+    lab = _labels(lab_i, lab_f, width)
+    for j in range(k):
+        lab.pairs[j, 0], lab.pairs[j, 1] = pairs[j, 0], pairs[j, 1]
         for c in range(6):
-            lab_budgets[sub[s], c] = budgets[s, c]
+            lab.budgets[j, c] = budgets[j, c]
     for i in range(nq):
+        lab.points[i, 0], lab.points[i, 1], lab.points[i, 2] = qp[i, 0], qp[i, 1], qp[i, 2]
+    for m in range(q.shape[0]):
+        lab.queried[m] = q[m]
+        lab.slack2[m] = slack[q[m]] * slack[q[m]]
+    for r in range(h):
+        _hit_row(lab.hits, r, hit_i, r, hit_f[r, 0], enter, leave)
+
+
+@njit(inner=True)
+def _splice_labels(
+    redo: np.ndarray, sub: np.ndarray, qpts: np.ndarray, hit_i: np.ndarray, hit_f: np.ndarray, h: int,
+    slack: np.ndarray, budgets: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, width: int,
+    thresholds: np.ndarray,
+) -> None:  # fmt: skip
+    """The labels of the query points in ``redo`` (labelled again: the pairs ``sub`` of the labels,
+    at ``qpts``) spliced into the last labels: their budgets, points and slacks, and their ``h`` new
+    hits merged with the others' kept ones (``thresholds``: the enter and the leave distance)."""
+    enter, leave = thresholds[0], thresholds[1]
+    lab = _labels(lab_i, lab_f, width)
+    for s in range(sub.shape[0]):
+        for c in range(6):
+            lab.budgets[sub[s], c] = budgets[s, c]
+    for i in range(redo.shape[0]):
         if redo[i]:
-            lab_pts[i, 0], lab_pts[i, 1], lab_pts[i, 2] = qpts[i, 0], qpts[i, 1], qpts[i, 2]
-    for m in range(lab_q.shape[0]):
-        if redo[lab_q[m]]:
-            lab_s2[m] = slack[lab_q[m]] * slack[lab_q[m]]
-    # the kept old hits and the new ones, merged by (query point, piece): the old ones come first
-    # among equals (there are none: a point's hits are all old or all new)
-    old = lab_hits.copy()
-    n_new = h
-    a, b, r = np.int64(0), np.int64(0), np.int64(0)
-    while a < old.shape[0] or b < n_new:
-        if a < old.shape[0] and redo[old[a, 0]]:
-            a += 1
-            continue
-        take_old = b >= n_new or (
-            a < old.shape[0] and old[a, 0] * (1 << 20) + old[a, 1] <= hit_i[b, 0] * (1 << 20) + hit_i[b, 1]
-        )
-        r += 1
-        if take_old:
-            a += 1
-        else:
-            b += 1
-    lab_i[L_H] = r
-    lab_hits = _labels(lab_i, lab_f, width)[2]
+            lab.points[i, 0], lab.points[i, 1], lab.points[i, 2] = qpts[i, 0], qpts[i, 1], qpts[i, 2]
+    for m in range(lab.queried.shape[0]):
+        if redo[lab.queried[m]]:
+            lab.slack2[m] = slack[lab.queried[m]] * slack[lab.queried[m]]
+    merged = np.empty((lab.hits.shape[0] + h, lab.hits.shape[1]), np.int64)
+    r = _merge_hits(lab.hits, redo, hit_i, hit_f, h, enter, leave, merged)
+    lab_i[L_H] = r  # the hit rows start where they did: the new ones over the old
+    hits = _labels(lab_i, lab_f, width).hits
+    for i in range(r):
+        for c in range(merged.shape[1]):
+            hits[i, c] = merged[i, c]
+
+
+@njit(inner=True)
+def _merge_hits(
+    old: np.ndarray, redo: np.ndarray, hit_i: np.ndarray, hit_f: np.ndarray, n_new: int, enter: float,
+    leave: float, out: np.ndarray,
+) -> int:  # fmt: skip
+    """The label hit rows ``old`` of the points not in ``redo`` and the ``n_new`` new hits of
+    :func:`pair_hits` (``hit_*``), merged into ``out`` by (query point, piece); returns their count.
+    The old ones come first among equals (there are none: a point's hits are all old or all new)."""
     a, b, r = np.int64(0), np.int64(0), np.int64(0)  # not literals (see track_step)
     while a < old.shape[0] or b < n_new:
         if a < old.shape[0] and redo[old[a, 0]]:
@@ -324,13 +422,13 @@ def _relabel(
         )
         if take_old:
             for c in range(old.shape[1]):
-                lab_hits[r, c] = old[a, c]
+                out[r, c] = old[a, c]
             a += 1
         else:
-            _hit_row(lab_hits, r, hit_i, b, hit_f[b, 0], enter, leave)
+            _hit_row(out, r, hit_i, b, hit_f[b, 0], enter, leave)
             b += 1
         r += 1
-    return True
+    return int(r)
 
 
 @njit(inner=True)
@@ -353,7 +451,8 @@ def update_hits(hits: np.ndarray, work_i: np.ndarray, work_f: np.ndarray) -> boo
     enter, within leave, face ids. Updates the touching keys and the kept hits (cable point, face
     ids; in hit order) and returns whether those changed; then also their face rows grouped by cable
     point and the list of points whose group changed."""
-    touching, kept, group, start, changed, _, owner, _, _, _, _ = _work(work_i, work_f)
+    w = _work(work_i, work_f)
+    touching, kept, group, start, changed, owner = w.touching, w.kept, w.group, w.start, w.changed, w.owner
     n1 = start.shape[0] - 1
     h, w = hits.shape[0], group.shape[1]
     nt, n_old = work_i[W_TOUCH_N], work_i[W_KEPT_N]

@@ -243,8 +243,8 @@ class ContactTracker:
                 self.partial_labellings += 1
         if changed:
             face, made = self.geometry.face_tuple, self._made
-            group, start = self._group, self._start
-            for p in self._changed[: self._work_i[tk.W_CHANGED_N]].tolist():
+            group, start = self._views.group, self._views.start
+            for p in self._views.changed[: self._work_i[tk.W_CHANGED_N]].tolist():
                 faces = [face(row) for row in group[start[p] : start[p + 1]]]
                 self._point_faces[p] = faces
                 self._env[p] = point_primitives(faces, made)
@@ -268,35 +268,15 @@ class ContactTracker:
         ``cap_h`` kept hits; what a step keeps (the touching keys, the grouped hits) is copied over when
         the points stay the same, else the labels and hits start afresh."""
         old = self._work_i if n1 == self._n1 else None
-        w = self._width
         cap_c, cap_h = max(nc, 16), max(cap_h, 16)
-        cap_q = n1 + cap_c
-        cap_k = n1 * self._n_pieces + 2 * cap_c + cap_h
-        sizes = (cap_h, cap_h * (w + 1), cap_h * w, n1 + 1, n1, 2 * cap_k, cap_q, cap_c, cap_q)
-        offsets = np.cumsum((tk.W_HEAD, *sizes))
-        wi = np.zeros(int(offsets[-1]), np.int64)
-        wi[[tk.W_POINTS, tk.W_WIDTH, tk.W_CAP_H]] = n1, w, cap_h
-        wi[list(_SECTIONS)] = offsets[:-1]
-        wi[tk.W_QPTS], wi[tk.W_FORCES] = 0, 3 * cap_q
-        if old is not None:  # what lasts from step to step: the counts, the touching keys, the groups
-            for slot in (tk.W_TOUCH_N, tk.W_CHANGED_N, tk.W_KEPT_N):
-                wi[slot] = old[slot]
-            old_h = old[tk.W_CAP_H]
-            for sec, n in ((tk.W_TOUCH, old_h), (tk.W_KEPT, old_h * (w + 1)), (tk.W_GROUP, old_h * w),
-                           (tk.W_START, n1 + 1)):  # fmt: skip
-                wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
-        else:
-            self._lab_i = np.full(64, -1, np.int64)  # no labels
-            self._lab_f = np.zeros(64)
+        self._work_i, self._work_f = tk.new_work(n1, self._width, self._n_pieces, cap_c, cap_h, old)
+        if old is None:
+            self._lab_i, self._lab_f = tk.no_labels()
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
             self._version = 0
-        self._work_i, self._work_f = wi, np.zeros(3 * cap_q + 2 * n1 + 8)
         self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
-        self._group = wi[wi[tk.W_GROUP] : wi[tk.W_START]].reshape(cap_h, w)
-        self._start = wi[wi[tk.W_START] : wi[tk.W_START] + n1 + 1]
-        self._changed = wi[wi[tk.W_CHANGED] : wi[tk.W_CHANGED] + n1]
-        self._forces_out = self._work_f[3 * cap_q :]
+        self._views = tk.work_views(self._work_i, self._work_f)
 
     def _piece_table(self, objs: Any) -> np.ndarray:
         """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
@@ -330,7 +310,7 @@ class ContactTracker:
             disc = self._discretizer()(topo)
             new = prev is None or prev.discrete != disc or prev.topological != topo
         if table is not None and len(table) and self._spans[0] is topo:  # the kernel's sums
-            forces = tuple(self._forces_out[: len(topo.contacts)].tolist())
+            forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
             forces = self._forces(topo, table)
         state = ContactState._of(
@@ -360,11 +340,11 @@ class ContactTracker:
         if self._spans[0] is not topo:
             spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in topo.contacts]
             self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
-            if len(spans) > len(self._forces_out):
+            views = self._views
+            if len(spans) > len(views.forces):
                 raise RuntimeError("more contacts than the cable has points")
-            wi = self._work_i
-            tk.span_forces(self._spans[1], wi[wi[tk.W_POINT_OF] : wi[tk.W_AGAIN]], table, self._forces_out)
-        return tuple(self._forces_out[: len(topo.contacts)].tolist())
+            tk.span_forces(self._spans[1], views.point_of, table, views.forces)
+        return tuple(self._views.forces[: len(topo.contacts)].tolist())
 
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
         """The kept situations with the classes of the transition into each (``()`` for the first;
@@ -382,12 +362,6 @@ def _tuple(v: Any) -> Any:
     if type(v) is np.ndarray and v.dtype is _F64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
-
-
-@dataclass(frozen=True)
-class _Hit:
-    point: int
-    faces: tuple[str, ...]
 
 
 def _vector_independent(topo: Situation) -> bool:
@@ -414,7 +388,3 @@ _track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))
 _NO_MAP = np.full((1, 1), -1, np.int64)
 _NO_SPANS = np.zeros((0, 2), np.int64)
-_SECTIONS = (
-    tk.W_TOUCH, tk.W_KEPT, tk.W_GROUP, tk.W_START, tk.W_CHANGED, tk.W_PAIRS, tk.W_OWNER, tk.W_POINT_OF,
-    tk.W_AGAIN,
-)  # fmt: skip

@@ -82,3 +82,42 @@ def test_records_and_states_made_without_init_are_the_constructors_objects():
         assert all(vars(fast)[k] is vars(slow)[k] for k in vars(slow))
         with pytest.raises(dataclasses.FrozenInstanceError):
             fast.step = 0  # type: ignore[misc]
+
+
+def test_packed_pieces_are_read_by_name_in_packing_order():
+    """The kernels' named sections of the packed pieces are packing's sections, in its order, and
+    each view has the shape the packed arrays say."""
+    from dlovr.geometry import SceneGeometry, box_mesh
+    from dlovr.geometry.kernels import Pieces, unpack
+    from dlovr.geometry.packing import FLOAT_SECTIONS, INT_SECTIONS
+    from dlovr.transforms import pose_matrix
+
+    assert Pieces._fields == FLOAT_SECTIONS + INT_SECTIONS
+    table = (box_mesh([1.0, 1.0, 0.05]), pose_matrix([0, 0, -0.025], [1, 0, 0, 0]))
+    packed = SceneGeometry.from_meshes({"table": table}, radius=0.005).packed()
+    g = getattr(unpack, "py_func", unpack)(packed.floats, packed.ints)  # the Python of the kernel
+    n_p, n_f = len(g.nfaces), packed.width
+    assert g.normals.shape == (n_p, n_f, 3) and g.label.shape == (n_p, n_f)
+    assert g.tri_range.shape == g.outline_range.shape == (n_p * n_f + 1,)
+    assert sum(a.size for a in g[: len(FLOAT_SECTIONS)]) == packed.floats.size
+
+
+def test_the_trackers_work_sections_tile_their_arrays():
+    """:func:`new_work` lays the sections out once, :class:`Work` names them: every section has its
+    room, none overlaps the next, and what lasts is copied when the arrays grow."""
+    from dlovr.sim import track_kernels as tk
+
+    wi, wf = tk.new_work(n1=5, width=3, n_pieces=4, cap_c=16, cap_h=16)
+    w = tk.work_views(wi, wf)
+    assert w.kept.shape == (16, 4) and w.group.shape == (16, 3) and w.start.shape == (6,)
+    assert w.pairs.shape == (5 * 4 + 2 * 16 + 16, 2) and w.qpts.shape == (5 + 16, 3)
+    assert w.owner.shape == w.again.shape == (5 + 16,) and w.point_of.shape == (16,)
+    starts = [int(wi[s]) for s in (tk.W_TOUCH, tk.W_KEPT, tk.W_GROUP, tk.W_START, tk.W_CHANGED)]
+    assert starts == sorted(starts) and starts[0] == tk.W_HEAD
+    w.touching[:3], w.group[:2] = [7, 8, 9], 5
+    wi[tk.W_TOUCH_N] = 3
+    wi2, wf2 = tk.new_work(n1=5, width=3, n_pieces=4, cap_c=32, cap_h=64, old=wi)
+    w2 = tk.work_views(wi2, wf2)
+    assert wi2[tk.W_TOUCH_N] == 3 and w2.touching[:3].tolist() == [7, 8, 9] and (w2.group[:2] == 5).all()
+    lab_i, _ = tk.no_labels()
+    assert lab_i[tk.L_K] < 0  # no labels
