@@ -17,12 +17,13 @@ import argparse
 import time
 from pathlib import Path
 
-from dlovr.execution.executor import ExecOptions, execute
-from dlovr.execution.programs import find_recording, load_program
-from dlovr.execution.run import load_track, resolve_scene
+from dlovr.execution.engine import execute
+from dlovr.execution.executor import ExecOptions
+from dlovr.execution.run import find_recording, load_track, resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trial
 from dlovr.execution.variation import parse_vary, perturb
 from dlovr.geometry import scene_pieces
+from dlovr.model.program import Program
 from dlovr.sim import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +38,7 @@ def main() -> None:
     ap.add_argument("--baseline", action="store_true", help="include the open-loop replay in each trial")
     args = ap.parse_args()
 
-    program = load_program(args.program)
+    program = Program.load(args.program)
     rec = find_recording(program)
     scene = resolve_scene(program, None, rec)
     track = load_track(rec) if rec is not None else None
