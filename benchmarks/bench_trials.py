@@ -44,7 +44,8 @@ def main() -> None:
     track = load_track(rec) if rec is not None else None
     pieces = scene_pieces(scene)
     variations = tuple(parse_vary(v, scene) for v in VARY)
-    setup = TrialSetup(program, scene, pieces, track, variations, args.seed, ExecOptions(), args.baseline)
+    setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=variations,
+                       seed=args.seed, opts=ExecOptions(), baseline=args.baseline)  # fmt: skip
 
     walls, sims = [], []
     for k in range(args.trials):

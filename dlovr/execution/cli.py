@@ -246,7 +246,10 @@ def _trials(
         raise _BadInput(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)
     record_dir = str(Path(out).resolve()) if record else None
-    setup = TrialSetup(program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir)
+    setup = TrialSetup(
+        program=program, scene=scene, pieces=pieces, track=track, variations=variations, seed=seed, opts=opts,
+        baseline=baseline, use_track=use_track, record_dir=record_dir,
+    )  # fmt: skip
     results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)

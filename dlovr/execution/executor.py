@@ -489,6 +489,15 @@ def run_macro(
     ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
+
+    def ended(
+        how: str, t: float, at: float | None, reason: str = "", resume: float | None = None
+    ) -> MacroRun:
+        return MacroRun(
+            macro=m, started_at=t0, ended_at=t, ended=how, detected_at=at, moved=s * scale, allowed=allowed,
+            peak_signal=guard.peak, reason=reason, resume_at=resume,
+        )  # fmt: skip
+
     try:
         while True:
             s = min(opts.allowance, (float(sim.time) + 1e-12 - t0) / period)
@@ -499,7 +508,7 @@ def run_macro(
                 if s >= 1.0:
                     why = "a bounce in the demonstration" if by_motion else "no force signal in it"
                     ses.emit("detected", m.index, f"macro {m.index} {m.label}: ended by its motion ({why})")
-                    return MacroRun(m, t0, t, "motion", t, s * scale, allowed, guard.peak)
+                    return ended("motion", t, t)
                 continue
             if not started:
                 if t - t0 >= blank - 1e-12:
@@ -511,14 +520,14 @@ def run_macro(
             moving = not force or s < opts.allowance
             if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
                 at = _detected(m, ses, track, path, r, s, m.t - period + s * period)
-                return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak, resume_at=at)
+                return ended("detected", t, t, resume=at)
             if t - t0 >= limit - 1e-12:
                 why = _allowance_text(m, opts, allowed)
                 ses.emit("failed", m.index, f"macro {m.index} {m.label}: {why}")
-                return MacroRun(m, t0, t, "allowance", None, s * scale, allowed, guard.peak, why)
+                return ended("allowance", t, None, why)
     except SimulationDiverged as e:
         ses.emit("failed", m.index, f"macro {m.index} {m.label}: simulation diverged: {e.reason}")
-        return MacroRun(m, t0, float(e.time), "diverged", None, s * scale, allowed, guard.peak, str(e))
+        return ended("diverged", float(e.time), None, str(e))
 
 
 def _detected(

@@ -491,21 +491,11 @@ class _NetworkRun:
         if self.arrived and not reached and not reason:
             reason = f"final situation {final or ('N',)} is not the goal {goal_p or ('N',)}"
         return NetworkRunResult(
-            self.nprog.name,
-            self.scene.name,
-            self.ses.opts.detect,
-            self.arrived and reached,
-            reached,
-            net.goal,
-            goal_p,
-            final,
-            reason,
-            tuple(self.path),
-            self.replans,
-            tuple(self.macros),
-            float(sim.time),
-            wall_time,
-        )
+            program=self.nprog.name, scene=self.scene.name, detect=self.ses.opts.detect,
+            success=self.arrived and reached, goal_reached=reached, goal=net.goal, goal_principals=goal_p,
+            final_principals=final, reason=reason, path=tuple(self.path), replans=self.replans,
+            macros=tuple(self.macros), sim_time=float(sim.time), wall_time=wall_time,
+        )  # fmt: skip
 
 
 def network_steps(
@@ -525,8 +515,10 @@ def failed_start(nprog: NetworkProgram, scene: Any, detect: str, why: str) -> Ne
     net = nprog.network
     goal_p = tuple(sorted(net.node(net.goal).principal))
     return NetworkRunResult(
-        nprog.name, scene.name, detect, False, False, net.goal, goal_p, (), why, (), 0, (), 0.0, 0.0
-    )
+        program=nprog.name, scene=scene.name, detect=detect, success=False, goal_reached=False, goal=net.goal,
+        goal_principals=goal_p, final_principals=(), reason=why, path=(), replans=0, macros=(), sim_time=0.0,
+        wall_time=0.0,
+    )  # fmt: skip
 
 
 def format_network_result(res: NetworkRunResult) -> str:

@@ -157,7 +157,11 @@ def not_started(program: Runnable, scene: Any, opts: ExecOptions, why: str) -> R
     if isinstance(program, NetworkProgram):
         return failed_start(program, scene, opts.detect, why)
     goal = program.goal if isinstance(program, Program) else ()
-    return RunResult(program.name, scene.name, opts.detect, False, False, goal, "", (), 0, why, (), 0.0, 0.0)
+    return RunResult(
+        program=program.name, scene=scene.name, detect=opts.detect, success=False, goal_reached=False,
+        goal=goal, final_situation="", final_principals=(), failed_macro=0, reason=why, macros=(),
+        sim_time=0.0, wall_time=0.0,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

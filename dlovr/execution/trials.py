@@ -34,7 +34,7 @@ from dlovr.model.program import Program, Runnable
 LEVELS = 3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialSetup:
     """Everything a trial needs (picklable, sent to the worker processes).
 

@@ -40,7 +40,8 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     the guarded macro goes on until it feels the contact. (Found by running trials 0-11; pinned.)"""
     program, scene, track, pieces = touch
     vary = (parse_vary("objects.pos=0.02"),)
-    setup = TrialSetup(program, scene, pieces, track, vary, 1, ExecOptions(), baseline=True)
+    setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=vary, seed=1,
+                       opts=ExecOptions(), baseline=True)  # fmt: skip
     trials = run_trials(setup, 3)
     t2 = trials[2]
     assert t2["values"]["objects.pos"][2] < -0.007
