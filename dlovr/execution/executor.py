@@ -11,6 +11,12 @@ still not detected ``settle`` seconds later. The program stops at the first fail
 ``detect="oracle"`` ends each macro instead when the contact tracker sees the expected change of
 principal contacts (to tell program errors from detection errors). Either way the tracker's debounced
 situations are logged beside the run to judge it afterwards (:mod:`dlovr.execution.scoring`).
+
+Every part of a run here is a generator of simulation steps (:data:`Steps`: it yields after each step
+and returns its outcome): :func:`program_steps` for a whole program, :func:`run_macro` and
+:func:`run_final` for one macro, :meth:`Session.hold`. The execution engine
+(:class:`dlovr.execution.engine.Engine`) advances them one step at a time, and network programs
+(:mod:`dlovr.execution.network_run`) are made of the same parts.
 """
 
 from __future__ import annotations
@@ -164,8 +170,9 @@ class MacroRun:
 
 @dataclass
 class Execution:
-    """The raw outcome of :func:`execute`: per-macro runs, the tracker's debounced situations
-    (``kept``: list of ``dlovr.model.transitions.Kept``), the events and where it stopped."""
+    """The raw outcome of a program's run (:func:`dlovr.execution.engine.execute`): per-macro runs,
+    the tracker's debounced situations (``kept``: list of ``dlovr.model.transitions.Kept``), the
+    events and where it stopped."""
 
     program: Program
     options: ExecOptions

@@ -137,13 +137,13 @@ class NetworkRunResult:
         return d
 
 
-def plan_track(nprog: Any, plan: Any) -> DemoTrack | None:
+def plan_track(nprog: NetworkProgram, plan: MacroPlan) -> DemoTrack | None:
     """The macro's motion as one recorded track: its edges' own demonstrated tracks one after the
     other (:func:`dlovr.model.tracks.join`); None when an edge has none (a network of recordings
     without commands), and the macro moves along the summed mean displacement instead."""
     by_id = {e.id: e for e in nprog.network.edges}
-    tracks = [by_id[i].track for i in plan.edges]
-    if not tracks or any(t is None for t in tracks):
+    tracks = [t for i in plan.edges if (t := by_id[i].track) is not None]
+    if not tracks or len(tracks) != len(plan.edges):
         return None
     pt = join(tracks)
     return DemoTrack(pt.t, pt.pos, pt.quat)
@@ -161,7 +161,7 @@ def _reference_steps(net: Any) -> list[tuple[float, float, Any]]:
     return sorted(steps, key=lambda x: x[0])
 
 
-def reference_span(nprog: Any, plan: Any, node: str) -> tuple[float, float] | None:
+def reference_span(nprog: NetworkProgram, plan: MacroPlan, node: str) -> tuple[float, float] | None:
     """Where the macro lies in the reference demonstration (start and end, s, its own clock), or
     None: from the reference's latest entry into ``node`` to its entry into the macro's target, when
     the macro's last (classed) edge is the reference's own (the unclassed steps between are not
@@ -185,14 +185,14 @@ def reference_span(nprog: Any, plan: Any, node: str) -> tuple[float, float] | No
     return (start, nxt[1]) if nxt is not None and {"S", "I"} & set(nxt[2].classes) else None
 
 
-def reference_goal_entry(nprog: Any) -> float | None:
+def reference_goal_entry(nprog: NetworkProgram) -> float | None:
     """When the reference demonstration entered the goal (s, its own clock), or None."""
     net = nprog.network
     at = [t1 for _, t1, e in _reference_steps(net) if e.target == net.goal]
     return max(at) if at else None
 
 
-def reference_track(nprog: Any) -> DemoTrack | None:
+def reference_track(nprog: NetworkProgram) -> DemoTrack | None:
     """The reference demonstration's whole commanded track on its own clock (s), or None."""
     ref = nprog.network.reference
     return None if ref is None else DemoTrack(ref.t0 + ref.t, ref.pos, ref.quat)
@@ -214,9 +214,9 @@ class _Final:
 
 def _macro_spec(
     index: int,
-    nprog: Any,
+    nprog: NetworkProgram,
     node: str,
-    plan: Any,
+    plan: MacroPlan | _Final,
     sim: Any,
     track: DemoTrack | None = None,
     span: tuple[float, float] | None = None,
@@ -551,7 +551,7 @@ def sensed_contact_vector(force: Any, tare: Any, free_force: float) -> np.ndarra
     return None if n < free_force else d / n
 
 
-def network_scene(nprog: Any, scene_ref: str | None) -> Any:
+def network_scene(nprog: NetworkProgram, scene_ref: str | None) -> Any:
     """The scene to run a network program in: ``scene_ref`` or the network's scene; raises
     :class:`dlovr.model.program.ProgramError` when the scene lacks an object the network's
     contacts name, or ``dlovr.scene.SceneError``."""
