@@ -178,7 +178,9 @@ def identify(
 
 
 class NetworkProgram:
-    """A network program: the planner over one network (module docstring) and its JSON form."""
+    """A network program: the planner over one network (module docstring) and its JSON form; like a
+    compiled :class:`dlovr.model.program_format.Program` it is a
+    :class:`~dlovr.model.program_format.Runnable` that the execution engine takes."""
 
     def __init__(self, network: Network, reach: float = DEFAULT_REACH_M, name: str = "", source: str = ""):
         if not reach >= 0:
