@@ -17,12 +17,13 @@ import argparse
 import time
 from pathlib import Path
 
-from dlovr.execution.executor import ExecOptions, execute
-from dlovr.execution.programs import find_recording, load_program
-from dlovr.execution.run import load_track, resolve_scene
+from dlovr.execution.engine import execute
+from dlovr.execution.executor import ExecOptions
+from dlovr.execution.run import find_recording, load_track, resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trial
 from dlovr.execution.variation import parse_vary, perturb
 from dlovr.geometry import scene_pieces
+from dlovr.model.program import Program
 from dlovr.sim import Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,13 +38,14 @@ def main() -> None:
     ap.add_argument("--baseline", action="store_true", help="include the open-loop replay in each trial")
     args = ap.parse_args()
 
-    program = load_program(args.program)
+    program = Program.load(args.program)
     rec = find_recording(program)
     scene = resolve_scene(program, None, rec)
     track = load_track(rec) if rec is not None else None
     pieces = scene_pieces(scene)
     variations = tuple(parse_vary(v, scene) for v in VARY)
-    setup = TrialSetup(program, scene, pieces, track, variations, args.seed, ExecOptions(), args.baseline)
+    setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=variations,
+                       seed=args.seed, opts=ExecOptions(), baseline=args.baseline)  # fmt: skip
 
     walls, sims = [], []
     for k in range(args.trials):

@@ -101,10 +101,11 @@ def run_cmd(
     """
     import json
 
+    from dlovr.execution.engine import format_result
     from dlovr.execution.executor import ExecOptions
-    from dlovr.execution.programs import ProgramError, find_recording, load_program
-    from dlovr.execution.run import load_track, resolve_scene
-    from dlovr.execution.scoring import format_result
+    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.model.planning import NetworkProgram, load_runnable
+    from dlovr.model.program import ProgramError
     from dlovr.recording import RecordingError
     from dlovr.scene import SceneError
 
@@ -132,13 +133,12 @@ def run_cmd(
         raise _BadInput(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if trials is not None and not out:
         raise _BadInput("--trials needs -o DIR for its results")
-    from dlovr.execution.network_run import load_network_program
-
     try:
-        nprog = load_network_program(program_path)
+        program = load_runnable(program_path)
     except ProgramError as e:
         raise _BadInput(str(e)) from None
-    if nprog is not None:
+    if isinstance(program, NetworkProgram):
+        nprog = program
         if baseline or recording or path_mode == "demo":
             why = "a network program has no single demonstration to replay or follow"
             raise _BadInput(f"{program_path}: {why}")
@@ -146,7 +146,6 @@ def run_cmd(
                  cluster, as_json)  # fmt: skip
         return
     try:
-        program = load_program(program_path)
         rec_path = find_recording(program, recording)
         if recording is not None and (rec_path is None or not rec_path.is_file()):
             raise _BadInput(f"{recording}: no such recording")
@@ -199,9 +198,11 @@ def _network(
     """``dlovr run NETWORK-PROGRAM.json``: one run (optionally recorded), or trials."""
     import json
 
+    from dlovr.execution.engine import format_result
     from dlovr.execution.executor import ExecOptions
-    from dlovr.execution.network_run import format_network_result, network_scene, run_network
-    from dlovr.execution.programs import ProgramError, ProgramSpec
+    from dlovr.execution.network_run import network_scene
+    from dlovr.execution.run import run_program
+    from dlovr.model.program import ProgramError
     from dlovr.scene import SceneError
 
     try:
@@ -210,27 +211,26 @@ def _network(
     except (ProgramError, SceneError, ValueError) as e:
         raise _BadInput(str(e)) from None
     if trials is not None:
-        holder = ProgramSpec(nprog.name or "network", nprog.source, ())
-        _trials(holder, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
-                cluster, nprog)  # fmt: skip
+        _trials(nprog, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
+                cluster)  # fmt: skip
         return
     if out:
         from dlovr.execution.recorded import record_run
 
         try:
-            res = record_run(ProgramSpec(nprog.name, nprog.source, ()), scene, out, opts, network=nprog)
+            res = record_run(nprog, scene, out, opts)
         except OSError as e:
             raise _BadInput(f"{out}: cannot write: {e.strerror}") from None
     else:
-        res = run_network(nprog, scene, opts)
-    click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_network_result(res))
+        res = run_program(nprog, scene, opts)
+    click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_result(res))
     sys.exit(0 if res.success else 1)
 
 
 def _trials(
     program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
     varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
-    cluster: str | None = None, network: Any = None,
+    cluster: str | None = None,
 ) -> None:  # fmt: skip
     from pathlib import Path
 
@@ -247,8 +247,9 @@ def _trials(
     pieces = scene_pieces(scene)
     record_dir = str(Path(out).resolve()) if record else None
     setup = TrialSetup(
-        program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir, network
-    )
+        program=program, scene=scene, pieces=pieces, track=track, variations=variations, seed=seed, opts=opts,
+        baseline=baseline, use_track=use_track, record_dir=record_dir,
+    )  # fmt: skip
     results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)

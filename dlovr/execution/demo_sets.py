@@ -43,13 +43,13 @@ def demo_path(setup: DemoSetup, trial: int) -> Path:
 
 def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
     """Record demonstration ``trial`` (see the module docstring); a JSON-able summary of it."""
-    from dlovr.execution.run import _simulator
+    from dlovr.execution.run import fresh_simulator
     from dlovr.recording import DemoRecorder
     from dlovr.sim import SimulationDiverged
 
     scene, values = perturb(setup.scene, setup.variations, setup.seed, trial)
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "path": None}
-    sim, why = _simulator(scene, setup.pieces)
+    sim, why = fresh_simulator(scene, setup.pieces)
     if sim is None:
         return {**out, "error": str(why), "situations": 0}
     path = demo_path(setup, trial)

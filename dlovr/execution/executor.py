@@ -11,21 +11,25 @@ still not detected ``settle`` seconds later. The program stops at the first fail
 ``detect="oracle"`` ends each macro instead when the contact tracker sees the expected change of
 principal contacts (to tell program errors from detection errors). Either way the tracker's debounced
 situations are logged beside the run to judge it afterwards (:mod:`dlovr.execution.scoring`).
+
+Every part of a run here is a generator of simulation steps (:data:`Steps`: it yields after each step
+and returns its outcome): :func:`program_steps` for a whole program, :func:`run_macro` and
+:func:`run_final` for one macro, :meth:`Session.hold`. The execution engine
+(:class:`dlovr.execution.engine.Engine`) advances them one step at a time, and network programs
+(:mod:`dlovr.execution.network_run`) are made of the same parts.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Callable, Generator
+from dataclasses import dataclass, field, replace
+from typing import Any, TypeVar
 
 import numpy as np
 
 from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
-from dlovr.execution.programs import MacroSpec, ProgramSpec
 from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
@@ -35,8 +39,14 @@ from dlovr.model.detection import (
     WrenchConditioner,
     make_detector,
 )
+from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
 from dlovr.transforms import dot, norm, quat_rotate
+
+T = TypeVar("T")
+#: A run's work between two simulation steps: a generator that yields after each step and returns
+#: its outcome (the engine, :mod:`dlovr.execution.engine`, advances it one step at a time).
+Steps = Generator[None, None, T]
 
 DETECT_MODES = ("force", "oracle")
 #: How a macro may end and the program go on: its transition detected, or -- a macro whose
@@ -48,6 +58,10 @@ ENDED_OK = ("detected", "motion")
 #: soft, high-friction cable still creeps into place after the motion stops (a tip sliding into a
 #: corner goes on at a few mm/s for a second), and the goal is a situation the cable rests in.
 FINAL_SETTLE_S = 2.0
+
+#: How far (m) a program's start may lie from the scene's gripper pose, and by what angle (deg).
+START_TOL_M = 0.02
+START_TOL_DEG = 10.0
 
 
 @dataclass(frozen=True)
@@ -142,7 +156,7 @@ class MacroRun:
     radians).
     """
 
-    macro: MacroSpec
+    macro: Macro
     started_at: float
     ended_at: float
     ended: str
@@ -156,10 +170,11 @@ class MacroRun:
 
 @dataclass
 class Execution:
-    """The raw outcome of :func:`execute`: per-macro runs, the tracker's debounced situations
-    (``kept``: list of ``dlovr.model.transitions.Kept``), the events and where it stopped."""
+    """The raw outcome of a program's run (:func:`dlovr.execution.engine.execute`): per-macro runs,
+    the tracker's debounced situations (``kept``: list of ``dlovr.model.transitions.Kept``), the
+    events and where it stopped."""
 
-    program: ProgramSpec
+    program: Program
     options: ExecOptions
     runs: list[MacroRun] = field(default_factory=list)
     events: list[Event] = field(default_factory=list)
@@ -175,14 +190,14 @@ def principal_states(situation: Any) -> tuple[str, ...]:
     return tuple(sorted(c.format() for run in successional_contacts(situation) for c in principal(run)))
 
 
-def transition_seen(principals: tuple[str, ...], m: MacroSpec) -> bool:
+def transition_seen(principals: tuple[str, ...], m: Macro) -> bool:
     """Whether a situation with these principal contacts shows the macro's transition: the principal
     contacts it begins are there and those it ends are gone (states and faces)."""
     have = set(principals)
     return all(c.state in have for c in m.established) and not any(c.state in have for c in m.released)
 
 
-def expectation(m: MacroSpec) -> Expectation:
+def expectation(m: Macro) -> Expectation:
     """What the macro's detectors expect: the contact vectors of the principal contacts its transition
     ends and begins, and the axes of those that are pinches (docs/model.md, Pinch)."""
     changing = (*m.released, *m.established)
@@ -190,7 +205,7 @@ def expectation(m: MacroSpec) -> Expectation:
     return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established), axes)
 
 
-def pace(m: MacroSpec, opts: ExecOptions) -> float:
+def pace(m: Macro, opts: ExecOptions) -> float:
     """Seconds for the demonstrated motion (s from 0 to 1): the demonstrated duration, but no
     faster than the speed bounds and no shorter than ``min_duration``."""
     mo = m.motion
@@ -201,7 +216,7 @@ def pace(m: MacroSpec, opts: ExecOptions) -> float:
 class _Guard:
     """The sensing side of one macro: the force detectors of its classes, or the oracle."""
 
-    def __init__(self, m: MacroSpec, opts: ExecOptions, rate_hz: float):
+    def __init__(self, m: Macro, opts: ExecOptions, rate_hz: float):
         self.macro = m
         self.oracle = opts.detect == "oracle"
         self.detectors: list[Detector] = []
@@ -264,13 +279,21 @@ class DemoTrack:
     quat: np.ndarray
 
 
-class _Session:
-    """One execution in progress: the simulator, the sensor chain and the event log."""
+class Session:
+    """One execution in progress: the simulator, the sensor chain, the event log and the guard of the
+    macro running (whose detector signal the browser shows)."""
 
-    def __init__(self, sim: Any, opts: ExecOptions, out: Execution, on_step: Any, on_event: Any):
-        self.sim, self.opts, self.out = sim, opts, out
+    def __init__(
+        self, sim: Any, opts: ExecOptions, *, on_step: Callable[[Any], None] | None = None,
+        on_event: Callable[[Event], None] | None = None,
+    ) -> None:  # fmt: skip
+        self.sim, self.opts = sim, opts
         self.on_step, self.on_event = on_step, on_event
         self.dt = float(sim.model.opt.timestep)
+        self.events: list[Event] = []
+        #: the macro running (its index; 0 before the first) and its guard (None in a final motion)
+        self.macro = 0
+        self.guard: _Guard | None = None
         #: how much further the cable's tip is from the gripper than demonstrated (m, gripper frame),
         #: once the tip's first touch has been felt (:func:`tip_offset`); turns are repeated about it
         self.tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -281,9 +304,17 @@ class _Session:
             sim.tracker.restart(rec)
         self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", np.zeros(3)), self.dt)
 
+    @property
+    def signal(self) -> float:
+        """The running macro's force detector signal (max over its classes; 1 = fires; 0 without)."""
+        dets = self.guard.detectors if self.guard is not None else []
+        return max((d.signal for d in dets), default=0.0)
+
     def emit(self, kind: str, macro: int, text: str) -> None:
         ev = Event(float(self.sim.time), int(self.sim.step_index), kind, macro, text)
-        self.out.events.append(ev)
+        self.events.append(ev)
+        if kind in ("macro", "final"):
+            self.macro = macro
         if self.on_event is not None:
             self.on_event(ev)
 
@@ -297,67 +328,63 @@ class _Session:
             self.on_step(r)
         return r
 
+    def hold(self, pos: np.ndarray, quat: np.ndarray, seconds: float) -> Steps[None]:
+        """Command the pose ``pos``, ``quat`` (world, m and wxyz) for ``seconds``."""
+        for _ in range(round(seconds / self.dt)):
+            self.step(pos, quat)
+            yield
 
-def execute(
-    program: ProgramSpec,
-    sim: Any,
-    opts: ExecOptions = ExecOptions(),
-    *,
-    track: DemoTrack | None = None,
-    on_step: Callable[[Any], None] | None = None,
-    on_event: Callable[[Event], None] | None = None,
-) -> Execution:
-    """Run ``program`` in ``sim`` (a :class:`dlovr.sim.Simulator` with ``track=True``, at its start
-    pose) and return the raw :class:`Execution` (judge it with :func:`dlovr.execution.scoring.score`).
+    def mocap_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """A copy of the gripper's (mocap body's) pose now: position (m) and quaternion (wxyz), world."""
+        mid = self.sim.built.mocap_id
+        return self.sim.data.mocap_pos[mid].copy(), self.sim.data.mocap_quat[mid].copy()
 
-    ``track``: the demonstration's gripper trajectory; when given, each macro follows its recorded
-    stretch of it (:class:`dlovr.execution.motion.TrackPath`) instead of the screw between the
-    demonstrated poses, and a program without a final macro ends with the rest of the recording.
-    A diverged simulation ends the run with its reason (never raises). ``on_step(record)`` sees
-    every step, ``on_event(event)`` every :class:`Event`.
-    """
+
+def program_steps(
+    program: Program, ses: Session, out: Execution, track: DemoTrack | None = None
+) -> Steps[None]:
+    """The steps of ``program`` (see :func:`dlovr.execution.engine.execute`): its classed macros
+    until one fails, then its final motion and the final hold; the outcome lands in ``out``."""
     from dlovr.sim import SimulationDiverged
 
-    out = Execution(program, opts)
-    wall0 = time.perf_counter()
-    ses = _Session(sim, opts, out, on_step, on_event)
-    ses.emit("start", 0, f"program {program.name}: {len(program.macros)} macros, detection {opts.detect}")
+    sim, opts, classed = ses.sim, ses.opts, program.classed
+    ses.emit("start", 0, f"program {program.name}: {len(classed)} macros, detection {opts.detect}")
     try:
-        mid = sim.built.mocap_id
-        here = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
-        for _ in range(round(opts.start_settle / ses.dt)):
-            ses.step(*here)
-        skip = bounces(program.macros, opts.bounce)
-        resume: float | None = None
-        for m in program.macros:
-            run = _run_macro(m, ses, track, m.index in skip, resume)
-            resume = run.resume_at
-            out.runs.append(run)
-            if run.ended == "diverged":
-                out.diverged = run.reason
-            if run.ended not in ENDED_OK:
-                break
-        else:
+        yield from ses.hold(*ses.mocap_pose(), opts.start_settle)
+        if (yield from _classed_steps(classed, ses, out, track)):
             final = program.final
-            if final is None and track is not None and program.macros:
-                final = _track_final(program.macros[-1], track)
+            if final is None and track is not None and classed:
+                final = _track_final(classed[-1], track)
             if final is not None:
-                _run_final(final, ses, track)
+                yield from run_final(final, ses, track)
                 out.final_done = True
-            pos, quat = sim.data.mocap_pos[mid].copy(), sim.data.mocap_quat[mid].copy()
-            for _ in range(round(opts.final_settle / ses.dt)):
-                ses.step(pos, quat)
+            yield from ses.hold(*ses.mocap_pose(), opts.final_settle)
             ses.emit("end", 0, "program done")
     except SimulationDiverged as e:
         out.diverged = str(e)
         ses.emit("failed", 0, f"simulation diverged outside the macros: {e.reason}")
     out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
     out.sim_time = float(sim.time)
-    out.wall_time = time.perf_counter() - wall0
-    return out
 
 
-def touches_tip(m: MacroSpec) -> bool:
+def _classed_steps(
+    macros: tuple[Macro, ...], ses: Session, out: Execution, track: DemoTrack | None
+) -> Steps[bool]:
+    """The classed macros in order until one does not end well; whether all did."""
+    skip = bounces(macros, ses.opts.bounce)
+    resume: float | None = None
+    for m in macros:
+        run = yield from run_macro(m, ses, track, by_motion=m.index in skip, t_from=resume)
+        resume = run.resume_at
+        out.runs.append(run)
+        if run.ended == "diverged":
+            out.diverged = run.reason
+        if run.ended not in ENDED_OK:
+            return False
+    return True
+
+
+def touches_tip(m: Macro) -> bool:
     """Whether ``m`` is the cable's tip touching from free space, approached along the cable: an
     ``E`` that releases nothing and establishes only tip (``V/``) contacts, its demonstrated motion
     within 25 degrees of the gripper's -z axis (the cable leaves the gripper along -z)."""
@@ -382,7 +409,7 @@ def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
 
 
 def _path(
-    m: MacroSpec, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None,
+    m: Macro, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None,
     tool: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> Any:  # fmt: skip
     mid = sim.built.mocap_id
@@ -403,7 +430,7 @@ def _path(
     return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)  # type: ignore[arg-type]
 
 
-def _period(m: MacroSpec, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
+def _period(m: Macro, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
     if track is None:
         return pace(m, opts)
     t0 = m.t - m.motion.duration if t_from is None else min(t_from, m.t - m.motion.duration)
@@ -422,9 +449,29 @@ def bounces(macros: Any, within: float) -> set[int]:
     return out
 
 
-def _run_macro(
-    m: MacroSpec, ses: _Session, track: DemoTrack | None, by_motion: bool = False, t_from: float | None = None
-) -> MacroRun:
+def _arm_at(m: Macro, opts: ExecOptions, track: DemoTrack | None, period: float) -> float:
+    """The fraction of the motion after which the force detectors may fire (``opts.arm``; following
+    the recorded track, also ``phase_blank`` s into the stretch's last motion phase: the gripper
+    setting off or stopping earlier shakes the wrench, which is no transition; at the latest 50 ms
+    before the demonstrated transition)."""
+    if track is None or period <= 0:
+        return opts.arm
+    t_start = m.t - period
+    phase = last_start(track.t, track.pos, track.quat, t_start, m.t)
+    return max(opts.arm, min((phase + opts.phase_blank - t_start) / period, 1.0 - 0.05 / period))
+
+
+def _allowance_text(m: Macro, opts: ExecOptions, allowed: float) -> str:
+    unit = "mm" if m.motion.distance > 1e-9 else "mrad"
+    return (
+        f"no {m.label} transition detected within the allowance ({opts.allowance:g}x the "
+        f"demonstrated motion: {allowed * 1000:.1f} {unit}) and {opts.settle:g} s after it"
+    )
+
+
+def run_macro(
+    m: Macro, ses: Session, track: DemoTrack | None, *, by_motion: bool = False, t_from: float | None = None
+) -> Steps[MacroRun]:
     """One guarded motion: until the detector fires, or the allowance and then ``settle`` pass;
     ``by_motion`` (or a macro without force signal): until its demonstrated motion is done.
 
@@ -436,18 +483,10 @@ def _run_macro(
     sim, opts = ses.sim, ses.opts
     path = _path(m, sim, opts, track, t_from, ses.tool)
     period = _period(m, opts, track, t_from)
-    t_start = m.t - period
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
-    unit = "mm" if m.motion.distance > 1e-9 else "mrad"
     allowed = opts.allowance * scale
-    guard = _Guard(m, opts, 1.0 / ses.dt)
-    arm = opts.arm
-    if track is not None and period > 0:
-        # the transition came in the stretch's last motion phase: the gripper setting off or stopping
-        # earlier shakes the wrench, which is no transition (armed ``blank`` s into the phase, at
-        # the latest 50 ms before the demonstrated transition)
-        phase = last_start(track.t, track.pos, track.quat, t_start, m.t)
-        arm = max(arm, min((phase + opts.phase_blank - t_start) / period, 1.0 - 0.05 / period))
+    guard = ses.guard = _Guard(m, opts, 1.0 / ses.dt)
+    arm = _arm_at(m, opts, track, period)
     t0 = float(sim.time)
     force = not guard.oracle
     blank = opts.blank if force else 0.0
@@ -457,16 +496,26 @@ def _run_macro(
     ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
+
+    def ended(
+        how: str, t: float, at: float | None, reason: str = "", resume: float | None = None
+    ) -> MacroRun:
+        return MacroRun(
+            macro=m, started_at=t0, ended_at=t, ended=how, detected_at=at, moved=s * scale, allowed=allowed,
+            peak_signal=guard.peak, reason=reason, resume_at=resume,
+        )  # fmt: skip
+
     try:
         while True:
             s = min(opts.allowance, (float(sim.time) + 1e-12 - t0) / period)
             r = ses.step(*path.at(s))
+            yield
             t = float(r.time)
             if by_motion or (force and guard.weak):
                 if s >= 1.0:
                     why = "a bounce in the demonstration" if by_motion else "no force signal in it"
                     ses.emit("detected", m.index, f"macro {m.index} {m.label}: ended by its motion ({why})")
-                    return MacroRun(m, t0, t, "motion", t, s * scale, allowed, guard.peak)
+                    return ended("motion", t, t)
                 continue
             if not started:
                 if t - t0 >= blank - 1e-12:
@@ -477,43 +526,53 @@ def _run_macro(
             # only a transition felt while moving counts (the oracle still waits ``settle``)
             moving = not force or s < opts.allowance
             if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
-                if track is None:
-                    sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
-                at = t_start + s * period if track is not None and s < 1.0 else None
-                if not ses.tool_known and touches_tip(m):
-                    # the approach left undone is the tip's offset, not motion for the next macro
-                    ses.tool, ses.tool_known, at = tip_offset(path, s), True, None
-                ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
-                return MacroRun(m, t0, t, "detected", t, s * scale, allowed, guard.peak, resume_at=at)
+                at = _detected(m, ses, track, path, r, s, m.t - period + s * period)
+                return ended("detected", t, t, resume=at)
             if t - t0 >= limit - 1e-12:
-                why = (
-                    f"no {m.label} transition detected within the allowance ({opts.allowance:g}x the "
-                    f"demonstrated motion: {allowed * 1000:.1f} {unit}) and {opts.settle:g} s after it"
-                )
+                why = _allowance_text(m, opts, allowed)
                 ses.emit("failed", m.index, f"macro {m.index} {m.label}: {why}")
-                return MacroRun(m, t0, t, "allowance", None, s * scale, allowed, guard.peak, why)
+                return ended("allowance", t, None, why)
     except SimulationDiverged as e:
         ses.emit("failed", m.index, f"macro {m.index} {m.label}: simulation diverged: {e.reason}")
-        return MacroRun(m, t0, float(e.time), "diverged", None, s * scale, allowed, guard.peak, str(e))
+        return ended("diverged", float(e.time), None, str(e))
 
 
-def _run_final(m: MacroSpec, ses: _Session, track: DemoTrack | None) -> None:
+def _detected(
+    m: Macro, ses: Session, track: DemoTrack | None, path: Any, r: Any, s: float, at_demo: float
+) -> float | None:
+    """The macro's transition was seen at ``s`` of its ``path`` (record ``r``): stop there (screw
+    paths), learn the tip's offset at its first touch, report; where on the demonstration's clock
+    (s) the next macro's motion resumes (None: at its own stretch)."""
+    if track is None:
+        ses.sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
+    at = at_demo if track is not None and s < 1.0 else None
+    if not ses.tool_known and touches_tip(m):
+        # the approach left undone is the tip's offset, not motion for the next macro
+        ses.tool, ses.tool_known, at = tip_offset(path, s), True, None
+    ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
+    return at
+
+
+def run_final(m: Macro, ses: Session, track: DemoTrack | None) -> Steps[None]:
     """The motion after the last classed transition, to the demonstrated end pose (no detection)."""
     path = _path(m, ses.sim, ses.opts, track, tool=ses.tool)
     period = _period(m, ses.opts, track)
     t0 = float(ses.sim.time)
+    ses.guard = None
     ses.emit("final", m.index, "final motion to the demonstrated end pose")
     while True:
         s = min(1.0, (float(ses.sim.time) + 1e-12 - t0) / period)
         ses.step(*path.at(s))
+        yield
         if s >= 1.0:
             return
 
 
-def _track_final(last: MacroSpec, track: DemoTrack) -> MacroSpec:
+def _track_final(last: Macro, track: DemoTrack) -> Macro:
     """The final motion of a program without one: the recorded trajectory after its last macro."""
-    from dataclasses import replace
-
     t_end = float(track.t[-1])
     mo = replace(last.motion, duration=max(t_end - last.t, 0.0))
-    return replace(last, index=last.index + 1, classes=(), t=t_end, motion=mo, detection=(), final=True)
+    return replace(
+        last, index=last.index + 1, kind="final", classes=(), t=t_end, motion=mo, detection=(),
+        changes=(), risk="none",
+    )  # fmt: skip

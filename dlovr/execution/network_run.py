@@ -47,17 +47,18 @@ import numpy as np
 
 from dlovr.execution.executor import (
     ENDED_OK,
+    START_TOL_M,
     DemoTrack,
-    ExecOptions,
-    Execution,
-    _run_final,
-    _run_macro,
-    _Session,
+    MacroRun,
+    Session,
+    Steps,
     principal_states,
+    run_final,
+    run_macro,
 )
-from dlovr.execution.programs import ContactVec, DetectionSpec, MacroSpec, MotionSpec, ProgramSpec
 from dlovr.model.derivation import THRESHOLD_PARAM
-from dlovr.model.program import PoseTrack
+from dlovr.model.planning import Choice, MacroPlan, NetworkProgram, Successor, identify
+from dlovr.model.program import ContactSpec, Detection, Macro, Motion, PoseTrack, ProgramError, risk
 from dlovr.model.tracks import join
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix, unit
 
@@ -136,13 +137,13 @@ class NetworkRunResult:
         return d
 
 
-def plan_track(nprog: Any, plan: Any) -> DemoTrack | None:
+def plan_track(nprog: NetworkProgram, plan: MacroPlan) -> DemoTrack | None:
     """The macro's motion as one recorded track: its edges' own demonstrated tracks one after the
     other (:func:`dlovr.model.tracks.join`); None when an edge has none (a network of recordings
     without commands), and the macro moves along the summed mean displacement instead."""
     by_id = {e.id: e for e in nprog.network.edges}
-    tracks = [by_id[i].track for i in plan.edges]
-    if not tracks or any(t is None for t in tracks):
+    tracks = [t for i in plan.edges if (t := by_id[i].track) is not None]
+    if not tracks or len(tracks) != len(plan.edges):
         return None
     pt = join(tracks)
     return DemoTrack(pt.t, pt.pos, pt.quat)
@@ -160,7 +161,7 @@ def _reference_steps(net: Any) -> list[tuple[float, float, Any]]:
     return sorted(steps, key=lambda x: x[0])
 
 
-def reference_span(nprog: Any, plan: Any, node: str) -> tuple[float, float] | None:
+def reference_span(nprog: NetworkProgram, plan: MacroPlan, node: str) -> tuple[float, float] | None:
     """Where the macro lies in the reference demonstration (start and end, s, its own clock), or
     None: from the reference's latest entry into ``node`` to its entry into the macro's target, when
     the macro's last (classed) edge is the reference's own (the unclassed steps between are not
@@ -184,14 +185,14 @@ def reference_span(nprog: Any, plan: Any, node: str) -> tuple[float, float] | No
     return (start, nxt[1]) if nxt is not None and {"S", "I"} & set(nxt[2].classes) else None
 
 
-def reference_goal_entry(nprog: Any) -> float | None:
+def reference_goal_entry(nprog: NetworkProgram) -> float | None:
     """When the reference demonstration entered the goal (s, its own clock), or None."""
     net = nprog.network
     at = [t1 for _, t1, e in _reference_steps(net) if e.target == net.goal]
     return max(at) if at else None
 
 
-def reference_track(nprog: Any) -> DemoTrack | None:
+def reference_track(nprog: NetworkProgram) -> DemoTrack | None:
     """The reference demonstration's whole commanded track on its own clock (s), or None."""
     ref = nprog.network.reference
     return None if ref is None else DemoTrack(ref.t0 + ref.t, ref.pos, ref.quat)
@@ -212,9 +213,14 @@ class _Final:
 
 
 def _macro_spec(
-    index: int, nprog: Any, node: str, plan: Any, sim: Any, track: DemoTrack | None = None,
+    index: int,
+    nprog: NetworkProgram,
+    node: str,
+    plan: MacroPlan | _Final,
+    sim: Any,
+    track: DemoTrack | None = None,
     span: tuple[float, float] | None = None,
-) -> MacroSpec:
+) -> Macro:
     """The executor's macro for a network macro plan, starting at the gripper's pose now (with
     ``track``: its motion is that track's between the times ``span``, s, or all of it)."""
     net = nprog.network
@@ -232,24 +238,41 @@ def _macro_spec(
         world = tuple(float(x) for x in p1 - p0)
         rot = tuple(float(x) for x in matrix_to_rotvec(quat_to_matrix(q0).T @ quat_to_matrix(q1)))
         duration = t_end - t0
-    rel = tuple(float(x) for x in quat_rotate(inv, np.asarray(world, float)))
-    motion = MotionSpec(world, rel, rot, duration, here, q)  # type: ignore[arg-type]
-
-    def contacts(n: Any) -> tuple[ContactVec, ...]:
-        v = None if n.vector is None or math.sqrt(sum(x * x for x in n.vector)) < 1e-9 else tuple(n.vector)
-        return tuple(ContactVec(s, v) for s in n.principal)  # type: ignore[arg-type]
-
+    rel = quat_rotate(inv, np.asarray(world, float))
+    motion = Motion(_v3(world), _v3(rel), _v3(rot), duration, _v3(here), (q[0], q[1], q[2], q[3]))
     derived = {d.cls: d for d in plan.detection}  # the network's parameters; the defaults without
     det = tuple(
-        DetectionSpec(c, derived[c].algorithm, dict(derived[c].params)) if c in derived
-        else DetectionSpec(c, "", {})
+        Detection(c, derived[c].algorithm, dict(derived[c].params)) if c in derived else Detection(c, "", {})
         for c in plan.classes
-    )  # fmt: skip
-    return MacroSpec(index, tuple(plan.classes), t_end, src.situation, dst.situation, contacts(src),
-                     contacts(dst), motion, det, final=plan.final, frame="world")  # fmt: skip
+    )
+    return Macro(
+        index=index,
+        kind="final" if plan.final else "transition",
+        classes=tuple(plan.classes),
+        t=t_end,
+        from_situation=src.situation,
+        to_situation=dst.situation,
+        changes=(),
+        from_contacts=_contacts(src),
+        to_contacts=_contacts(dst),
+        motion=motion,
+        detection=det,
+        risk=risk(plan.classes),
+        frame="world",
+    )
 
 
-def _free_force(m: MacroSpec, free_force: float) -> float:
+def _v3(v: Any) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _contacts(n: Any) -> tuple[ContactSpec, ...]:
+    """A node's principal contacts, each with the node's vector (None when it is zero)."""
+    v = None if n.vector is None or math.sqrt(sum(x * x for x in n.vector)) < 1e-9 else _v3(n.vector)
+    return tuple(ContactSpec(s, v) for s in n.principal)
+
+
+def _free_force(m: Macro, free_force: float) -> float:
     """Below what contact force (N) the sensed vector is free space after macro ``m``: ``free_force``,
     or half the smallest threshold its detectors fired at (a detection at a smaller force than
     ``free_force`` is a contact of that size, not free space)."""
@@ -258,16 +281,16 @@ def _free_force(m: MacroSpec, free_force: float) -> float:
     return min([free_force, *(0.5 * t for t in thr if t > 0.0)])
 
 
-def _hold(ses: _Session, seconds: float) -> None:
+def _hold_target(ses: Session, seconds: float) -> Steps[None]:
     """Hold the commanded pose ``seconds``: the gripper, which lags its target at speed, catches up
     (holding where it is instead would drop the motion still under way)."""
     sim = ses.sim
-    pos, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
-    for _ in range(round(seconds / ses.dt)):
-        ses.step(pos, quat)
+    yield from ses.hold(
+        np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float), seconds
+    )
 
 
-def _true_node(nprog: Any, sim: Any) -> tuple[str, tuple[str, ...]]:
+def _true_node(nprog: NetworkProgram, sim: Any) -> tuple[str, tuple[str, ...]]:
     cur = sim.tracker.current
     have = principal_states(cur.discrete) if cur is not None else ()
     for n in nprog.network.nodes:
@@ -276,165 +299,235 @@ def _true_node(nprog: Any, sim: Any) -> tuple[str, tuple[str, ...]]:
     return "?", have
 
 
-def run_network_in(
-    nprog: Any,
-    sim: Any,
-    scene: Any,
-    opts: ExecOptions | None = None,
-    nopts: NetworkOptions | None = None,
-    *,
-    on_step: Any = None,
-    on_event: Any = None,
-) -> NetworkRunResult:
-    """Run the network program ``nprog`` (a :class:`dlovr.model.planning.NetworkProgram`) in ``sim``
-    (a :class:`dlovr.sim.Simulator` with ``track=True`` at its start pose); see the module docstring.
-    Never raises for a failed run: the reason is in the result."""
-    opts = opts if opts is not None else ExecOptions()
-    nopts = nopts if nopts is not None else NetworkOptions()
-    net = nprog.network
-    wall0 = time.perf_counter()
-    holder = ProgramSpec(nprog.name or "network", nprog.source, ())
-    out = Execution(holder, opts)
-    ses = _Session(sim, opts, out, on_step, on_event)
-    weight = np.array([0.0, 0.0, -float(scene.dlo.mass) * GRAVITY])
-    tare = weight
-    head = f"network program {nprog.name}: start {net.start}, goal {net.goal}, detection {opts.detect}"
-    ses.emit("start", 0, head)
-    node, path, macros, replans = net.start, [net.start], [], 0
-    ref_track, resume = reference_track(nprog), None
-    last_end: float | None = None  # where the last macro ended on the reference's clock (s)
-    reason, arrived = "", False
-    from dlovr.sim import SimulationDiverged
+def _rounded(v: np.ndarray | None) -> tuple[float, float, float] | None:
+    """A sensed vector for the report: 4 decimals, no -0.0."""
+    return None if v is None else _v3([round(float(x), 4) + 0.0 for x in v])
 
-    try:
-        while len(macros) < nopts.max_macros:
-            mid = sim.built.mocap_id
-            pos = tuple(float(x) for x in sim.data.mocap_pos[mid])
-            if node == net.goal:
-                arrived = True
-                break
-            choice = nprog.replan(node, pos)
-            if choice is None:
-                where = f"{node} ({net.node(node).situation})"
-                reason = f"no demonstrated path from {where} to the goal {net.goal}"
-                ses.emit("failed", 0, reason)
-                break
-            plan = choice.macro
-            k = len(macros) + 1
-            span = reference_span(nprog, plan, node) if nopts.tracks else None
-            if span is not None:  # along the reference demonstration: its own track, as a program
-                track = ref_track
-            else:
-                track, resume = (plan_track(nprog, plan) if nopts.tracks else None), None
-            m = _macro_spec(k, nprog, node, plan, sim, track, span)
-            ses.emit("plan", k, f"at {node}: edges {' '.join(plan.edges)} toward {plan.target}, "
-                                f"P(goal)={choice.reach_probability:.3f}")  # fmt: skip
-            t0 = float(sim.time)
-            if plan.final:
-                _run_final(m, ses, track)
-                node = plan.target
-                tn, tp = _true_node(nprog, sim)
-                macros.append(NetMacro(k, choice.node, plan.target, (), plan.edges, t0, float(sim.time),
-                                       "final", None, node, tn, tp))  # fmt: skip
-                path.append(node)
-                continue
-            run = _run_macro(m, ses, track, False, resume)
-            resume = run.resume_at if span is not None else None
-            last_end = None if span is None else (resume if resume is not None else span[1])
-            if run.ended not in ENDED_OK:
-                tn, tp = _true_node(nprog, sim)
-                macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
-                                       run.ended_at, run.ended, None, None, tn, tp, run.reason))  # fmt: skip
-                reason = f"macro {k} ({','.join(plan.classes)}, {node} -> {plan.target}): {run.reason}"
-                break
-            _hold(ses, nopts.sense_settle)
-            tn, tp = _true_node(nprog, sim)
-            sensed = sensed_contact_vector(ses.f, tare, _free_force(m, nopts.free_force))
-            if opts.detect == "oracle":
-                found = next((s for s in choice.successors if s.node == tn), None)
-            elif run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes:
-                # a transition without force signal gives the wrench nothing to tell: as a compiled
-                # program does, take the demonstrated motion to have made the planned transition
-                # (not a spontaneous one, whose outcome the motion does not choose: where the DLO
-                # landed is sensed)
-                found = next((s for s in choice.successors if s.node == plan.target), None)
-            else:
-                from dlovr.model.planning import identify
 
-                found = identify(choice.successors, sensed, nopts.tolerance, nopts.sigma)
-            sv = None if sensed is None else tuple(round(float(x), 4) + 0.0 for x in sensed)  # no -0.0
-            if found is None:
-                exp = ", ".join(f"{s.node} {list(s.vector) if s.vector is not None else '-'}"
-                                for s in choice.successors)  # fmt: skip
-                reason = (
-                    f"macro {k}: sensed contact vector {list(sv) if sv else 'none (free space)'} matches "
-                    f"none of the expected situations ({exp}) within {nopts.tolerance:g}: a situation "
-                    "outside the network"
-                    f" (tracker: {' + '.join(tp) or 'N'})"
-                )
-                ses.emit("outside", k, reason)
-                macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
-                                       run.ended_at, "outside", sv, None, tn, tp, reason))  # fmt: skip
-                break
-            macros.append(NetMacro(k, choice.node, plan.target, plan.classes, plan.edges, t0,
-                                   run.ended_at, run.ended, sv, found.node, tn, tp))  # fmt: skip
-            if found.node != plan.target:
-                replans += 1
-                what = f"reached {found.node} ({found.situation}), not {plan.target}: planning again"
-                ses.emit("replan", k, what)
-            node = found.node
-            path.append(node)
+class _NetworkRun:
+    """A network program's run in progress (the loop of the module docstring) and what it found."""
+
+    def __init__(self, nprog: NetworkProgram, ses: Session, scene: Any, nopts: NetworkOptions):
+        self.nprog, self.ses, self.scene, self.nopts = nprog, ses, scene, nopts
+        self.net = nprog.network
+        self.node, self.path, self.replans = self.net.start, [self.net.start], 0
+        self.macros: list[NetMacro] = []
+        self.tare = np.array([0.0, 0.0, -float(scene.dlo.mass) * GRAVITY])  # the cable's weight
+        self.ref_track = reference_track(nprog)
+        self.resume: float | None = None
+        self.last_end: float | None = None  # where the last macro ended on the reference's clock (s)
+        self.reason, self.arrived = "", False
+
+    def steps(self) -> Steps[None]:
+        """Macros until the goal, a failure or ``max_macros``; then the motion after the goal."""
+        from dlovr.sim import SimulationDiverged
+
+        net, ses = self.net, self.ses
+        head = f"network program {self.nprog.name}: start {net.start}, goal {net.goal}"
+        ses.emit("start", 0, f"{head}, detection {ses.opts.detect}")
+        try:
+            while len(self.macros) < self.nopts.max_macros:
+                if self.node == net.goal:
+                    self.arrived = True
+                    break
+                if not (yield from self._macro()):
+                    break
+            else:
+                self.reason = f"stopped after {self.nopts.max_macros} macros without reaching the goal"
+                ses.emit("failed", 0, self.reason)
+            if self.arrived or self.node == net.goal:
+                self.arrived = True
+                yield from self._after_goal()
+        except SimulationDiverged as e:
+            self.reason = f"simulation diverged: {e}"
+            ses.emit("failed", 0, self.reason)
+
+    def _macro(self) -> Steps[bool]:
+        """Plan at the node reached and run that macro; whether the loop goes on."""
+        ses, sim, node = self.ses, self.ses.sim, self.node
+        pos = tuple(float(x) for x in sim.data.mocap_pos[sim.built.mocap_id])
+        choice = self.nprog.replan(node, pos)
+        if choice is None:
+            where = f"{node} ({self.net.node(node).situation})"
+            self.reason = f"no demonstrated path from {where} to the goal {self.net.goal}"
+            ses.emit("failed", 0, self.reason)
+            return False
+        plan, k = choice.macro, len(self.macros) + 1
+        span = reference_span(self.nprog, plan, node) if self.nopts.tracks else None
+        if span is not None:  # along the reference demonstration: its own track, as a program
+            track = self.ref_track
         else:
-            reason = f"stopped after {nopts.max_macros} macros without reaching the goal"
-            ses.emit("failed", 0, reason)
-        if arrived or node == net.goal:
-            arrived = True
-            # the reference's motion after it entered the goal, as a program's final macro (from
-            # where the last macro stopped on its clock when that followed it)
-            since = last_end if last_end is not None else reference_goal_entry(nprog)
-            if since is not None and ref_track is not None and float(ref_track.t[-1]) > since:
-                span = (since, float(ref_track.t[-1]))
-                fin = _macro_spec(len(macros) + 1, nprog, node, _Final(target=node), sim, ref_track, span)
-                _run_final(fin, ses, ref_track)
-            _hold(ses, opts.final_settle)
-            ses.emit("end", 0, "network program done")
-    except SimulationDiverged as e:
-        reason = f"simulation diverged: {e}"
-        ses.emit("failed", 0, reason)
-    kept = list(sim.tracker.kept)
-    final = principal_states(kept[-1].situation) if kept else ()
-    goal_p = tuple(sorted(net.node(net.goal).principal))
-    reached = final == goal_p and not reason.startswith("simulation diverged")
-    if arrived and not reached and not reason:
-        reason = f"final situation {final or ('N',)} is not the goal {goal_p or ('N',)}"
-    return NetworkRunResult(
-        nprog.name, scene.name, opts.detect, arrived and reached, reached, net.goal, goal_p, final, reason,
-        tuple(path), replans, tuple(macros), float(sim.time), time.perf_counter() - wall0,
-    )  # fmt: skip
+            track, self.resume = (plan_track(self.nprog, plan) if self.nopts.tracks else None), None
+        m = _macro_spec(k, self.nprog, node, plan, sim, track, span)
+        ses.emit(
+            "plan",
+            k,
+            f"at {node}: edges {' '.join(plan.edges)} toward {plan.target}, "
+            f"P(goal)={choice.reach_probability:.3f}",
+        )
+        t0 = float(sim.time)
+        if plan.final:
+            yield from run_final(m, ses, track)
+            self.node = plan.target
+            self._log(k, choice, t0, float(sim.time), "final", None, self.node, classes=())
+            self.path.append(self.node)
+            return True
+        run = yield from run_macro(m, ses, track, t_from=self.resume)
+        self.resume = run.resume_at if span is not None else None
+        self.last_end = None if span is None else (self.resume if self.resume is not None else span[1])
+        if run.ended not in ENDED_OK:
+            self._log(k, choice, t0, run.ended_at, run.ended, None, None, reason=run.reason)
+            self.reason = f"macro {k} ({','.join(plan.classes)}, {node} -> {plan.target}): {run.reason}"
+            return False
+        return (yield from self._sense(k, choice, m, run, t0))
 
+    def _sense(self, k: int, choice: Choice, m: Macro, run: MacroRun, t0: float) -> Steps[bool]:
+        """Hold still, sense the contact vector and identify the node reached; whether it is one."""
+        yield from _hold_target(self.ses, self.nopts.sense_settle)
+        tn, _ = _true_node(self.nprog, self.ses.sim)
+        sensed = sensed_contact_vector(self.ses.f, self.tare, _free_force(m, self.nopts.free_force))
+        found = self._identify(choice, run, sensed, tn)
+        sv = _rounded(sensed)
+        if found is None:
+            self._outside(k, choice, run, sv, t0)
+            return False
+        self._log(k, choice, t0, run.ended_at, run.ended, sv, found.node)
+        plan = choice.macro
+        if found.node != plan.target:
+            self.replans += 1
+            what = f"reached {found.node} ({found.situation}), not {plan.target}: planning again"
+            self.ses.emit("replan", k, what)
+        self.node = found.node
+        self.path.append(self.node)
+        return True
 
-def run_network(
-    nprog: Any, scene: Any, opts: ExecOptions | None = None, nopts: NetworkOptions | None = None,
-    *, pieces: Any = None,
-) -> NetworkRunResult:  # fmt: skip
-    """:func:`run_network_in` in a fresh simulation of ``scene``."""
-    from dlovr.execution.run import _simulator
+    def _identify(
+        self, choice: Choice, run: MacroRun, sensed: np.ndarray | None, true_node: str
+    ) -> Successor | None:
+        """The successor reached: the tracker's (oracle), the planned one (a macro ended by its motion,
+        not a spontaneous one), or the one whose vector fits the sensed one."""
+        plan, nopts = choice.macro, self.nopts
+        if self.ses.opts.detect == "oracle":
+            return next((s for s in choice.successors if s.node == true_node), None)
+        if run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes:
+            # a transition without force signal gives the wrench nothing to tell: as a compiled
+            # program does, take the demonstrated motion to have made the planned transition
+            # (not a spontaneous one, whose outcome the motion does not choose: where the DLO
+            # landed is sensed)
+            return next((s for s in choice.successors if s.node == plan.target), None)
+        return identify(choice.successors, sensed, nopts.tolerance, nopts.sigma)
 
-    opts = opts if opts is not None else ExecOptions()
-    sim, why = _simulator(scene, pieces)
-    if sim is None:
-        net = nprog.network
+    def _outside(
+        self, k: int, choice: Choice, run: MacroRun, sv: tuple[float, float, float] | None, t0: float
+    ) -> None:
+        _, tp = _true_node(self.nprog, self.ses.sim)
+        exp = ", ".join(
+            f"{s.node} {list(s.vector) if s.vector is not None else '-'}" for s in choice.successors
+        )
+        self.reason = (
+            f"macro {k}: sensed contact vector {list(sv) if sv else 'none (free space)'} matches "
+            f"none of the expected situations ({exp}) within {self.nopts.tolerance:g}: a situation "
+            f"outside the network (tracker: {' + '.join(tp) or 'N'})"
+        )
+        self.ses.emit("outside", k, self.reason)
+        self._log(k, choice, t0, run.ended_at, "outside", sv, None, reason=self.reason)
+
+    def _log(
+        self,
+        k: int,
+        choice: Choice,
+        t0: float,
+        t1: float,
+        ended: str,
+        sensed: tuple[float, float, float] | None,
+        identified: str | None,
+        *,
+        classes: tuple[str, ...] | None = None,
+        reason: str = "",
+    ) -> None:
+        """Append the :class:`NetMacro` of macro ``k`` (with the tracker's node now)."""
+        plan: MacroPlan = choice.macro
+        tn, tp = _true_node(self.nprog, self.ses.sim)
+        self.macros.append(
+            NetMacro(
+                index=k,
+                node=choice.node,
+                expected=plan.target,
+                classes=plan.classes if classes is None else classes,
+                edges=plan.edges,
+                started_at=t0,
+                ended_at=t1,
+                ended=ended,
+                sensed=sensed,
+                identified=identified,
+                true_node=tn,
+                true_principals=tp,
+                reason=reason,
+            )
+        )
+
+    def _after_goal(self) -> Steps[None]:
+        """The reference's motion after it entered the goal, as a program's final macro (from where
+        the last macro stopped on its clock when that followed it); then the final hold."""
+        since = self.last_end if self.last_end is not None else reference_goal_entry(self.nprog)
+        ref = self.ref_track
+        if since is not None and ref is not None and float(ref.t[-1]) > since:
+            span = (since, float(ref.t[-1]))
+            fin = _macro_spec(
+                len(self.macros) + 1, self.nprog, self.node, _Final(target=self.node), self.ses.sim, ref, span
+            )
+            yield from run_final(fin, self.ses, ref)
+        yield from _hold_target(self.ses, self.ses.opts.final_settle)
+        self.ses.emit("end", 0, "network program done")
+
+    def result(self, wall_time: float) -> NetworkRunResult:
+        """The judged run: the goal is reached when the tracker's last situation has its principals."""
+        net, sim = self.net, self.ses.sim
+        kept = list(sim.tracker.kept)
+        final = principal_states(kept[-1].situation) if kept else ()
         goal_p = tuple(sorted(net.node(net.goal).principal))
-        return NetworkRunResult(nprog.name, scene.name, opts.detect, False, False, net.goal, goal_p, (),
-                                str(why), (), 0, (), 0.0, 0.0)  # fmt: skip
-    return run_network_in(nprog, sim, scene, opts, nopts)
+        reached = final == goal_p and not self.reason.startswith("simulation diverged")
+        reason = self.reason
+        if self.arrived and not reached and not reason:
+            reason = f"final situation {final or ('N',)} is not the goal {goal_p or ('N',)}"
+        return NetworkRunResult(
+            program=self.nprog.name, scene=self.scene.name, detect=self.ses.opts.detect,
+            success=self.arrived and reached, goal_reached=reached, goal=net.goal, goal_principals=goal_p,
+            final_principals=final, reason=reason, path=tuple(self.path), replans=self.replans,
+            macros=tuple(self.macros), sim_time=float(sim.time), wall_time=wall_time,
+        )  # fmt: skip
+
+
+def network_steps(
+    nprog: NetworkProgram, ses: Session, scene: Any, nopts: NetworkOptions
+) -> Steps[NetworkRunResult]:
+    """The steps of the network program ``nprog`` in ``ses`` (its simulator at the start pose of
+    ``scene``, a ``dlovr.scene.Scene``); see the module docstring. Never raises for a failed run:
+    the reason is in the result."""
+    wall0 = time.perf_counter()
+    run = _NetworkRun(nprog, ses, scene, nopts)
+    yield from run.steps()
+    return run.result(time.perf_counter() - wall0)
+
+
+def failed_start(nprog: NetworkProgram, scene: Any, detect: str, why: str) -> NetworkRunResult:
+    """The result of a network run that could not start (``why``)."""
+    net = nprog.network
+    goal_p = tuple(sorted(net.node(net.goal).principal))
+    return NetworkRunResult(
+        program=nprog.name, scene=scene.name, detect=detect, success=False, goal_reached=False, goal=net.goal,
+        goal_principals=goal_p, final_principals=(), reason=why, path=(), replans=0, macros=(), sim_time=0.0,
+        wall_time=0.0,
+    )  # fmt: skip
 
 
 def format_network_result(res: NetworkRunResult) -> str:
     """The per-macro table and the result line of a network run."""
-    lines = [f"network program {res.program} in scene {res.scene}, detection {res.detect}",
-             f"{'#':>3}  {'from':<5} {'class':<5} {'expected':<8} {'identified':<10} {'true':<5} "
-             f"{'ended':>9}  outcome  sensed"]  # fmt: skip
+    lines = [
+        f"network program {res.program} in scene {res.scene}, detection {res.detect}",
+        f"{'#':>3}  {'from':<5} {'class':<5} {'expected':<8} {'identified':<10} {'true':<5} "
+        f"{'ended':>9}  outcome  sensed",
+    ]
     for m in res.macros:
         sensed = "-" if m.sensed is None else "[" + ", ".join(f"{x:+.2f}" for x in m.sensed) + "]"
         lines.append(
@@ -456,34 +549,10 @@ def sensed_contact_vector(force: Any, tare: Any, free_force: float) -> np.ndarra
     return unit(-(np.asarray(force, float) - np.asarray(tare, float)), free_force)
 
 
-def load_network_program(path: str | Any) -> Any:
-    """The :class:`dlovr.model.planning.NetworkProgram` in the JSON file ``path``, or None when the
-    file is not a network program (``"kind": "network-program"``; then it is read as a compiled
-    program). Raises :class:`dlovr.execution.programs.ProgramError` (one line) for a bad one."""
-    import json
-    from pathlib import Path
-
-    from dlovr.execution.programs import ProgramError
-    from dlovr.model.network import NetworkError
-    from dlovr.model.planning import NetworkProgram
-
-    try:
-        raw = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return None  # the compiled-program reader reports it
-    if not isinstance(raw, dict) or raw.get("kind") != "network-program":
-        return None
-    try:
-        return NetworkProgram.from_json(raw)
-    except NetworkError as e:
-        raise ProgramError(f"{path}: {e}") from None
-
-
-def network_scene(nprog: Any, scene_ref: str | None) -> Any:
+def network_scene(nprog: NetworkProgram, scene_ref: str | None) -> Any:
     """The scene to run a network program in: ``scene_ref`` or the network's scene; raises
-    :class:`dlovr.execution.programs.ProgramError` when the scene lacks an object the network's
+    :class:`dlovr.model.program.ProgramError` when the scene lacks an object the network's
     contacts name, or ``dlovr.scene.SceneError``."""
-    from dlovr.execution.programs import ProgramError
     from dlovr.scene import load_scene
 
     scene = load_scene(scene_ref or nprog.network.scene_name)
@@ -501,8 +570,6 @@ def network_scene(nprog: Any, scene_ref: str | None) -> Any:
             f"network program {nprog.name}: touches object {missing[0]!r}, which scene {scene.name} does "
             f"not have (a program for another scene?)"
         )
-    from dlovr.execution.run import START_TOL_M
-
     net = nprog.network
     start = next(p for p in net.starts if p.node == net.start)
     d = math.dist(start.position, scene.gripper.pos)

@@ -4,7 +4,8 @@ Foxglove and the browser timeline open it like any recording.
 
 - :func:`scene_bundle`: the scene to embed, written from the ``Scene`` value itself (a perturbed
   scene of a trial exists only in memory) with the mesh files it names;
-- :func:`record_run`: :func:`dlovr.execution.run.run_program` with a recorder attached.
+- :func:`record_run`: :func:`dlovr.execution.run.run_program` with a recorder attached (a compiled or
+  a network program).
 
 The events channel :data:`TOPIC_EVENTS` carries one message per :class:`dlovr.execution.executor.Event`
 (``start``, ``macro`` -- a macro starts --, ``detected``, ``failed``, ``final``, ``end``; for network
@@ -18,9 +19,12 @@ import json
 from pathlib import Path
 from typing import Any
 
-from dlovr.execution.executor import DemoTrack, Event, ExecOptions, execute
-from dlovr.execution.programs import ProgramSpec
-from dlovr.execution.scoring import score
+from dlovr.execution.engine import Engine
+from dlovr.execution.executor import DemoTrack, Event, ExecOptions
+from dlovr.execution.network_run import NetworkOptions, NetworkRunResult
+from dlovr.execution.run import fresh_simulator, not_started
+from dlovr.execution.scoring import RunResult
+from dlovr.model.program import Runnable
 
 TOPIC_EVENTS = "/dlovr/executor_events"
 EVENT_SCHEMA_NAME = "dlovr.ExecutorEvent"
@@ -94,33 +98,25 @@ def scene_bundle(scene: Any) -> Any:
 
 
 def record_run(
-    program: ProgramSpec,
+    program: Runnable,
     scene: Any,
     path: str | Path,
     opts: ExecOptions | None = None,
     *,
     track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
-    network: Any = None,
-) -> Any:
-    """Run ``program`` in ``scene`` (like :func:`dlovr.execution.run.run_program`; with ``network``, a
-    :class:`dlovr.model.planning.NetworkProgram`, that instead, like
-    :func:`dlovr.execution.network_run.run_network`) while recording it to ``path``. A run that cannot
-    start writes no file."""
-    from dlovr.execution.run import _simulator, run_program
+) -> RunResult | NetworkRunResult:
+    """Run ``program`` (compiled or network) in ``scene`` like :func:`dlovr.execution.run.run_program`
+    while recording it to ``path``. A run that cannot start writes no file."""
     from dlovr.recording import DemoRecorder
 
     opts = opts if opts is not None else ExecOptions()
-    sim, _ = _simulator(scene, pieces)
+    sim, why = fresh_simulator(scene, pieces)
     if sim is None:  # the same failed result
-        if network is not None:
-            from dlovr.execution.network_run import run_network
-
-            return run_network(network, scene, opts, pieces=pieces)
-        return run_program(program, scene, opts, track=track, pieces=pieces)
-    name = network.name if network is not None else program.name
-    meta = {"source": "dlovr run", "program": name, "detect": opts.detect, **(extra_metadata or {})}
+        return not_started(program, scene, opts, str(why))
+    meta = {"source": "dlovr run", "program": program.name, "detect": opts.detect, **(extra_metadata or {})}
     rec = DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta)
     with rec:
         rec.rec.add_channel(TOPIC_EVENTS, EVENT_SCHEMA_NAME, EVENT_SCHEMA)
@@ -128,19 +124,18 @@ def record_run(
         def on_event(ev: Event) -> None:
             rec.rec.message(ev.step, TOPIC_EVENTS, ev.payload())
 
-        if network is not None:
-            from dlovr.execution.network_run import run_network_in
-
-            res = run_network_in(network, sim, scene, opts, on_step=rec.step, on_event=on_event)
-            if res.reason.startswith("simulation diverged"):
-                rec.end_reason = res.reason
-        else:
-            ex = execute(program, sim, opts, track=track, on_step=rec.step, on_event=on_event)
-            if ex.diverged:
-                rec.end_reason = ex.diverged
-            res = score(ex, scene.name)
+        eng = Engine(program, sim, opts, track=track, scene=scene, network=network, on_step=rec.step,
+                     on_event=on_event)  # fmt: skip
+        res = eng.run()
+        diverged = eng.execution.diverged if eng.execution is not None else _diverged(res.reason)
+        if diverged:
+            rec.end_reason = diverged
         text = "goal reached" if res.success else f"failed: {res.reason}"
         result = {"success": res.success, "goal_reached": res.goal_reached, "reason": res.reason}
         payload = Event(float(sim.time), int(sim.step_index), "result", 0, text).payload()
         rec.rec.message(int(sim.step_index), TOPIC_EVENTS, {**payload, "result": result})
     return res
+
+
+def _diverged(reason: str) -> str | None:
+    return reason if reason.startswith("simulation diverged") else None

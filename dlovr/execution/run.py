@@ -3,7 +3,10 @@
 - :func:`resolve_scene`: the scene a program runs in (given, named by the program, or the one its
   demonstration was recorded in), checked against the program (:func:`check_program_scene`);
 - :func:`load_track`: the demonstration's gripper trajectory (for ``--path demo`` and the baseline);
-- :func:`run_program`: simulate, execute, judge -> :class:`dlovr.execution.scoring.RunResult`;
+- :func:`find_recording`: the demonstration a program was compiled from;
+- :func:`run_program`: simulate, execute, judge (:class:`dlovr.execution.engine.Engine`) ->
+  :class:`dlovr.execution.scoring.RunResult`, or a network program's
+  :class:`dlovr.execution.network_run.NetworkRunResult`;
 - :func:`run_openloop`: replay the demonstration's recorded gripper commands open loop in a scene
   and judge the end situation against the program's goal -> :class:`OpenLoopResult`.
 
@@ -21,16 +24,38 @@ from typing import Any
 
 import numpy as np
 
-from dlovr.execution.executor import FINAL_SETTLE_S, DemoTrack, ExecOptions, execute, principal_states
-from dlovr.execution.programs import ProgramError, ProgramSpec, find_recording
-from dlovr.execution.scoring import RunResult, score
+from dlovr.execution.engine import Engine
+from dlovr.execution.executor import (
+    FINAL_SETTLE_S,
+    START_TOL_DEG,
+    START_TOL_M,
+    DemoTrack,
+    ExecOptions,
+    principal_states,
+)
+from dlovr.execution.network_run import NetworkOptions, NetworkRunResult, failed_start
+from dlovr.execution.scoring import RunResult
+from dlovr.model.planning import NetworkProgram
+from dlovr.model.program import Program, ProgramError, Runnable
 
-#: How far (m) the program's start may lie from the scene's gripper pose, and by what angle (deg).
-START_TOL_M = 0.02
-START_TOL_DEG = 10.0
+
+def find_recording(program: Program, given: str | Path | None = None) -> Path | None:
+    """The demonstration a program was compiled from: ``given``, else its ``source`` looked up beside
+    the program file, in its parent directory and in the working directory; ``None`` if not found."""
+    if given is not None:
+        return Path(given)
+    if not program.source:
+        return None
+    src = Path(program.source)
+    cands = [src] if src.is_absolute() else []
+    if program.path is not None and not src.is_absolute():
+        cands += [program.path.parent / src, program.path.parent.parent / src]
+    if not src.is_absolute():
+        cands += [Path.cwd() / src, Path.cwd() / "recordings" / src]
+    return next((c for c in cands if c.is_file()), None)
 
 
-def check_program_scene(program: ProgramSpec, scene: Any) -> None:
+def check_program_scene(program: Program, scene: Any) -> None:
     """Raise :class:`ProgramError` when ``program`` was not made for ``scene``: it names objects the
     scene lacks, or it starts away from the scene's gripper pose."""
     where = str(program.path) if program.path else program.name
@@ -53,7 +78,7 @@ def check_program_scene(program: ProgramSpec, scene: Any) -> None:
         )
 
 
-def resolve_scene(program: ProgramSpec, scene_ref: str | None, recording: Path | None = None) -> Any:
+def resolve_scene(program: Program, scene_ref: str | None, recording: Path | None = None) -> Any:
     """The scene to run ``program`` in: ``scene_ref`` (name or path), else the program's ``scene``,
     else the scene its demonstration was recorded in, else the built-in scene named like the program.
     Raises :class:`ProgramError` or ``dlovr.scene.SceneError`` (one line)."""
@@ -87,13 +112,15 @@ def load_track(path: str | Path) -> DemoTrack:
     return DemoTrack(steps * rec.dt, pos, quat)
 
 
-def demo_track(program: ProgramSpec, recording: str | Path | None = None) -> DemoTrack | None:
+def demo_track(program: Program, recording: str | Path | None = None) -> DemoTrack | None:
     """The program's demonstration trajectory when its recording can be found, else None."""
     path = find_recording(program, recording)
     return None if path is None else load_track(path)
 
 
-def _simulator(scene: Any, pieces: Any) -> tuple[Any, str | None]:
+def fresh_simulator(scene: Any, pieces: Any = None) -> tuple[Any, str | None]:
+    """A ``dlovr.sim.Simulator`` of ``scene`` at its start pose with the contact tracker (``pieces``:
+    its convex decomposition, if known), or None and why it cannot start."""
     from dlovr.sim import SimulationDiverged, Simulator
 
     try:
@@ -103,23 +130,38 @@ def _simulator(scene: Any, pieces: Any) -> tuple[Any, str | None]:
 
 
 def run_program(
-    program: ProgramSpec,
+    program: Runnable,
     scene: Any,
     opts: ExecOptions | None = None,
     *,
     track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
     pieces: Any = None,
     on_step: Any = None,
     on_event: Any = None,
-) -> RunResult:
-    """Execute ``program`` in a fresh simulation of ``scene`` and judge it."""
+) -> RunResult | NetworkRunResult:
+    """Execute ``program`` (compiled or network) in a fresh simulation of ``scene`` and judge it
+    (:class:`dlovr.execution.engine.Engine`); a run that cannot start is a failed result."""
     opts = opts if opts is not None else ExecOptions()
-    sim, why = _simulator(scene, pieces)
+    sim, why = fresh_simulator(scene, pieces)
     if sim is None:
-        return RunResult(program.name, scene.name, opts.detect, False, False, program.goal, "", (), 0,
-                         str(why), (), 0.0, 0.0)  # fmt: skip
-    ex = execute(program, sim, opts, track=track, on_step=on_step, on_event=on_event)
-    return score(ex, scene.name)
+        return not_started(program, scene, opts, str(why))
+    eng = Engine(
+        program, sim, opts, track=track, scene=scene, network=network, on_step=on_step, on_event=on_event
+    )
+    return eng.run()
+
+
+def not_started(program: Runnable, scene: Any, opts: ExecOptions, why: str) -> RunResult | NetworkRunResult:
+    """The failed result of a run that could not start (``why``)."""
+    if isinstance(program, NetworkProgram):
+        return failed_start(program, scene, opts.detect, why)
+    goal = program.goal if isinstance(program, Program) else ()
+    return RunResult(
+        program=program.name, scene=scene.name, detect=opts.detect, success=False, goal_reached=False,
+        goal=goal, final_situation="", final_principals=(), failed_macro=0, reason=why, macros=(),
+        sim_time=0.0, wall_time=0.0,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -141,7 +183,7 @@ class OpenLoopResult:
 
 
 def run_openloop(
-    program: ProgramSpec, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = FINAL_SETTLE_S
+    program: Program, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = FINAL_SETTLE_S
 ) -> OpenLoopResult:
     """Replay ``track`` (every step's commanded gripper pose) in a fresh simulation of ``scene``, then
     hold the last command ``settle`` s more (as long as a program holds its last pose), and judge the
@@ -149,7 +191,7 @@ def run_openloop(
     from dlovr.sim import SimulationDiverged
 
     wall0 = time.perf_counter()
-    sim, why = _simulator(scene, pieces)
+    sim, why = fresh_simulator(scene, pieces)
     if sim is None:
         return OpenLoopResult(False, "", (), str(why), 0.0, 0.0)
     sim.tracker.restart(sim.record())

@@ -129,7 +129,7 @@ def score(ex: Execution, scene_name: str = "") -> RunResult:
         fm = failed.macro
         reason = f"macro {fm.index} ({fm.label}, {fm.expected}): {failed.reason}"
     ran = {m.index for m in macros}
-    for m in ex.program.macros:
+    for m in ex.program.classed:
         if m.index not in ran:
             macros.append(
                 MacroScore(m.index, m.label, m.expected, math.nan, None, None, None, "not run", 0.0, 0.0)

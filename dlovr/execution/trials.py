@@ -24,27 +24,28 @@ from pathlib import Path
 from typing import Any
 
 from dlovr.execution.executor import DemoTrack, ExecOptions
-from dlovr.execution.programs import ProgramSpec
+from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.run import run_openloop, run_program
+from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, perturb
+from dlovr.model.program import Program, Runnable
 
 #: Levels per variation parameter in the summary and the plot.
 LEVELS = 3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrialSetup:
     """Everything a trial needs (picklable, sent to the worker processes).
 
     ``pieces``: the scene objects' convex decomposition (their own frames, so valid for every
     perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
     ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
-    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`);
-    ``network``: a :class:`dlovr.model.planning.NetworkProgram` run instead of ``program`` (then a
-    placeholder naming it), see :func:`dlovr.execution.network_run.run_network`.
+    trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
+    ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
     """
 
-    program: ProgramSpec
+    program: Runnable
     scene: Any
     pieces: Any
     track: DemoTrack | None
@@ -54,7 +55,16 @@ class TrialSetup:
     baseline: bool = False
     use_track: bool = True
     record_dir: str | None = None
-    network: Any = None
+
+    @property
+    def name(self) -> str:
+        """The program's name (a network program's may be empty: ``network``)."""
+        return self.program.name if isinstance(self.program, Program) else self.program.name or "network"
+
+    @property
+    def goal(self) -> tuple[str, ...]:
+        """The compiled program's goal principal contacts (none for a network program)."""
+        return self.program.goal if isinstance(self.program, Program) else ()
 
 
 def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
@@ -65,8 +75,6 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
     track = setup.track if setup.use_track else None
-    if setup.network is not None:
-        return _network_trial(setup, trial, scene, values, opts, t0)
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
 
@@ -78,11 +86,22 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         )
     else:
         res = run_program(setup.program, scene, opts, track=track, pieces=setup.pieces)
-    out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": res.to_json()}
-    if setup.baseline and setup.track is not None:
+    out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, **_trial_result(res)}
+    if setup.baseline and setup.track is not None and isinstance(setup.program, Program):
         out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
     out["wall_time"] = time.perf_counter() - t0
     return out
+
+
+def _trial_result(res: RunResult | NetworkRunResult) -> dict[str, Any]:
+    """A trial's run under ``program``; a network program's result JSON under ``network_run``, and
+    under ``program`` the fields the summary reads (no per-macro latencies: network macros are not
+    judged one by one)."""
+    if isinstance(res, RunResult):
+        return {"program": res.to_json()}
+    prog = {"success": res.success, "goal_reached": res.goal_reached, "failed_macro": None,
+            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}  # fmt: skip
+    return {"program": prog, "network_run": res.to_json()}
 
 
 @functools.lru_cache(maxsize=8)
@@ -98,31 +117,6 @@ def _trial_metadata(setup: TrialSetup, trial: int, values: dict[str, Any]) -> di
     (``base_scene_sha256``), so that recorded trials of one scene merge into a network."""
     return {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values),
             "base_scene_sha256": _scene_digest(str(setup.scene.path))}  # fmt: skip
-
-
-def _network_trial(
-    setup: TrialSetup, trial: int, scene: Any, values: dict[str, Any], opts: ExecOptions, t0: float
-) -> dict[str, Any]:
-    """A trial of a network program: its result JSON under ``network_run``, and under ``program`` the
-    fields the summary reads (no per-macro latencies: network macros are not judged one by one)."""
-    if setup.record_dir is not None:
-        from dlovr.execution.recorded import record_run
-
-        Path(setup.record_dir).mkdir(parents=True, exist_ok=True)
-        path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
-        meta = _trial_metadata(setup, trial, values)
-        res = record_run(setup.program, scene, path, opts, pieces=setup.pieces, extra_metadata=meta,
-                         network=setup.network)  # fmt: skip
-    else:
-        from dlovr.execution.network_run import run_network
-
-        res = run_network(setup.network, scene, opts, pieces=setup.pieces)
-    prog = {"success": res.success, "goal_reached": res.goal_reached, "failed_macro": None,
-            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}  # fmt: skip
-    out = {"trial": trial, "seed": setup.seed, "values": values, "program": prog}
-    out["network_run"] = res.to_json()
-    out["wall_time"] = time.perf_counter() - t0
-    return out
 
 
 def run_trials(
@@ -159,8 +153,8 @@ def lost_trial(setup: TrialSetup, trial: int, error: str) -> dict[str, Any]:
     _, values = perturb(setup.scene, setup.variations, setup.seed, trial)
     reason = f"trial lost: {error}"
     program = {
-        "program": setup.program.name, "scene": setup.scene.name, "detect": setup.opts.detect,
-        "success": False, "goal_reached": False, "goal": list(setup.program.goal), "final_situation": "",
+        "program": setup.name, "scene": setup.scene.name, "detect": setup.opts.detect,
+        "success": False, "goal_reached": False, "goal": list(setup.goal), "final_situation": "",
         "final_principals": [], "failed_macro": None, "reason": reason, "macros": [], "sim_time": 0.0,
         "wall_time": 0.0,
     }  # fmt: skip
@@ -225,7 +219,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         per[v.key] = rows
     walls = [t["wall_time"] for t in trials]
     return {
-        "program": setup.program.name,
+        "program": setup.name,
         "scene": setup.scene.name,
         "trials": len(trials),
         "seed": setup.seed,

@@ -38,12 +38,14 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from fractions import Fraction
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import read_json
 from dlovr.model.network import RISKS, Edge, Network, NetworkError, Vec3
-from dlovr.model.program import Detection
+from dlovr.model.program import Detection, Program, ProgramError
 from dlovr.transforms import norm
 
 PROGRAM_VERSION = 1
@@ -167,6 +169,7 @@ def identify(
         return nearest[1]
     if tolerance is not None:
         scored = [x for x in scored if x[0] <= tolerance]
+
     def posterior(x: tuple[float, Successor]) -> tuple[float, int]:
         d, c = x
         num = int(c.node[1:]) if c.node[1:].isdigit() else 0
@@ -176,7 +179,9 @@ def identify(
 
 
 class NetworkProgram:
-    """A network program: the planner over one network (module docstring) and its JSON form."""
+    """A network program: the planner over one network (module docstring) and its JSON form; like a
+    compiled :class:`dlovr.model.program_format.Program` it is a
+    :class:`~dlovr.model.program_format.Runnable` that the execution engine takes."""
 
     def __init__(self, network: Network, reach: float = DEFAULT_REACH_M, name: str = "", source: str = ""):
         if not reach >= 0:
@@ -365,7 +370,7 @@ class NetworkProgram:
     @staticmethod
     def from_json(data: Mapping[str, Any]) -> NetworkProgram:
         if not isinstance(data, Mapping) or data.get("kind") != "network-program":
-            raise NetworkError("not a network program (no \"kind\": \"network-program\")")
+            raise NetworkError('not a network program (no "kind": "network-program")')
         if data.get("version") != PROGRAM_VERSION:
             raise NetworkError(
                 f"network program format {data.get('version')}, this dlovr reads {PROGRAM_VERSION}"
@@ -405,3 +410,16 @@ class NetworkProgram:
                 what = f"{' '.join(ch.macro.edges)}  {kind}, P(goal)={ch.reach_probability:.3f}"
             lines.append(f"  {n.id:<5} {what}")
         return "\n".join(lines) + "\n"
+
+
+def load_runnable(path: str | Path) -> Program | NetworkProgram:
+    """The program in the JSON file ``path``, read once: a :class:`NetworkProgram` when it says
+    ``"kind": "network-program"``, else a compiled :class:`dlovr.model.program.Program`. Raises
+    :class:`dlovr.model.program.ProgramError` (one line) for a bad file."""
+    raw = read_json(path, ProgramError, "program file")
+    if not isinstance(raw, dict) or raw.get("kind") != "network-program":
+        return Program.from_json(raw, path)
+    try:
+        return NetworkProgram.from_json(raw)
+    except NetworkError as e:
+        raise ProgramError(f"{path}: {e}") from None

@@ -13,35 +13,66 @@ is expressed in the gripper frame at the macro's start; times in seconds; forces
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
-from importlib import resources
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from dlovr.model.derivation import DerivationRules, WrenchSeries, derive
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation
+from dlovr.model.program_format import (
+    PROGRAM_VERSION,
+    RISK_LEVELS,
+    RISK_OF_CLASS,
+    RISKY,
+    ContactChange,
+    ContactSpec,
+    Detection,
+    Macro,
+    Motion,
+    Program,
+    ProgramError,
+    Runnable,
+    program_schema,
+    readable_versions,
+    risk,
+    summarize,
+)
 from dlovr.model.transitions import (
-    CLASS_NAMES,
     CLASS_ORDER,
     changes,
     classify_change,
     classify_step,
-    format_classes,
     principal,
     successional_contacts,
 )
 from dlovr.transforms import matrix_to_rotvec, quat_to_matrix
 
-PROGRAM_VERSION = 2
-"""Version of the program JSON format (``version`` field); bump on incompatible changes.
-
-2: macros name the principal contacts that change (``changes``), carry a ``risk`` (none, caution,
-risky) instead of ``risky``, a ``kind`` (``transition`` or ``final``: the motion after the last
-classed transition), and expected contacts carry a pinch ``axis``."""
+__all__ = [  # the program format's names, importable from here too (dlovr.model.program_format)
+    "DETECTORS",
+    "PROGRAM_VERSION",
+    "RISKY",
+    "RISK_LEVELS",
+    "RISK_OF_CLASS",
+    "ContactChange",
+    "ContactSpec",
+    "Detection",
+    "Macro",
+    "Motion",
+    "PoseTrack",
+    "Program",
+    "ProgramError",
+    "Runnable",
+    "TimedSituation",
+    "compile_program",
+    "detections",
+    "motion_between",
+    "program_schema",
+    "readable_versions",
+    "risk",
+    "summarize",
+]
 
 
 @dataclass(frozen=True)
@@ -81,23 +112,6 @@ class PoseTrack:
         """Pose at time ``t`` (the last sample at or before ``t``; the first one before the track)."""
         i = max(int(np.searchsorted(self.t, t, side="right")) - 1, 0)
         return self.pos[i], self.quat[i]
-
-
-@dataclass(frozen=True)
-class Motion:
-    """The demonstrated gripper motion of one macro.
-
-    ``world``: displacement in the world frame (m); ``relative``: the same in the gripper frame at
-    the start; ``rotation``: rotation vector (rad) from the start orientation, gripper frame;
-    ``duration`` s; ``start_pos``/``start_quat`` the pose where it starts (world, wxyz).
-    """
-
-    world: tuple[float, float, float]
-    relative: tuple[float, float, float]
-    rotation: tuple[float, float, float]
-    duration: float
-    start_pos: tuple[float, float, float]
-    start_quat: tuple[float, float, float, float]
 
 
 def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
@@ -145,137 +159,6 @@ DETECTORS: dict[str, dict[str, Any]] = {
         "params": {"jump_n": 0.5, "min_rate_hz": 500.0},
     },
 }
-RISKY = frozenset({"S", "I"})
-RISK_OF_CLASS = {"C": "none", "E": "none", "T": "caution", "I": "risky", "S": "risky"}
-"""Risk of a transition class (§IV.B, §VI): stable ones none, semi-stable caution, instable risky."""
-RISK_LEVELS = ("none", "caution", "risky")
-
-
-def risk(classes: Sequence[str]) -> str:
-    """The risk of a macro: that of its riskiest class (``none`` for no class)."""
-    return max((RISK_OF_CLASS[c] for c in classes), key=RISK_LEVELS.index, default="none")
-
-
-@dataclass(frozen=True)
-class Detection:
-    """The detection of one class: its algorithm, parameters (forces N, angles degrees, times s) and,
-    per parameter, how it was derived from the demonstration (``derived: ...``) or that it is the
-    class's default (``default: why``); see :mod:`dlovr.model.derivation`."""
-
-    cls: str
-    algorithm: str
-    params: dict[str, float]
-    derivation: dict[str, str] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class ContactSpec:
-    """A principal contact a macro expects: its state with face names and its contact vector (unit,
-    world frame). A pinch (the DLO clamped between opposite faces) has the zero vector and, when its
-    faces' normals share one line, that line's ``axis`` (unit, world frame): a detector then looks
-    for force along the axis, either sign (docs/model.md, Contact vectors)."""
-
-    state: str
-    vector: tuple[float, float, float] | None
-    axis: tuple[float, float, float] | None = None
-
-
-@dataclass(frozen=True)
-class ContactChange:
-    """One principal contact that changes in a macro's transition and its classes.
-
-    ``from_contact``/``to_contact``: before and after, ``None`` for free space ``N`` (a contact
-    established or released)."""
-
-    classes: tuple[str, ...]
-    from_contact: ContactSpec | None
-    to_contact: ContactSpec | None
-
-
-@dataclass(frozen=True)
-class Macro:
-    """One guarded motion of a program.
-
-    ``kind``: ``transition`` (ends when its detection sees the transition ``classes``) or ``final``
-    (the motion after the last classed transition, to the demonstrated end pose, no detection).
-    ``t``: when the demonstrated transition happened, or the demonstration's end (s). ``changes``:
-    the principal contacts that change; ``from_contacts``/``to_contacts``: all principal contacts
-    of the whole situations before and after. ``risk``: ``none`` (C, E), ``caution`` (T) or
-    ``risky`` (I, S).
-    """
-
-    index: int
-    kind: str
-    classes: tuple[str, ...]
-    t: float
-    from_situation: str
-    to_situation: str
-    changes: tuple[ContactChange, ...]
-    from_contacts: tuple[ContactSpec, ...]
-    to_contacts: tuple[ContactSpec, ...]
-    motion: Motion
-    detection: tuple[Detection, ...]
-    risk: str
-
-    @property
-    def label(self) -> str:
-        return "end" if self.kind == "final" else format_classes(self.classes)
-
-    @property
-    def risky(self) -> bool:
-        return self.risk == "risky"
-
-
-@dataclass(frozen=True)
-class Program:
-    name: str
-    source: str
-    macros: tuple[Macro, ...]
-    version: int = PROGRAM_VERSION
-    summary: dict[str, int] = field(default_factory=dict)
-
-    def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        d = {"version": d.pop("version"), **d}
-        return d
-
-    def dumps(self) -> str:
-        return json.dumps(self.to_json(), indent=2, sort_keys=False, ensure_ascii=False) + "\n"
-
-    def listing(self) -> str:
-        """A readable text listing of the program."""
-        lines = [f"program {self.name}  (from {self.source}, format v{self.version})"]
-        for m in self.macros:
-            mv = m.motion
-            lines.append(f"{m.index:>3}  {m.label:<4} t={m.t:8.3f}s  risk {m.risk}")
-            for c in m.changes:
-                lines.append(
-                    f"       {format_classes(c.classes):<4} {_name(c.from_contact)} -> {_name(c.to_contact)}"
-                )
-            lines.append(f"       from {m.from_situation}")
-            lines.append(f"       to   {m.to_situation}")
-            lines.append(
-                "       move {:+.4f} {:+.4f} {:+.4f} m (world) in {:.3f} s, rotate {:.1f} deg".format(
-                    *mv.world, mv.duration, math.degrees(float(np.linalg.norm(mv.rotation)))
-                )
-            )
-            for det in m.detection:
-                params = ", ".join(f"{k}={v:g}" for k, v in det.params.items())
-                lines.append(f"       until {det.algorithm} ({params})  [{CLASS_NAMES[det.cls]}]")
-                for k, how in det.derivation.items():
-                    lines.append(f"         {k}: {how}")
-            if m.kind == "final":
-                lines.append("       to the demonstrated end pose (no detection)")
-        s = self.summary
-        lines.append(
-            f"{s.get('macros', 0)} macros (the last one final), {s.get('risky', 0)} risky, "
-            f"{s.get('caution', 0)} caution"
-        )
-        return "\n".join(lines) + "\n"
-
-
-def _name(c: ContactSpec | None) -> str:
-    return "N" if c is None else c.state
 
 
 def _spec(c: DiscreteContact) -> ContactSpec:
@@ -383,14 +266,4 @@ def compile_program(
             risk="none",
         )
     )
-    summary = {
-        "macros": len(macros),
-        "risky": sum(m.risk == "risky" for m in macros),
-        "caution": sum(m.risk == "caution" for m in macros),
-    }
-    return Program(name, source, tuple(macros), PROGRAM_VERSION, summary)
-
-
-def program_schema() -> dict[str, Any]:
-    """The JSON Schema of the program format, shipped with the package."""
-    return json.loads(resources.files("dlovr").joinpath("data/program.schema.json").read_text("utf-8"))
+    return Program(name, source, tuple(macros), PROGRAM_VERSION, summarize(macros))

@@ -33,7 +33,7 @@ class Session:
         self.tracker: ContactTracker = self.sim.tracker
         self.geometry = self.tracker.geometry
         self.recorder: DemoRecorder | None = None
-        self.runner: Any = None  # a program run that takes the steps (dlovr.execution.stepper)
+        self.runner: Any = None  # a program run that takes the steps (dlovr.execution.engine.Engine)
         self.record = self.sim.record()
         self.state = self.tracker.update(self.record)
         self.forces = ForceTrace()  # the gripper force, mean of every 10 steps

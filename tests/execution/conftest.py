@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from dlovr.execution.programs import load_program
 from dlovr.execution.run import load_track
+from dlovr.model.program import Program
 
 SCRIPT = Path(__file__).resolve().parents[1] / "data" / "touch_press.script.toml"
 
@@ -30,6 +30,6 @@ def touch(tmp_path_factory):
     prog = compile_recording(d / "touch.mcap")
     path = d / "touch.program.json"
     path.write_text(prog.dumps())
-    program = load_program(path)
-    assert [m.label for m in program.macros] == ["E"] and program.goal == ("V/F[table.F1]",)
+    program = Program.load(path)
+    assert [m.label for m in program.classed] == ["E"] and program.goal == ("V/F[table.F1]",)
     return program, scene, load_track(d / "touch.mcap"), sim.pieces

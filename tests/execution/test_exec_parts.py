@@ -12,8 +12,9 @@ import pytest
 
 from dlovr.execution.executor import expectation
 from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
-from dlovr.execution.programs import ProgramError, find_recording, load_program, parse_program
+from dlovr.execution.run import find_recording
 from dlovr.execution.variation import VaryError, parse_varies, parse_vary, perturb
+from dlovr.model.program import Program, ProgramError
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,11 +26,11 @@ PROGRAMS = sorted((ROOT / "recordings" / "programs").glob("*.program.json"))
 
 @pytest.mark.parametrize("path", PROGRAMS, ids=lambda p: p.stem)
 def test_reads_every_sample_program(path):
-    p = load_program(path)
+    p = Program.load(path)
     raw = json.loads(path.read_text())
-    assert len(p.macros) == sum(1 for m in raw["macros"] if m["classes"]) and p.name == raw["name"]
+    assert len(p.classed) == sum(1 for m in raw["macros"] if m["classes"]) and p.name == raw["name"]
     assert p.final is not None  # the compiler's final macro (kind final, no class)
-    for m in p.macros:
+    for m in p.classed:
         assert m.classes and m.detection and {d.cls for d in m.detection} == set(m.classes)
         assert m.released or m.established  # a classed transition changes some principal contact
     assert find_recording(p) == ROOT / "recordings" / raw["source"]
@@ -41,8 +42,8 @@ def test_reader_tolerates_new_fields_and_a_final_macro():
     raw["macros"][0]["risk"] = "none"
     raw["macros"][0]["detection"][0]["params"]["derived_from"] = "demo"  # non-numbers are skipped
     assert raw["macros"][-1]["kind"] == "final" and raw["macros"][-1]["classes"] == []
-    p = parse_program(raw)
-    assert len(p.macros) == len(raw["macros"]) - 1 and p.final is not None and p.final.final
+    p = Program.from_json(raw)
+    assert len(p.classed) == len(raw["macros"]) - 1 and p.final is not None and p.final.final
     assert p.goal == ()  # the table demonstration ends with the cable in the air
     params = p.macros[0].detection[0].params
     assert {"force_threshold_n", "max_angle_deg"} <= set(params) and "derived_from" not in params
@@ -55,19 +56,19 @@ def test_a_pinch_is_read_with_its_zero_vector_and_axis_for_the_detector():
     raw = json.loads((ROOT / "recordings/programs/table.program.json").read_text())
     first = raw["macros"][0]["to_contacts"][0]
     first.update(vector=[0.0, 0.0, 0.0], axis=[0.0, 0.0, 1.0])
-    m = parse_program(raw).macros[0]
+    m = Program.from_json(raw).macros[0]
     assert m.established[0].vector == (0.0, 0.0, 0.0) and m.established[0].axis == (0.0, 0.0, 1.0)
     assert expectation(m).axes == ((0.0, 0.0, 1.0),)
     first.update(axis=[0.0, 0.0, 2.0])
     with pytest.raises(ProgramError, match=r"to_contacts\[0\].axis: must be a unit vector"):
-        parse_program(raw, "p.json")
+        Program.from_json(raw, "p.json")
 
 
 @pytest.mark.parametrize(
     ("mutate", "message"),
     [
-        (lambda r: r.pop("macros"), "missing field 'macros'"),
-        (lambda r: r["macros"][0].pop("motion"), r"macros\[0\]: missing field 'motion'"),
+        (lambda r: r.pop("macros"), "macros: missing"),
+        (lambda r: r["macros"][0].pop("motion"), r"macros\[0\]\.motion: missing"),
         (lambda r: r["macros"][0]["motion"].update(world=[0, 0]), r"macros\[0\].motion.world"),
         (lambda r: r["macros"][1].update(classes=["X"]), r"macros\[1\].classes"),
         (lambda r: r["macros"][0]["motion"].update(duration=-1), "must not be negative"),
@@ -79,7 +80,7 @@ def test_malformed_programs_are_one_line_errors(mutate, message):
     raw = json.loads((ROOT / "recordings/programs/table.program.json").read_text())
     mutate(raw)
     with pytest.raises(ProgramError, match=message) as ei:
-        parse_program(raw, "p.json")
+        Program.from_json(raw, "p.json")
     assert "\n" not in str(ei.value) and str(ei.value).startswith("p.json")
 
 
@@ -87,12 +88,12 @@ def test_unreadable_program_files(tmp_path):
     bad = tmp_path / "bad.program.json"
     bad.write_text("{ not json")
     with pytest.raises(ProgramError, match="not valid JSON"):
-        load_program(bad)
+        Program.load(bad)
     with pytest.raises(ProgramError, match="no such program file"):
-        load_program(tmp_path / "missing.json")
+        Program.load(tmp_path / "missing.json")
     bad.write_text("[]")
     with pytest.raises(ProgramError, match="not a program"):
-        load_program(bad)
+        Program.load(bad)
 
 
 # -- the guarded motion's path -----------------------------------------------------------------------
@@ -100,8 +101,8 @@ def test_unreadable_program_files(tmp_path):
 
 @pytest.mark.parametrize("frame", ["world", "relative"])
 def test_screw_reaches_the_demonstrated_end_pose(frame):
-    p = load_program(ROOT / "recordings/programs/peg_in_hole.program.json")
-    for m in p.macros:
+    p = Program.load(ROOT / "recordings/programs/peg_in_hole.program.json")
+    for m in p.classed:
         mo = m.motion
         path = ScrewPath(mo.start_pos, mo.start_quat, mo.rotation, mo.relative, mo.start_quat, frame)
         pos, quat = path.at(1.0)
@@ -160,8 +161,8 @@ def test_the_tips_first_touch_gives_its_offset():
     path = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, -0.04))
     np.testing.assert_allclose(tip_offset(path, 0.5), (0.0, 0.0, -0.02), atol=1e-12)
     np.testing.assert_allclose(tip_offset(path, 1.25), (0.0, 0.0, 0.01), atol=1e-12)
-    program = load_program(ROOT / "recordings/programs/peg_in_hole.program.json")
-    assert [touches_tip(m) for m in program.macros] == [True] + [False] * (len(program.macros) - 1)
+    program = Program.load(ROOT / "recordings/programs/peg_in_hole.program.json")
+    assert [touches_tip(m) for m in program.classed] == [True] + [False] * (len(program.classed) - 1)
 
 
 def test_track_path_repeats_the_recorded_stretch_from_where_the_gripper_is():
@@ -282,10 +283,8 @@ def test_bounces_and_weak_detections_end_by_motion():
     from dataclasses import replace
 
     from dlovr.execution.executor import _weak, bounces
-    from dlovr.execution.programs import load_program
-
-    prog = load_program(ROOT / "recordings" / "programs" / "table.program.json")
-    ms = list(prog.macros)
+    prog = Program.load(ROOT / "recordings" / "programs" / "table.program.json")
+    ms = list(prog.classed)
     assert len(ms) >= 2
     a, b = ms[0], ms[1]
     back = replace(b, from_contacts=a.to_contacts, to_contacts=a.from_contacts,

@@ -15,7 +15,8 @@ from click.testing import CliRunner
 
 from dlovr.cli import main
 from dlovr.execution.executor import ExecOptions
-from dlovr.execution.network_run import NetworkOptions, run_network, sensed_contact_vector
+from dlovr.execution.network_run import NetworkOptions, sensed_contact_vector
+from dlovr.execution.run import run_program
 from dlovr.model.network import Network
 from dlovr.model.planning import NetworkProgram
 from dlovr.scene import load_scene
@@ -95,7 +96,7 @@ def test_an_unexpected_transition_is_identified_and_planned_again(net):
     first = prog.replan("n1", (0.0, 0.0, 0.7))
     assert first is not None and first.macro.target == "n3"
     assert {s.node for s in first.successors} == {"n2", "n3"}
-    res = run_network(prog, load_scene("table"), ExecOptions())
+    res = run_program(prog, load_scene("table"), ExecOptions())
     assert res.success, res.reason
     assert res.macros[0].expected == "n3" and res.macros[0].identified == "n2" == res.macros[0].true_node
     assert res.path == ("n1", "n2") and res.replans == 1
@@ -106,7 +107,7 @@ def test_a_situation_outside_the_network_stops_the_run_with_a_report(net):
     raw = copy.deepcopy(raw)
     # the network expects a tilted contact (as if the demonstrations had sensed one), the cable lands flat
     raw["nodes"][1]["vector"] = raw["nodes"][1]["sensed"] = TILTED
-    res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
+    res = run_program(program(raw), load_scene("table"), ExecOptions(), network=NetworkOptions(tolerance=0.3))
     assert not res.success
     (m,) = res.macros
     assert m.ended == "outside" and m.identified is None and m.true_node == "n2"
@@ -138,15 +139,15 @@ def test_a_macro_without_force_signal_is_taken_to_reach_its_planned_target(net):
     raw["nodes"][1]["vector"] = raw["nodes"][1]["sensed"] = TILTED
     (det,) = raw["edges"][0]["detection"]
     det["params"].update(force_threshold_n=0.5, step_n=0.01)  # a threshold above the step: no signal
-    res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
+    res = run_program(program(raw), load_scene("table"), ExecOptions(), network=NetworkOptions(tolerance=0.3))
     assert res.success, res.reason
     assert res.macros[0].ended == "motion" and res.macros[0].identified == "n2"
     strict = NetworkOptions(tolerance=0.3, blind_motion=False)
-    res = run_network(program(raw), load_scene("table"), ExecOptions(), strict)
+    res = run_program(program(raw), load_scene("table"), ExecOptions(), network=strict)
     assert not res.success and res.macros[0].ended == "outside"
     # a spontaneous transition's outcome is not the motion's to choose: where the DLO landed is sensed
     raw["edges"][0]["classes"], raw["edges"][0]["label"] = ["S", "E"], "S,E"
     jump = {"cls": "S", "algorithm": "force_jump", "params": {"jump_n": 0.5, "step_n": 0.01}}
     raw["edges"][0]["detection"] = [jump, det]
-    res = run_network(program(raw), load_scene("table"), ExecOptions(), NetworkOptions(tolerance=0.3))
+    res = run_program(program(raw), load_scene("table"), ExecOptions(), network=NetworkOptions(tolerance=0.3))
     assert not res.success and res.macros[0].ended == "outside"

@@ -13,12 +13,13 @@ import pytest
 from click.testing import CliRunner
 
 from dlovr.cli import main
-from dlovr.execution.executor import ExecOptions, execute
-from dlovr.execution.programs import load_program
+from dlovr.execution.engine import execute
+from dlovr.execution.executor import ExecOptions
 from dlovr.execution.run import load_track, resolve_scene, run_openloop, run_program
 from dlovr.execution.scoring import format_result, score
 from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
 from dlovr.execution.variation import parse_vary
+from dlovr.model.program import Program
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,7 +40,8 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     the guarded macro goes on until it feels the contact. (Found by running trials 0-11; pinned.)"""
     program, scene, track, pieces = touch
     vary = (parse_vary("objects.pos=0.02"),)
-    setup = TrialSetup(program, scene, pieces, track, vary, 1, ExecOptions(), baseline=True)
+    setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=vary, seed=1,
+                       opts=ExecOptions(), baseline=True)  # fmt: skip
     trials = run_trials(setup, 3)
     t2 = trials[2]
     assert t2["values"]["objects.pos"][2] < -0.007
@@ -95,7 +97,7 @@ def test_a_diverged_simulation_is_a_failed_result(touch, monkeypatch):
 def test_table_program_runs_to_its_goal_with_the_oracle():
     """The sample table program, each macro ended by the contact tracker: every transition of the
     demonstration comes again, and the cable ends in the air as demonstrated."""
-    program = load_program(ROOT / "recordings/programs/table.program.json")
+    program = Program.load(ROOT / "recordings/programs/table.program.json")
     scene = resolve_scene(program, None)
     track = load_track(ROOT / "recordings/table.mcap")
     res = run_program(program, scene, ExecOptions(detect="oracle"), track=track)
@@ -108,7 +110,7 @@ def test_table_program_runs_to_its_goal_with_the_oracle():
 
 @pytest.fixture(scope="module")
 def peg():
-    program = load_program(ROOT / "recordings/programs/peg_in_hole.program.json")
+    program = Program.load(ROOT / "recordings/programs/peg_in_hole.program.json")
     return program, resolve_scene(program, None), load_track(ROOT / "recordings/peg_in_hole.mcap")
 
 

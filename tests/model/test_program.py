@@ -200,3 +200,42 @@ def test_pose_track_validation():
         PoseTrack(np.array([1.0, 0.0]), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)))
     with pytest.raises(ValueError):
         PoseTrack(np.array([0.0]), np.zeros((2, 3)), np.zeros((1, 4)))
+
+
+def test_the_one_program_type_reads_back_what_it_writes():
+    """Program.from_json reads the compiler's JSON into the same Program (byte for byte when written
+    again); the reader's classes, risks and version come from the shipped schema."""
+    from dlovr.inputs import InputError
+    from dlovr.model.program import Program, ProgramError, readable_versions
+
+    prog = compile_program(fig11_states(), straight_track(), name="peg", source="fig11.txt")
+    back = Program.from_json(json.loads(prog.dumps()), "peg.program.json")
+    assert back.dumps() == prog.dumps()
+    assert back.macros == prog.macros and back.summary == prog.summary
+    assert [m.index for m in back.classed] == list(range(1, len(prog.macros)))
+    assert back.final == prog.macros[-1] and back.final.final
+    assert str(back.path) == "peg.program.json" and back.scene is None
+    schema = program_schema()
+    assert readable_versions()[-1] == schema["properties"]["version"]["const"] == PROGRAM_VERSION
+    assert set(schema["$defs"]["class"]["enum"]) == set(DETECTORS)
+    raw = json.loads(prog.dumps())
+    raw["macros"][0]["risk"] = "dire"
+    with pytest.raises(ProgramError, match=r"^p\.json: macros\[0\]\.risk: must be one of none, caution, risky"):
+        Program.from_json(raw, "p.json")
+    assert issubclass(ProgramError, InputError)
+
+
+def test_a_format_1_program_is_read_with_its_risk_and_summary_derived():
+    """Format 1 (no kind, risk or changes; the final macro under ``final``) still reads."""
+    from dlovr.model.program import Program
+
+    prog = compile_program(fig11_states(), straight_track(), name="peg", source="fig11.txt")
+    raw = json.loads(prog.dumps())
+    for m in raw["macros"]:
+        for k in ("kind", "risk", "changes"):
+            m.pop(k)
+    raw["final"] = raw["macros"].pop()
+    raw["version"] = 1
+    back = Program.from_json(raw)
+    assert [m.risk for m in back.macros] == [m.risk for m in prog.macros]
+    assert back.summary == prog.summary and back.final is not None and back.final.kind == "final"

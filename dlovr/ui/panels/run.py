@@ -3,8 +3,8 @@
 The programs offered: the sample programs (``recordings/programs/`` of the repository and of the
 recordings directory) that belong to the current scene (:func:`dlovr.execution.run.check_program_scene`),
 and the program compiled from the last recording. A run restarts the scene at its start pose and
-executes the program with :class:`dlovr.execution.stepper.SteppedExecution`: the real-time loop grants
-it its steps (:meth:`dlovr.ui.session.Session.advance`), so the cable, the situation, the timeline and
+executes the program with the execution engine (:class:`dlovr.execution.engine.Engine`): the real-time
+loop steps it (:meth:`dlovr.ui.session.Session.advance`), so the cable, the situation, the timeline and
 a recording in progress follow it as they follow a demonstration. The program's list of macros
 highlights the one running and marks those that ended; the force plot shows the current macro's
 detector signal (1 = fires); at the end a result line says whether the goal was reached, or which
@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING, Any
 
 import viser
 
+from dlovr.execution.engine import Engine
 from dlovr.execution.executor import Event, ExecOptions
-from dlovr.execution.programs import ProgramError, ProgramSpec, load_program
 from dlovr.execution.run import check_program_scene, demo_track
-from dlovr.execution.scoring import score
-from dlovr.execution.stepper import SteppedExecution
+from dlovr.execution.scoring import RunResult
+from dlovr.model.program import Program, ProgramError
 from dlovr.ui.forces import ForceTrace
 from dlovr.ui.program_view import program_html
 
@@ -41,8 +41,8 @@ class RunPanel:
 
     def __init__(self, app: DemoServer) -> None:
         self.app = app
-        self.runner: SteppedExecution | None = None
-        self.program: ProgramSpec | None = None
+        self.runner: Engine | None = None
+        self.program: Program | None = None
         self.signals: ForceTrace | None = None  # the detector signal (first component), 1 = fires
         self.outcomes: dict[int, str] = {}
         self.result = ""
@@ -84,7 +84,7 @@ class RunPanel:
                 continue
             seen.add(key)
             try:
-                check_program_scene(load_program(path), scene)
+                check_program_scene(Program.load(path), scene)
             except (ProgramError, OSError):
                 continue
             found[label] = path
@@ -113,7 +113,7 @@ class RunPanel:
         except (ProgramError, OSError, ValueError) as e:
             self._say(f"cannot run: {e}")
 
-    def run(self, path: str | Path | None = None, detect: str | None = None) -> SteppedExecution:
+    def run(self, path: str | Path | None = None, detect: str | None = None) -> Engine:
         """Restart the scene and run the program ``path`` (default: the one picked); returns the run,
         which the real-time loop advances. A recording in progress goes on with the run."""
         app = self.app
@@ -122,7 +122,7 @@ class RunPanel:
             if self.app.server is None or self.choice.value not in self.choices:
                 raise ProgramError("no program picked")
             path = self.choices[self.choice.value]
-        program = load_program(path)
+        program = Program.load(path)
         check_program_scene(program, app.session.scene)
         try:
             track = demo_track(program)
@@ -143,7 +143,10 @@ class RunPanel:
             signals.add(rec.time, (runner.signal, 0.0, 0.0))
 
         with app.lock:
-            runner = SteppedExecution(program, ses.sim, opts, track=track, on_step=took, on_event=self._event)
+            runner = Engine(
+                program, ses.sim, opts, track=track, scene=ses.scene, on_step=took, on_event=self._event
+            )
+            runner.start()
             self.runner = ses.runner = runner
         if app.server is not None:
             self.stop_btn.disabled = False
@@ -166,7 +169,7 @@ class RunPanel:
             self.app.hold()
 
     def _event(self, ev: Event) -> None:
-        """An executor event (in the run's worker thread)."""
+        """An executor event."""
         if ev.kind == "detected":
             self.outcomes[ev.macro] = "ok"
         elif ev.kind == "failed" and ev.macro:
@@ -189,15 +192,15 @@ class RunPanel:
             app.viewport.gizmo.position, app.viewport.gizmo.wxyz = tuple(p), tuple(q)
         self._show_program()
 
-    def _finish(self, runner: SteppedExecution) -> None:
+    def _finish(self, runner: Engine) -> None:
         app = self.app
         with app.lock:
             app.session.runner = None
         self.runner = None
-        if runner.execution is None:
+        res = runner.result() if runner.error is None else None
+        if not isinstance(res, RunResult):
             self._say(f"run ended: {runner.error}")
         else:
-            res = score(runner.execution, app.session.scene.name)
             goal = " & ".join(res.goal) or "N"
             if res.success:
                 text = f"**Goal reached** ({goal}) at t = {res.sim_time:.2f} s"
