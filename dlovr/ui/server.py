@@ -2,12 +2,14 @@
 
 :class:`DemoServer` owns one :class:`dlovr.sim.Simulator` (in a :class:`dlovr.ui.session.Session`),
 its :class:`dlovr.sim.tracker.ContactTracker` and, while recording, a
-:class:`dlovr.recording.DemoRecorder`. A background thread (:mod:`dlovr.ui.loop`) steps the simulation
-at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the cable, the gripper
-and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block followed by
-``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
+:class:`dlovr.recording.DemoRecorder`. A background thread (:class:`dlovr.ui.loop.RealtimeLoop`) steps
+the simulation at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the
+cable, the gripper and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block
+followed by ``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
 server-wide): the 3D scene is drawn by :class:`dlovr.ui.viewport.Viewport`, the GUI is built by the
-panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation).
+panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation). The server wires them: each
+is given the :class:`dlovr.ui.app.App` it implements and, where it needs one, another panel or the
+viewport.
 
 The gripper gizmo only sets the *target* pose; the simulated gripper follows it with bounded speed
 (:class:`dlovr.sim.Simulator`). A tab that disconnects mid-drag leaves the gripper where it was; a
