@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 from dlovr.scene import SceneError, builtin_scenes
 from dlovr.ui.app import App
@@ -17,6 +17,9 @@ if TYPE_CHECKING:
 
 JOG_STEP = 0.005  # m per key press
 JOG_ANGLE = math.radians(5.0)
+
+JogKey = Literal["J", "L", "I", "K", "U", "O", "N", "M", "P"]
+"""The hotkeys of the jog commands (a subset of viser's hotkey names)."""
 
 
 class SimulationPanel:
@@ -69,7 +72,7 @@ class SimulationPanel:
             geo = self.viewport.shown_geometry or app.session.geometry
             self.viewport.show_obstacles(geo, sc)
 
-        jogs: list[tuple[str, str, Callable[[], None]]] = [
+        jogs: list[tuple[str, JogKey, Callable[[], None]]] = [
             ("Jog -x", "J", lambda: app.jog(dx=-JOG_STEP)),
             ("Jog +x", "L", lambda: app.jog(dx=JOG_STEP)),
             ("Jog +y", "I", lambda: app.jog(dy=JOG_STEP)),
@@ -81,5 +84,5 @@ class SimulationPanel:
             ("Pause / resume", "P", lambda: app.pause(not app.paused)),
         ]
         for label, key, fn in jogs:
-            cmd = gui.add_command(label, hotkey=key)  # type: ignore[arg-type]
+            cmd = gui.add_command(label, hotkey=key)
             cmd.on_trigger(lambda _e, fn=fn: fn())
