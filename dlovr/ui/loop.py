@@ -147,23 +147,31 @@ class RealtimeLoop:
 
     def _step(self, now: float, pub_at: float) -> float:
         """Take the steps due by ``now`` (toward a new target if one came), stopping at ``pub_at``;
-        the publish time, moved earlier by a new target."""
+        the publish time, moved earlier by a new target.
+
+        The pause flag is read again under the session's lock, which the server's ``pause`` takes
+        too: once ``pause`` returned, no step is taken (a step waiting for the lock while a GUI
+        callback held it could otherwise follow it)."""
         session = self._session
-        due = int((now - self._anchor_wall) / session.dt) - (self._done - self._anchor_steps)
-        if due > 50:  # more than 0.1 s behind: give up catching up (slower than real time)
-            self._anchor_wall, self._anchor_steps = now, self._done
-            due = 50
-        fresh, target = self.target.take()
-        if fresh:
-            due = max(due, 1)  # show a new target at once
-            self._kicked = True
-            pub_at = min(self._next_pub, self._last_pub + MIN_GAP)
-        if due > 0:
+        with session.lock:
+            if self.paused():
+                return pub_at
+            due = int((now - self._anchor_wall) / session.dt) - (self._done - self._anchor_steps)
+            if due > 50:  # more than 0.1 s behind: give up catching up (slower than real time)
+                self._anchor_wall, self._anchor_steps = now, self._done
+                due = 50
+            fresh, target = self.target.take()
+            if fresh:
+                due = max(due, 1)  # show a new target at once
+                self._kicked = True
+                pub_at = min(self._next_pub, self._last_pub + MIN_GAP)
+            if due <= 0:
+                return pub_at
             n = session.advance(min(due, MAX_CHUNK), target, deadline=pub_at)
-            if n is None:
-                self.diverged()
-                n = 1
-            self._done += n
+        if n is None:  # called outside the lock: it pauses and holds the gripper
+            self.diverged()
+            n = 1
+        self._done += n
         return pub_at
 
     def _publish(self, now: float) -> None:

@@ -223,7 +223,8 @@ class DemoServer:
         return self._paused
 
     def pause(self, paused: bool = True) -> None:
-        self._paused = paused
+        with self.lock:  # the real-time loop reads the flag under it: no step once this returned
+            self._paused = paused
         if self.server is not None:
             self.simulation_panel.pause_btn.label = "Resume" if paused else "Pause"
 

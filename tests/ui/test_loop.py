@@ -21,6 +21,7 @@ class FakeSession:
     dt = 0.002
 
     def __init__(self, diverge: bool = False) -> None:
+        self.lock = threading.RLock()
         self.record = SimpleNamespace(time=0.0)
         self.steps = 0
         self.targets: list[Any] = []
