@@ -107,7 +107,7 @@ def main() -> None:
     log = FrameLog()
     # server-side marks: when the gizmo target arrives, and each publish with the gripper position
     srv_marks: list[tuple[str, float, np.ndarray]] = []
-    orig_set_target, orig_publish = srv.set_target, srv._publish
+    orig_set_target, orig_publish = srv.set_target, srv.loop.publish
 
     def set_target(pos, quat=None, *, move_gizmo: bool = True) -> None:
         srv_marks.append(("target", time.perf_counter(), np.asarray(pos, dtype=float)))
@@ -117,7 +117,7 @@ def main() -> None:
         orig_publish()
         srv_marks.append(("publish", time.perf_counter(), srv.session.record.gripper_pos.copy()))
 
-    srv.set_target, srv._publish = set_target, publish
+    srv.set_target, srv.loop.publish = set_target, publish
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=exe, args=ARGS)

@@ -40,15 +40,16 @@ def _in_type_checking(node: ast.AST, parents: dict[ast.AST, ast.AST]) -> bool:
     return False
 
 
-def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+def _imports(name: str, path: Path, modules: dict[str, Path], type_only: bool = False) -> set[str]:
     """dlovr modules that ``name`` imports anywhere in its file (function-level imports included,
-    ``if TYPE_CHECKING:`` blocks excluded); importing ``a.b.c`` also runs ``a.b``'s ``__init__``."""
+    ``if TYPE_CHECKING:`` blocks only with ``type_only``); importing ``a.b.c`` also runs ``a.b``'s
+    ``__init__``."""
     tree = ast.parse(path.read_text(), str(path))
     parents = {c: p for p in ast.walk(tree) for c in ast.iter_child_nodes(p)}
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     targets: set[str] = set()
     for node in ast.walk(tree):
-        if _in_type_checking(node, parents):
+        if not type_only and _in_type_checking(node, parents):
             continue
         if isinstance(node, ast.Import):
             targets.update(a.name for a in node.names)
@@ -69,9 +70,9 @@ def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
     return deps
 
 
-def import_graph() -> dict[str, set[str]]:
+def import_graph(type_only: bool = False) -> dict[str, set[str]]:
     modules = _modules()
-    return {name: _imports(name, path, modules) for name, path in modules.items()}
+    return {name: _imports(name, path, modules, type_only) for name, path in modules.items()}
 
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -100,6 +101,33 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
 def test_no_import_cycles():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_ui_modules_import_each_other_without_a_circle_counting_type_only_imports():
+    """The browser UI's panels, viewport and loop see the server through ``dlovr.ui.app`` only: no
+    circle among the UI's modules, ``if TYPE_CHECKING:`` imports counted too."""
+    graph = import_graph(type_only=True)
+    ui = {n: {d for d in deps if d.startswith("dlovr.ui")} for n, deps in graph.items() if "dlovr.ui" in n}
+    cycle = find_cycle(ui)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+    below = {n for n, deps in ui.items() if "dlovr.ui.server" in deps} - {"dlovr.ui"}
+    assert not below, f"modules that import the server: {sorted(below)}"
+
+
+def test_ui_modules_touch_no_private_attribute_of_the_app():
+    """No UI module but the server reads or writes ``app._x`` (the narrow interface is
+    :class:`dlovr.ui.app.App`)."""
+    bad = []
+    for name, path in _modules().items():
+        if not name.startswith("dlovr.ui") or name == "dlovr.ui.server":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Attribute) or not node.attr.startswith("_") or node.attr[:2] == "__":
+                continue
+            owner = ast.unparse(node.value)
+            if owner == "app" or owner.endswith(".app"):
+                bad.append(f"{name}: {ast.unparse(node)}")
+    assert not bad, "private attributes of the app: " + "; ".join(bad)
 
 
 def test_cycle_finder_finds_a_cycle():

@@ -3,8 +3,8 @@
 The only package of dlovr that imports viser. :class:`DemoServer` (:mod:`dlovr.ui.server`) runs the
 simulation :class:`Session` (:mod:`dlovr.ui.session`) in a real-time thread (:mod:`dlovr.ui.loop`),
 draws it (:mod:`dlovr.ui.viewport`, with the pure helpers of :mod:`dlovr.ui.drawing`) and builds the
-GUI panels (:mod:`dlovr.ui.panels`); :mod:`dlovr.ui.timeline` holds the scrubbable timeline, live or
-read from a recording.
+GUI panels (:mod:`dlovr.ui.panels`), which see it through :class:`dlovr.ui.app.App` only;
+:mod:`dlovr.ui.timeline` holds the scrubbable timeline, live or read from a recording.
 """
 
 from dlovr.model.discrete import Stability

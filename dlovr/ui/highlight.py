@@ -4,6 +4,7 @@ labels* option) that name every face and say which ones are touched."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -13,7 +14,7 @@ from dlovr.model.discrete import Stability
 from dlovr.ui.drawing import COLOR_BY_CLASS, STABILITY_WORDS
 
 if TYPE_CHECKING:
-    from dlovr.ui.server import DemoServer
+    import viser
 
 OFFSET = 0.0015
 """How far (m) a highlight is drawn out of its face, along the face's outward normal."""
@@ -21,14 +22,14 @@ OFFSET = 0.0015
 
 class FaceHighlighter:
     """The highlighted faces and the face labels of the obstacles shown; drawn under the server's
-    ``_draw_lock``.
+    ``draw_lock``; ``scene`` gives the viser scene to draw into.
 
     :meth:`show` is given the faces of the moment shown (live or scrubbed); while ``pinned`` is set
     (a situation hovered in the timeline) those faces are shown instead.
     """
 
-    def __init__(self, app: DemoServer) -> None:
-        self.app = app
+    def __init__(self, scene: Callable[[], viser.SceneApi]) -> None:
+        self.scene = scene
         self._faces: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # name -> (triangles, normal)
         self._meshes: dict[str, Any] = {}
         self.labels: dict[str, Any] = {}
@@ -48,12 +49,12 @@ class FaceHighlighter:
             for name, tris, normal in zip(obj.face_names, obj.face_tris, obj.face_normals, strict=True)
         }
         if labels:
-            srv = self.app.server
+            api = self.scene()
             for name, (tris, normal) in self._faces.items():
                 area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
                 c3 = (tris.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-12)
                 obj = name.split(".", 1)[0]
-                self.labels[name] = srv.scene.add_label(
+                self.labels[name] = api.add_label(
                     f"/obstacles/{obj}_labels/{name}", name, position=tuple(c3 + 0.01 * normal)
                 )
         self._draw(self.pinned if self.pinned is not None else self.current)
@@ -73,7 +74,7 @@ class FaceHighlighter:
         faces = {f: c for f, c in faces.items() if f in self._faces}
         if faces == self.shown:
             return
-        srv = self.app.server
+        api = self.scene()
         for name in [n for n in self.shown if faces.get(n) != self.shown[n]]:
             self._meshes.pop(name).remove()
             if name in self.labels:
@@ -83,7 +84,7 @@ class FaceHighlighter:
                 continue
             tris, normal = self._faces[name]
             verts = (tris + OFFSET * normal).reshape(-1, 3).astype(np.float32)
-            self._meshes[name] = srv.scene.add_mesh_simple(
+            self._meshes[name] = api.add_mesh_simple(
                 f"/contact_faces/{name}",
                 verts,
                 np.arange(len(verts), dtype=np.uint32).reshape(-1, 3),

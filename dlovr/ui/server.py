@@ -2,12 +2,14 @@
 
 :class:`DemoServer` owns one :class:`dlovr.sim.Simulator` (in a :class:`dlovr.ui.session.Session`),
 its :class:`dlovr.sim.tracker.ContactTracker` and, while recording, a
-:class:`dlovr.recording.DemoRecorder`. A background thread (:mod:`dlovr.ui.loop`) steps the simulation
-at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the cable, the gripper
-and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block followed by
-``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
+:class:`dlovr.recording.DemoRecorder`. A background thread (:class:`dlovr.ui.loop.RealtimeLoop`) steps
+the simulation at its own rate (500 Hz of simulated time) paced to the wall clock and publishes the
+cable, the gripper and the contact feedback at ~60 Hz, each update in one ``server.atomic()`` block
+followed by ``server.flush()``. Every connected tab sees the same simulation (all scene and GUI elements are
 server-wide): the 3D scene is drawn by :class:`dlovr.ui.viewport.Viewport`, the GUI is built by the
-panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation).
+panels of :mod:`dlovr.ui.panels` (state, recording, timeline, simulation). The server wires them: each
+is given the :class:`dlovr.ui.app.App` it implements and, where it needs one, another panel or the
+viewport.
 
 The gripper gizmo only sets the *target* pose; the simulated gripper follows it with bounded speed
 (:class:`dlovr.sim.Simulator`). A tab that disconnects mid-drag leaves the gripper where it was; a
@@ -16,6 +18,7 @@ recording in progress is independent of the tabs and is finished by :meth:`DemoS
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import math
 import socket
@@ -28,10 +31,11 @@ from typing import Any
 import numpy as np
 import viser
 
-from dlovr.scene import Scene, load_scene
+from dlovr.scene import load_scene
 from dlovr.transforms import quat_mul
+from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
-from dlovr.ui.loop import realtime_loop
+from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
     ForcePanel,
     NetworkPanel,
@@ -81,7 +85,7 @@ class DemoServer:
     """The ``dlovr serve`` server: ``DemoServer(scene).start()``, then :meth:`stop`.
 
     ``port=None`` picks a free port. ``recordings_dir`` is where recordings are written (created on
-    the first recording). ``realtime=False`` steps as fast as possible (tests, benchmarks).
+    the first recording). It implements :class:`dlovr.ui.app.App`, what its panels see of it.
     """
 
     def __init__(
@@ -102,29 +106,31 @@ class DemoServer:
         self.lock = threading.RLock()
         self.session = Session(load_scene(scene), self.lock)
         self.server: viser.ViserServer | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-        self._wake = threading.Event()
         self._paused = False
-        self._target: tuple[np.ndarray, np.ndarray] | None = None
-        self._target_dirty = False
-        self._dragging: dict[int, float | None] = {}  # client id -> drag end time (None: dragging)
-        self._draw_lock = threading.RLock()
-        self._view: Timeline | None = None  # a timeline being scrubbed (None: live view)
-        self._view_scene: Scene | None = None
+        self._target = TargetCommand()
+        self.draw_lock = threading.RLock()
+        self.view = View()  # a timeline being scrubbed (its timeline None: the live view)
         self.program_text = ""
         self.last_program: Any = None  # the last recording's compiled program
         self.last_recording: Path | None = None
         self.publish_count = 0
         self._panels_at = 0.0
-        self._rtf = 1.0
-        self.viewport = Viewport(self)
+        self.loop = RealtimeLoop(
+            lambda: self.session,
+            self._target,
+            paused=lambda: self._paused,
+            publish=self._publish,
+            diverged=self._diverged,
+            publish_hz=self.publish_hz,
+            verbose=verbose,
+        )
+        self.viewport = Viewport(self, face_labels=lambda: self.simulation_panel.face_labels)
         self.state_panel = StatePanel()
-        self.force_panel = ForcePanel(self)
-        self.recording_panel = RecordingPanel(self)
-        self.timeline_panel = TimelinePanel(self)
-        self.simulation_panel = SimulationPanel(self)
         self.run_panel = RunPanel(self)
+        self.force_panel = ForcePanel(self, self.run_panel)
+        self.recording_panel = RecordingPanel(self)
+        self.timeline_panel = TimelinePanel(self, self.viewport, self.state_panel, self.force_panel)
+        self.simulation_panel = SimulationPanel(self, self.viewport, self.timeline_panel)
         self.network_panel = NetworkPanel(self)
 
     # -- lifecycle ----------------------------------------------------------------------------------
@@ -149,21 +155,17 @@ class DemoServer:
         srv.scene.set_up_direction("+z")
         self._build_gui()
         self._build_scene()
-        srv.on_client_connect(self._on_connect)
-        srv.on_client_disconnect(self._on_disconnect)
-        self._stop.clear()
-        self._thread = threading.Thread(target=realtime_loop, args=(self,), name="dlovr-sim", daemon=True)
-        self._thread.start()
+        srv.on_client_connect(self.on_client_connect)
+        srv.on_client_disconnect(self.on_client_disconnect)
+        self.loop.start()
         return self
 
     def stop(self) -> Path | None:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
-        self._stop.set()
+        self.loop.stop()
         self.timeline_panel.cancel_resim()
         self.run_panel.cancel(None)
-        if self._thread is not None:
-            self._thread.join(timeout=10)
-            self._thread = None
+        self.loop.join(timeout=10)
         path = self.session.stop_recording()
         if path is not None:
             self.last_recording = path
@@ -187,16 +189,20 @@ class DemoServer:
         """Command the gripper pose (what the gizmo does); the sim follows with bounded speed."""
         p = np.asarray(pos, dtype=float)
         q = np.asarray(quat, dtype=float) if quat is not None else self.target()[1]
-        self._target = (p, q)
-        self._target_dirty = True
-        self._wake.set()
-        if move_gizmo and self.server is not None:
-            self.viewport.gizmo.position = tuple(p)
-            self.viewport.gizmo.wxyz = tuple(q)
+        self._target.set(p, q)
+        if move_gizmo:
+            self.move_gizmo(p, q)
+
+    def move_gizmo(self, pos: Any, quat: Any) -> None:
+        """Put the gizmo at ``pos`` (m, world), ``quat`` (wxyz) without commanding the gripper."""
+        if self.server is not None:
+            self.viewport.gizmo.position = tuple(pos)
+            self.viewport.gizmo.wxyz = tuple(quat)
 
     def target(self) -> tuple[np.ndarray, np.ndarray]:
-        if self._target is not None:
-            return self._target
+        """The gripper target last commanded (m, world; wxyz), else the simulator's."""
+        if self._target.pose is not None:
+            return self._target.pose
         with self.lock:
             s = self.session.sim
             return s.target_pos.copy(), s.target_quat.copy()
@@ -212,8 +218,13 @@ class DemoServer:
         p, q = self.session.gripper_pose()
         self.set_target(p, q)
 
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
     def pause(self, paused: bool = True) -> None:
-        self._paused = paused
+        with self.lock:  # the real-time loop reads the flag under it: no step once this returned
+            self._paused = paused
         if self.server is not None:
             self.simulation_panel.pause_btn.label = "Resume" if paused else "Pause"
 
@@ -227,14 +238,11 @@ class DemoServer:
         with self.lock:
             self.recording_panel.finish()
             self.session = new
-            self._target = None
-            self._target_dirty = False
-            self._view = None
-            self._view_scene = None
+            self._target.clear()
+            self.view.clear()
         if self.server is not None:
             self._build_scene()
-            p, q = new.gripper_pose()
-            self.viewport.gizmo.position, self.viewport.gizmo.wxyz = tuple(p), tuple(q)
+            self.move_gizmo(*new.gripper_pose())
             self.timeline_panel.live_btn.visible = False
 
     def start_recording(self, path: str | Path | None = None) -> Path:
@@ -275,7 +283,7 @@ class DemoServer:
                 "gripper_force": list(st.gripper_force),
                 "recording": s.recorder.path if s.recorder else None,
                 "paused": self._paused,
-                "rtf": self._rtf,
+                "rtf": self.loop.rtf,
                 "kept": len(s.tracker.kept),
             }
 
@@ -294,17 +302,17 @@ class DemoServer:
             text = None
             if slow:
                 text = status_markdown(
-                    st, s.last_class(), t=rec.time, rtf=self._rtf, paused=self._paused, note=s.note
+                    st, s.last_class(), t=rec.time, rtf=self.loop.rtf, paused=self._paused, note=s.note
                 )
-            viewing = self._view is not None
+            viewing = self.view.timeline is not None
         if not viewing:
             pts = np.asarray(rec.points, dtype=float)
             colors = point_colors(point_classes(st, len(pts)))
             arrows = contact_arrows(st, pts)
             faces = situation_faces(st.discrete if st is not None else None)
             view = self.viewport
-            with self._draw_lock, srv.atomic():
-                if self._view is not None:
+            with self.draw_lock, srv.atomic():
+                if self.view.timeline is not None:
                     return
                 view.draw_cable(pts, colors, arrows)
                 view.faces.show(faces)
@@ -335,27 +343,34 @@ class DemoServer:
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
 
+    def _diverged(self) -> None:
+        """A step diverged (the session restored the state before it): pause, the gripper held."""
+        self.pause(True)
+        with contextlib.suppress(Exception):
+            self.hold()
+
     def _build_scene(self) -> None:
-        with self._draw_lock:
+        with self.draw_lock:
             self.viewport.build()
             self.timeline_panel.update(force=True)
 
     # -- clients ------------------------------------------------------------------------------------
 
-    def _on_connect(self, client: Any) -> None:
+    def on_client_connect(self, client: Any) -> None:
         """Frame the workspace for the new tab once its camera has reported (its aspect is known)."""
 
         @client.camera.on_update
         def _(cam: Any) -> None:
             self.viewport.camera_update(client)
 
-    def _on_disconnect(self, client: Any) -> None:
+    def on_client_disconnect(self, client: Any) -> None:
+        """A tab went away: forget its camera and its hover; hold the gripper if it left mid-drag."""
         self.viewport.camera_ready.pop(client.client_id, None)
-        if self.viewport.faces.pinned is not None and not self._stop.is_set():
-            with self._draw_lock:  # it may have gone away while hovering a situation
+        if self.viewport.faces.pinned is not None and not self.loop.stopping:
+            with self.draw_lock:  # it may have gone away while hovering a situation
                 self.viewport.faces.pin(None)
-        ended = self._dragging.pop(client.client_id, -1.0)
-        if self._stop.is_set():  # the server is stopping (it disconnects everyone): nothing to hold
+        ended = self.viewport.dragging.pop(client.client_id, -1.0)
+        if self.loop.stopping:  # the server is stopping (it disconnects everyone): nothing to hold
             return
         if ended is None or (ended >= 0 and time.perf_counter() - ended < 1.0):
             self.hold()  # it went away mid-drag: the gripper stays where it is now

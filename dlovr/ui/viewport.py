@@ -6,6 +6,7 @@ contact vectors, the gripper body, the gizmo that commands the gripper target, a
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -13,19 +14,27 @@ import trimesh
 
 from dlovr.geometry import SceneGeometry
 from dlovr.scene import Scene
+from dlovr.ui.app import App
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
 from dlovr.ui.framing import FOV, frame_box
 from dlovr.ui.highlight import FaceHighlighter
 
 if TYPE_CHECKING:
-    from dlovr.ui.server import DemoServer
+    import viser
 
 
 class Viewport:
-    """The server's 3D scene elements; drawing happens under the server's ``_draw_lock``."""
+    """The server's 3D scene elements; drawing happens under the server's ``draw_lock``.
 
-    def __init__(self, app: DemoServer) -> None:
+    ``face_labels`` says whether the obstacles' faces are to be labelled (the simulation panel's
+    checkbox). :attr:`dragging` follows the gizmo drags: client id -> when its drag ended
+    (``time.perf_counter()``, s), None while it drags.
+    """
+
+    def __init__(self, app: App, face_labels: Callable[[], bool]) -> None:
         self.app = app
+        self.face_labels = face_labels
+        self.dragging: dict[int, float | None] = {}
         self.obstacle_handles: list[Any] = []
         self.shown_geometry: Any = None
         self.cable: Any = None
@@ -34,25 +43,30 @@ class Viewport:
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
         self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
-        self.faces = FaceHighlighter(app)
+        self.faces = FaceHighlighter(self._scene_api)
+
+    def _scene_api(self) -> viser.SceneApi:
+        srv = self.app.server
+        assert srv is not None, "drawing needs the started server"
+        return srv.scene
 
     def build_gizmo(self) -> None:
-        """The transform gizmo: a drag sets the gripper target (:meth:`DemoServer.set_target`)."""
+        """The transform gizmo: a drag sets the gripper target (:meth:`App.set_target`)."""
         app = self.app
         p, q = app.session.gripper_pose()
-        self.gizmo = app.server.scene.add_transform_controls(
+        self.gizmo = self._scene_api().add_transform_controls(
             "/gripper", scale=0.15, position=tuple(p), wxyz=tuple(q)
         )
 
         @self.gizmo.on_update
         async def _(event: Any) -> None:
             if event.phase == "start" and event.client_id is not None:
-                app._dragging[event.client_id] = None
+                self.dragging[event.client_id] = None
             elif event.phase == "end":
                 # viser sends a synthetic "end" just before the disconnect callbacks of a tab that
-                # goes away mid-drag: remember when, so _on_disconnect can tell
+                # goes away mid-drag: remember when, so the server's on_client_disconnect can tell
                 if event.client_id is not None:
-                    app._dragging[event.client_id] = time.perf_counter()
+                    self.dragging[event.client_id] = time.perf_counter()
                 return
             if event.phase == "update":
                 g = event.target
@@ -62,11 +76,8 @@ class Viewport:
 
     def draw_cable(self, pts: np.ndarray, colors: np.ndarray, arrows: np.ndarray) -> None:
         """Move the cable to ``pts`` (world frame, m) with per-point ``colors``; ``arrows`` (k, 2, 3)."""
-        r = (
-            float(self.app.session.scene.dlo.radius)
-            if self.app._view_scene is None
-            else float(self.app._view_scene.dlo.radius)
-        )
+        viewed = self.app.view.scene
+        r = float(self.app.session.scene.dlo.radius) if viewed is None else float(viewed.dlo.radius)
         pos, wxyz, scales = segment_transforms(pts, r)
         seg_colors = np.where(
             (colors[:-1] != np.array(COLOR_FREE)).any(axis=1)[:, None], colors[:-1], colors[1:]
@@ -85,7 +96,7 @@ class Viewport:
             if self.arrows is not None:
                 self.arrows.points = arrows.astype(np.float32)  # moved in place, not re-created
             else:
-                self.arrows = self.app.server.scene.add_arrows(
+                self.arrows = self._scene_api().add_arrows(
                     "/contacts/vectors",
                     points=arrows,
                     colors=(30, 60, 220),
@@ -98,12 +109,12 @@ class Viewport:
             self.arrows = None
 
     def _make_cable(self, n: int, r: float) -> None:
-        srv = self.app.server
+        scene = self._scene_api()
         cyl = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=12)
         ball = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
         z = np.zeros((n, 3), dtype=np.float32)
         q = np.tile(np.array([1.0, 0, 0, 0], dtype=np.float32), (n, 1))
-        self.cable = srv.scene.add_batched_meshes_simple(
+        self.cable = scene.add_batched_meshes_simple(
             "/cable/tube",
             cyl.vertices,
             cyl.faces,
@@ -113,7 +124,7 @@ class Viewport:
             batched_colors=COLOR_FREE,
             lod="off",
         )
-        self.joints = srv.scene.add_batched_meshes_simple(
+        self.joints = scene.add_batched_meshes_simple(
             "/cable/points",
             ball.vertices,
             ball.faces,
@@ -126,11 +137,11 @@ class Viewport:
         self.cable_n = n
 
     def show_obstacles(self, geometry: SceneGeometry, scene: Scene) -> None:
-        with self.app._draw_lock:
+        with self.app.draw_lock:
             self._show_obstacles_locked(geometry, scene)
 
     def _show_obstacles_locked(self, geometry: SceneGeometry, scene: Scene) -> None:
-        srv = self.app.server
+        api = self._scene_api()
         for h in self.obstacle_handles:
             h.remove()
         self.obstacle_handles = []
@@ -139,7 +150,7 @@ class Viewport:
             c = colors.get(obj.name)
             rgb = tuple(int(255 * x) for x in c) if c else (150, 155, 170)
             self.obstacle_handles.append(
-                srv.scene.add_mesh_simple(
+                api.add_mesh_simple(
                     f"/obstacles/{obj.name}",
                     np.asarray(obj.mesh.vertices, dtype=np.float32),
                     np.asarray(obj.mesh.faces, dtype=np.uint32),
@@ -147,21 +158,21 @@ class Viewport:
                     flat_shading=True,
                 )
             )
-        self.faces.reset(geometry, labels=self.app.simulation_panel.face_labels)
+        self.faces.reset(geometry, labels=self.face_labels())
         self.shown_geometry = geometry
 
     def build(self) -> None:
         """(Re)build the scene of the server's session: camera, obstacles, gripper body, cable; called
-        under the server's ``_draw_lock``."""
+        under the server's ``draw_lock``."""
         s = self.app.session
         self.cable = None
         self.cable_n = -1
         self.arrows = None
         self.show_obstacles(s.geometry, s.scene)
         p, q = s.gripper_pose()
-        srv = self.app.server
-        self.body = srv.scene.add_frame("/gripper_body", show_axes=False, position=tuple(p), wxyz=tuple(q))
-        srv.scene.add_box(
+        api = self._scene_api()
+        self.body = api.add_frame("/gripper_body", show_axes=False, position=tuple(p), wxyz=tuple(q))
+        api.add_box(
             "/gripper_body/box", dimensions=(0.03, 0.03, 0.04), color=(70, 70, 85), position=(0.0, 0.0, 0.021)
         )
         self.draw_cable(
@@ -201,7 +212,7 @@ class Viewport:
         clients = [client] if client is not None else list(srv.get_clients().values())
         for c in clients:
             if c.client_id not in self.camera_ready:
-                continue  # framed when its camera first reports (DemoServer._on_connect)
+                continue  # framed when its camera first reports (camera_update)
             cam = c.camera
             aspect = cam.aspect
             pos, look = frame_box(lo, hi, aspect=aspect)

@@ -208,8 +208,8 @@ def test_a_client_leaving_as_the_server_stops_moves_nothing(tmp_path: Path):
 
     def stop_then_disconnect() -> None:
         real_stop()
-        srv._dragging[7] = time.perf_counter()  # client 7 ended a drag just now
-        srv._on_disconnect(SimpleNamespace(client_id=7))
+        srv.viewport.dragging[7] = time.perf_counter()  # client 7 ended a drag just now
+        srv.on_client_disconnect(SimpleNamespace(client_id=7))
 
     srv.server.stop = stop_then_disconnect
     with warnings.catch_warnings():

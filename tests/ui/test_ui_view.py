@@ -280,9 +280,9 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
 
     # clicking it scrubs the cable to that situation, its face highlighted
     on_table.click()
-    wait_for(lambda: server._view is not None, timeout=10, what="the click to scrub")
+    wait_for(lambda: server.view.timeline is not None, timeout=10, what="the click to scrub")
     page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
-    band = server._view.bands[k]
+    band = server.view.timeline.bands[k]
     assert band.start - 0.01 <= server.timeline_panel.slider.value <= band.end + 0.01
     page.mouse.move(5, 300)
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the clicked faces")

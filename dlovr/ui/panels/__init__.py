@@ -3,7 +3,8 @@ the gripper wrench plot (:mod:`~dlovr.ui.panels.forces`), recording controls
 (:mod:`~dlovr.ui.panels.recording`), running a program (:mod:`~dlovr.ui.panels.run`), the scene's
 transition network (:mod:`~dlovr.ui.panels.network`), the timeline
 (:mod:`~dlovr.ui.panels.timeline`) and simulation controls (:mod:`~dlovr.ui.panels.simulation`).
-Each panel builds its widgets in ``build(gui)`` and calls back into the server it was given."""
+Each panel builds its widgets in ``build(gui)`` and calls back into the :class:`dlovr.ui.app.App` it
+was given (the server, as a panel may see it), never into the server's module."""
 
 from dlovr.ui.panels.forces import ForcePanel
 from dlovr.ui.panels.network import NetworkPanel

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dlovr.model.transitions import format_classes
+from dlovr.ui.app import App
 from dlovr.ui.forces import (
     SERIES_COLORS,
     SERIES_LABELS,
@@ -20,12 +21,11 @@ from dlovr.ui.forces import (
     plot_arrays,
     signal_arrays,
 )
+from dlovr.ui.panels.run import RunPanel
 from dlovr.ui.timeline import Timeline
 
 if TYPE_CHECKING:
     import viser
-
-    from dlovr.ui.server import DemoServer
 
 
 def _series(points: bool) -> tuple[dict[str, Any], ...]:
@@ -52,10 +52,12 @@ def _with_signal(data: tuple[np.ndarray, ...], trace: ForceTrace | None) -> tupl
 
 
 class ForcePanel:
-    """The "Gripper wrench" folder: the plot and a line naming the transitions it marks."""
+    """The "Gripper wrench" folder: the plot and a line naming the transitions it marks; ``run`` is
+    the run panel, whose program's detector signal the plot shows."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App, run: RunPanel) -> None:
         self.app = app
+        self.run = run
         self._mode = "live"
         self._caption = ""
         self.updates = 0
@@ -88,14 +90,12 @@ class ForcePanel:
             data = plot_arrays(s.forces, tl.transition_times(), s.record.time)
             data = _with_signal(data, self.signal_trace())
             bands = [b for b in tl.bands[-12:] if b.classes]
-        run = getattr(self.app, "run_panel", None)
-        extra = run.signal_caption() if run is not None else ""
+        extra = self.run.signal_caption()
         self._show(data, bands, "live", f"force on the gripper [N], last {WINDOW_S:g} s", extra)
 
     def signal_trace(self) -> ForceTrace | None:
         """The detector signal of the program run in the current scene, if any."""
-        run = getattr(self.app, "run_panel", None)
-        return run.signals if run is not None else None
+        return self.run.signals
 
     def show_at(self, tl: Timeline, t: float) -> None:
         """The seconds before moment ``t`` of a timeline being scrubbed (a recording, or the live one)."""

@@ -3,23 +3,21 @@ the live situation highlighted while demonstrating or running a program."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import viser
 
 from dlovr.model.network import Network
+from dlovr.ui.app import App
 from dlovr.ui.network_view import network_view_html, scene_network
 from dlovr.ui.panels.run import SAMPLE_PROGRAMS
-
-if TYPE_CHECKING:
-    from dlovr.ui.server import DemoServer
 
 
 class NetworkPanel:
     """The "Transition network" folder: loaded (or built) for each scene, re-drawn when the live node
     changes; "Rebuild network" takes in recordings made since."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App) -> None:
         self.app = app
         self.net: Network | None = None
         self.note = ""

@@ -7,22 +7,19 @@ from __future__ import annotations
 import datetime as _dt
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import viser
 
 from dlovr.recording import compile_recording
+from dlovr.ui.app import App
 from dlovr.ui.program_view import program_html
-
-if TYPE_CHECKING:
-    from dlovr.ui.server import DemoServer
 
 
 class RecordingPanel:
-    """The "Recording" folder and the commands behind it (:meth:`DemoServer.start_recording`,
-    :meth:`DemoServer.stop_recording`); they work without the GUI too (the server not started)."""
+    """The "Recording" folder and the commands behind it (:meth:`App.start_recording`,
+    :meth:`App.stop_recording`); they work without the GUI too (the server not started)."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App) -> None:
         self.app = app
         self.compile_thread: threading.Thread | None = None
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import html
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import viser
 
@@ -24,11 +24,9 @@ from dlovr.execution.executor import Event, ExecOptions
 from dlovr.execution.run import check_program_scene, demo_track
 from dlovr.execution.scoring import RunResult
 from dlovr.model.program import Program, ProgramError
+from dlovr.ui.app import App
 from dlovr.ui.forces import ForceTrace
 from dlovr.ui.program_view import program_html
-
-if TYPE_CHECKING:
-    from dlovr.ui.server import DemoServer
 
 SAMPLE_PROGRAMS = Path(__file__).resolve().parents[3] / "recordings" / "programs"
 """The repository's sample programs (one per built-in scene)."""
@@ -39,7 +37,7 @@ NO_PROGRAM = "(no program for this scene)"
 class RunPanel:
     """The "Run program" folder and :meth:`run` behind it (works without the GUI too)."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App) -> None:
         self.app = app
         self.runner: Engine | None = None
         self.program: Program | None = None
@@ -189,7 +187,7 @@ class RunPanel:
         elif runner is not None and app.server is not None:  # the gizmo follows the program's target
             with app.lock:
                 p, q = app.session.sim.target_pos.copy(), app.session.sim.target_quat.copy()
-            app.viewport.gizmo.position, app.viewport.gizmo.wxyz = tuple(p), tuple(q)
+            app.move_gizmo(p, q)
         self._show_program()
 
     def _finish(self, runner: Engine) -> None:

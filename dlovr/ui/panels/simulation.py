@@ -5,24 +5,31 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 from dlovr.scene import SceneError, builtin_scenes
+from dlovr.ui.app import App
+from dlovr.ui.panels.timeline import TimelinePanel
+from dlovr.ui.viewport import Viewport
 
 if TYPE_CHECKING:
     import viser
 
-    from dlovr.ui.server import DemoServer
-
 JOG_STEP = 0.005  # m per key press
 JOG_ANGLE = math.radians(5.0)
 
+JogKey = Literal["J", "L", "I", "K", "U", "O", "N", "M", "P"]
+"""The hotkeys of the jog commands (a subset of viser's hotkey names)."""
+
 
 class SimulationPanel:
-    """The "Simulation" folder and the jog commands (hotkeys); the commands are the server's."""
+    """The "Simulation" folder and the jog commands (hotkeys); the commands are the app's. A scene
+    that cannot be loaded is reported in the ``timeline`` panel."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App, viewport: Viewport, timeline: TimelinePanel) -> None:
         self.app = app
+        self.viewport = viewport
+        self.timeline = timeline
 
     @property
     def face_labels(self) -> bool:
@@ -46,8 +53,8 @@ class SimulationPanel:
                 "Drag the gizmo to move the gripper. Keys: J/L x, I/K y, U/O z, "
                 "N/M yaw, P pause (5 mm / 5° a press)."
             )
-        self.frame_btn.on_click(lambda e: app.viewport.frame(e.client))
-        self.pause_btn.on_click(lambda _e: app.pause(not app._paused))
+        self.frame_btn.on_click(lambda e: self.viewport.frame(e.client))
+        self.pause_btn.on_click(lambda _e: app.pause(not app.paused))
         reset_btn.on_click(lambda _e: app.reset())
 
         @self.scene_dd.on_update
@@ -57,15 +64,15 @@ class SimulationPanel:
             try:
                 app.load(self.scene_dd.value)
             except (SceneError, ValueError) as e:
-                app.timeline_panel.open_md.content = f"cannot load scene: {e}"
+                self.timeline.say(f"cannot load scene: {e}")
 
         @self.labels_cb.on_update
         def _(_e: Any) -> None:
-            sc = app._view_scene or app.session.scene
-            geo = app.viewport.shown_geometry or app.session.geometry
-            app.viewport.show_obstacles(geo, sc)
+            sc = app.view.scene or app.session.scene
+            geo = self.viewport.shown_geometry or app.session.geometry
+            self.viewport.show_obstacles(geo, sc)
 
-        jogs: list[tuple[str, str, Callable[[], None]]] = [
+        jogs: list[tuple[str, JogKey, Callable[[], None]]] = [
             ("Jog -x", "J", lambda: app.jog(dx=-JOG_STEP)),
             ("Jog +x", "L", lambda: app.jog(dx=JOG_STEP)),
             ("Jog +y", "I", lambda: app.jog(dy=JOG_STEP)),
@@ -74,8 +81,8 @@ class SimulationPanel:
             ("Jog -z", "O", lambda: app.jog(dz=-JOG_STEP)),
             ("Yaw +", "N", lambda: app.jog(yaw=JOG_ANGLE)),
             ("Yaw -", "M", lambda: app.jog(yaw=-JOG_ANGLE)),
-            ("Pause / resume", "P", lambda: app.pause(not app._paused)),
+            ("Pause / resume", "P", lambda: app.pause(not app.paused)),
         ]
         for label, key, fn in jogs:
-            cmd = gui.add_command(label, hotkey=key)  # type: ignore[arg-type]
+            cmd = gui.add_command(label, hotkey=key)
             cmd.on_trigger(lambda _e, fn=fn: fn())

@@ -13,21 +13,27 @@ from dlovr.geometry import SceneGeometry
 from dlovr.model.transitions import format_classes
 from dlovr.recording import RecordingError
 from dlovr.scene import SceneError
+from dlovr.ui.app import App
+from dlovr.ui.panels.forces import ForcePanel
+from dlovr.ui.panels.state import StatePanel
 from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline, resimulated_forces
+from dlovr.ui.viewport import Viewport
 
 if TYPE_CHECKING:
     import viser
 
-    from dlovr.ui.server import DemoServer
-
 
 class TimelinePanel:
-    """The "Timeline" folder and the commands behind it (:meth:`DemoServer.open_recording`,
-    :meth:`DemoServer.scrub`, :meth:`DemoServer.live`). The timeline being viewed is the server's
-    ``_view`` (None: the live view), its scene ``_view_scene`` (None: the live scene)."""
+    """The "Timeline" folder and the commands behind it (:meth:`App.open_recording`,
+    :meth:`App.scrub`, :meth:`App.live`). The timeline being viewed is the app's ``view``
+    (:class:`dlovr.ui.app.View`). A moment is drawn in the ``viewport`` and told by the ``state``
+    and the ``forces`` panels."""
 
-    def __init__(self, app: DemoServer) -> None:
+    def __init__(self, app: App, viewport: Viewport, state: StatePanel, forces: ForcePanel) -> None:
         self.app = app
+        self.viewport = viewport
+        self.state = state
+        self.forces = forces
         self._key: Any = None
         self._resim_stop: threading.Event | None = None
         self.resim_thread: threading.Thread | None = None
@@ -69,13 +75,18 @@ class TimelinePanel:
             except (RecordingError, SceneError, OSError) as e:
                 self.open_md.content = f"cannot open: {e}"
 
+    def say(self, text: str) -> None:
+        """Show ``text`` (markdown) under the recording picker (what opening a recording, or loading a
+        scene, says)."""
+        self.open_md.content = text
+
     def open_recording(self, path: str | Path) -> Timeline:
         app = self.app
         tl, scene, rec = recording_timeline(path)
         self.cancel_resim()
         with app.lock:
-            app._view = tl
-            app._view_scene = scene
+            app.view.timeline = tl
+            app.view.scene = scene
         # the recording stores the force only where the contact state changed: re-simulate it for
         # the force at every step, in the background (the plot shows the samples meanwhile)
         stop = self._resim_stop = threading.Event()
@@ -84,9 +95,9 @@ class TimelinePanel:
         )
         self.resim_thread.start()
         if app.server is not None:
-            app.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
+            self.viewport.show_obstacles(SceneGeometry.from_scene(scene, pieces=rec.pieces), scene)
             if scene.name != app.session.scene.name:
-                app.viewport.frame()  # another scene: frame its workspace
+                self.viewport.frame()  # another scene: frame its workspace
             self.live_btn.visible = True
             self.update(force=True)
             app.scrub(tl.start)
@@ -102,8 +113,8 @@ class TimelinePanel:
             return
         tl.forces, tl.forces_note = trace, "re-simulated"
         app = self.app
-        if app._view is tl and app.server is not None:
-            app.force_panel.show_at(tl, float(self.slider.value))
+        if app.view.timeline is tl and app.server is not None:
+            self.forces.show_at(tl, float(self.slider.value))
 
     def cancel_resim(self) -> None:
         """Stop a re-simulation of a recording's forces in progress (another view, or the server stops)."""
@@ -116,26 +127,26 @@ class TimelinePanel:
     def scrub(self, t: float) -> Snapshot | None:
         app = self.app
         with app.lock:
-            if app._view is None:
-                app._view = app.session.timeline
-                app._view_scene = None
-            tl = app._view
+            if app.view.timeline is None:
+                app.view.timeline = app.session.timeline
+                app.view.scene = None
+            tl = app.view.timeline
             snap = tl.at(t)
         if app.server is None or snap is None:
             return snap
         band = tl.band_at(t)
         srv = app.server
-        view = app.viewport
-        with app._draw_lock, srv.atomic():
+        view = self.viewport
+        with app.draw_lock, srv.atomic():
             view.draw_cable(snap.points, snap.colors, np.zeros((0, 2, 3)))
             view.faces.show(snap.faces)
             view.body.position, view.body.wxyz = tuple(snap.gripper_pos), tuple(snap.gripper_quat)
             cls = format_classes(band.classes) if band and band.classes else "-"
-            app.state_panel.show(
+            self.state.show(
                 f"**Timeline ({tl.source}) at {t:.2f} s**\n\n**Discrete:** `{snap.text}`\n\n"
                 f"**Transition into it:** `{cls}`"
             )
-            app.force_panel.show_at(tl, t)
+            self.forces.show_at(tl, t)
         srv.flush()
         self.live_btn.visible = True
         v = min(max(round(float(t), 2), float(self.slider.min)), float(self.slider.max))
@@ -147,24 +158,22 @@ class TimelinePanel:
         app = self.app
         self.cancel_resim()
         with app.lock:
-            was_other = app._view_scene is not None
-            scene_name = app._view_scene.name if was_other else ""
-            app._view = None
-            app._view_scene = None
+            viewed = app.view.scene
+            app.view.clear()
         if app.server is not None:
-            with app._draw_lock:
-                app.viewport.faces.pin(None)
-            if was_other:
-                app.viewport.show_obstacles(app.session.geometry, app.session.scene)
-                if scene_name != app.session.scene.name:
-                    app.viewport.frame()
+            with app.draw_lock:
+                self.viewport.faces.pin(None)
+            if viewed is not None:
+                self.viewport.show_obstacles(app.session.geometry, app.session.scene)
+                if viewed.name != app.session.scene.name:
+                    self.viewport.frame()
             self.live_btn.visible = False
 
     def picked(self, value: str) -> None:
         """A situation of the timeline hovered (``h<i>``: highlight its faces), left (``""``) or
         clicked (``c<i>:<ms>``: show the middle of it, as the slider would)."""
         app = self.app
-        tl = app._view or app.session.timeline
+        tl = app.view.timeline or app.session.timeline
         kind = value.partition(":")[0]
         try:
             i = int(kind[1:]) if kind[:1] in ("h", "c") else -1
@@ -175,8 +184,8 @@ class TimelinePanel:
             return
         if band is not None and kind == f"c{i}":
             app.scrub((band.start + band.end) / 2.0)
-        with app._draw_lock, app.server.atomic():
-            app.viewport.faces.pin(band.faces if band is not None else None)
+        with app.draw_lock, app.server.atomic():
+            self.viewport.faces.pin(band.faces if band is not None else None)
         app.server.flush()
 
     def recording_files(self) -> list[str]:
@@ -187,7 +196,7 @@ class TimelinePanel:
     def update(self, force: bool = False) -> None:
         """Redraw the bands and the slider's range when the viewed timeline changed (or ``force``)."""
         app = self.app
-        tl = app._view or app.session.timeline
+        tl = app.view.timeline or app.session.timeline
         key = (id(tl), len(tl.bands), round(tl.end))
         if not force and key == self._key:
             return
@@ -196,7 +205,7 @@ class TimelinePanel:
         lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
         self.slider.min, self.slider.max = lo, hi
         # the number box shows the slider's value: keep it inside the range (live: the present)
-        v = hi if app._view is None else min(max(float(self.slider.value), lo), hi)
+        v = hi if app.view.timeline is None else min(max(float(self.slider.value), lo), hi)
         if v != self.slider.value:
             self.slider.value = v
         files = self.recording_files()
