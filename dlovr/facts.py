@@ -21,6 +21,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from dlovr.inputs import InputError
 from dlovr.model.discrete import FaceFact, FactBook, PairFact
 from dlovr.model.topology import FACE_NAME_RE, face_object
 
@@ -31,7 +32,7 @@ _FACE_KEYS = ("normal", "internal")
 _PAIR_KEYS = ("a", "b", "concave", "opening_deg")
 
 
-class FactsError(ValueError):
+class FactsError(InputError):
     """A facts file is unusable: ``FILE: key: what is wrong`` (one line)."""
 
 

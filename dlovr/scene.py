@@ -20,6 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from dlovr.inputs import InputError
 from dlovr.model.discrete import ModelParams
 
 Vec3 = tuple[float, float, float]
@@ -37,7 +38,7 @@ MAX_OBJECTS = 64
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".off")
 
 
-class SceneError(ValueError):
+class SceneError(InputError):
     """A problem in a scene file: one line naming the file, the key or object, and the problem."""
 
 

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import InputError
 from dlovr.transforms import quat_normalize, slerp
 
 _TOP_KEYS = {"scene", "waypoints", "description"}
@@ -41,7 +42,7 @@ MAX_DURATION_S = 600.0
 _WP_KEYS = {"pos", "quat", "duration", "hold", "note"}
 
 
-class ScriptError(ValueError):
+class ScriptError(InputError):
     """A script file is invalid; the message is one line: ``file: waypoints[i].key: what is wrong``."""
 
 

@@ -130,7 +130,7 @@ def test_times_in_json_and_csv_are_rounded(touch):
 
 
 def test_one_macro_is_singular(tmp_path):
-    from dlovr.cli_common import _plural
+    from dlovr.cli.common import plural as _plural
 
     assert [_plural(n, "macro") for n in (1, 2, 0)] == ["1 macro", "2 macros", "0 macros"]
     r = cli("compile", SAMPLES / "l_block.mcap", "-o", tmp_path)

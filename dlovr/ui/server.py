@@ -86,7 +86,7 @@ class DemoServer:
 
     def __init__(
         self,
-        scene: str | Path = "table",
+        scene: str | Path | Scene = "table",
         *,
         host: str = "127.0.0.1",
         port: int | None = 8080,
@@ -100,7 +100,7 @@ class DemoServer:
         self.publish_hz = float(publish_hz)
         self.verbose = verbose
         self.lock = threading.RLock()
-        self.session = Session(load_scene(scene), self.lock)
+        self.session = Session(scene if isinstance(scene, Scene) else load_scene(scene), self.lock)
         self.server: viser.ViserServer | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -379,10 +379,12 @@ def exposure_warning(host: str, port: int) -> str | None:
     )
 
 
-def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
-    """Run the server until Ctrl-C or SIGTERM (used by ``dlovr serve``; SIGTERM exits with 143 once
-    the server stopped, a recording in progress finished and the temporary folders removed); warns on
-    stderr when ``host`` is not loopback."""
+def serve(
+    scene: str | Path | Scene, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings"
+) -> None:
+    """Run the server on ``scene`` (loaded, or a name or path) until Ctrl-C or SIGTERM (used by
+    ``dlovr serve``; SIGTERM exits with 143 once the server stopped, a recording in progress finished
+    and the temporary folders removed); warns on stderr when ``host`` is not loopback."""
     from dlovr.recording import finish_on_sigterm
 
     srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()

@@ -9,12 +9,7 @@ from typing import Any
 import click
 
 from dlovr.batch import cluster_option
-
-
-class _BadInput(click.ClickException):
-    """A problem with the user's input: one line, exit code 2."""
-
-    exit_code = 2
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError
 
 
 def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
@@ -24,10 +19,10 @@ def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float
         x = int(raw) if integer else float(raw)
     except ValueError:
         kind = "an integer" if integer else "a number"
-        raise _BadInput(f"{name}: {raw!r} is not {kind}") from None
+        raise UserError(f"{name}: {raw!r} is not {kind}") from None
     if not math.isfinite(x) or (minimum is not None and x < minimum):
         bound = f">= {minimum:g}" if minimum is not None else "finite"
-        raise _BadInput(f"{name}: must be {bound}, got {raw}")
+        raise UserError(f"{name}: must be {bound}, got {raw}")
     return x
 
 
@@ -105,8 +100,6 @@ def run_cmd(
     from dlovr.execution.programs import ProgramError, find_recording, load_program
     from dlovr.execution.run import load_track, resolve_scene
     from dlovr.execution.scoring import format_result
-    from dlovr.recording import RecordingError
-    from dlovr.scene import SceneError
 
     for name, value, allowed in (
         ("--detect", detect, ("force", "oracle")),
@@ -115,7 +108,7 @@ def run_cmd(
         ("--baseline", baseline or "replay", ("replay",)),
     ):
         if value not in allowed:
-            raise _BadInput(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+            raise UserError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
     noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
     allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
     settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
@@ -123,25 +116,25 @@ def run_cmd(
     seed = _number("--seed", seed_raw, integer=True, minimum=0)
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
     if trials is None and (varies or baseline):
-        raise _BadInput("--vary and --baseline need --trials N")
+        raise UserError("--vary and --baseline need --trials N")
     if trials is None and cluster:
-        raise _BadInput("--cluster is for --trials")
+        raise UserError("--cluster is for --trials")
     if trials is None and record:
-        raise _BadInput("--record is for --trials (a single run is recorded with -o run.mcap)")
+        raise UserError("--record is for --trials (a single run is recorded with -o run.mcap)")
     if trials is None and out and not out.endswith(".mcap"):
-        raise _BadInput(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
+        raise UserError(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if trials is not None and not out:
-        raise _BadInput("--trials needs -o DIR for its results")
+        raise UserError("--trials needs -o DIR for its results")
     from dlovr.execution.network_run import load_network_program
 
     try:
         nprog = load_network_program(program_path)
     except ProgramError as e:
-        raise _BadInput(str(e)) from None
+        raise UserError(str(e)) from None
     if nprog is not None:
         if baseline or recording or path_mode == "demo":
             why = "a network program has no single demonstration to replay or follow"
-            raise _BadInput(f"{program_path}: {why}")
+            raise UserError(f"{program_path}: {why}")
         _network(nprog, scene_ref, detect, noise, allowance, trials, seed, varies, workers, out, record,
                  cluster, as_json)  # fmt: skip
         return
@@ -149,21 +142,19 @@ def run_cmd(
         program = load_program(program_path)
         rec_path = find_recording(program, recording)
         if recording is not None and (rec_path is None or not rec_path.is_file()):
-            raise _BadInput(f"{recording}: no such recording")
+            raise UserError(f"{recording}: no such recording")
         scene = resolve_scene(program, scene_ref, rec_path)
         track = None
         if path_mode in ("auto", "demo") or baseline:
             if rec_path is None:
                 if path_mode == "demo" or baseline:
                     why = f"its demonstration {program.source!r} was not found: give --recording"
-                    raise _BadInput(f"{program_path}: {why}")
+                    raise UserError(f"{program_path}: {why}")
             else:
                 track = load_track(rec_path)
-        opts = ExecOptions(
-            detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle
-        )
-    except (ProgramError, SceneError, RecordingError, ValueError) as e:
-        raise _BadInput(str(e)) from None
+        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle)
+    except (ProgramError, ValueError) as e:  # ValueError: options the executor refuses
+        raise UserError(str(e)) from None
     use_track = path_mode != "program" and track is not None
     if trials is not None:
         _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out,
@@ -171,15 +162,13 @@ def run_cmd(
         return
     if out:
         from dlovr.execution.recorded import record_run
-        from dlovr.outputs import OutputError, output_error, prepare_output
+        from dlovr.outputs import output_error, prepare_output
 
         try:
             prepare_output(out)
             res = record_run(program, scene, out, opts, track=track if use_track else None)
-        except OutputError as e:
-            raise _BadInput(str(e)) from None
         except OSError as e:
-            raise _BadInput(str(output_error(out, e))) from None
+            raise UserError(str(output_error(out, e))) from None
     else:
         from dlovr.execution.run import run_program
 
@@ -188,7 +177,7 @@ def run_cmd(
         click.echo(json.dumps(res.to_json(), indent=1))
     else:
         click.echo(format_result(res))
-    sys.exit(0 if res.success else 1)
+    sys.exit(EXIT_OK if res.success else EXIT_FAILED)
 
 
 def _network(
@@ -202,13 +191,12 @@ def _network(
     from dlovr.execution.executor import ExecOptions
     from dlovr.execution.network_run import format_network_result, network_scene, run_network
     from dlovr.execution.programs import ProgramError, ProgramSpec
-    from dlovr.scene import SceneError
 
     try:
         scene = network_scene(nprog, scene_ref)
         opts = ExecOptions(detect=detect, noise=noise, allowance=allowance)
-    except (ProgramError, SceneError, ValueError) as e:
-        raise _BadInput(str(e)) from None
+    except (ProgramError, ValueError) as e:  # ValueError: options the executor refuses
+        raise UserError(str(e)) from None
     if trials is not None:
         holder = ProgramSpec(nprog.name or "network", nprog.source, ())
         _trials(holder, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
@@ -220,11 +208,11 @@ def _network(
         try:
             res = record_run(ProgramSpec(nprog.name, nprog.source, ()), scene, out, opts, network=nprog)
         except OSError as e:
-            raise _BadInput(f"{out}: cannot write: {e.strerror}") from None
+            raise UserError(f"{out}: cannot write: {e.strerror}") from None
     else:
         res = run_network(nprog, scene, opts)
     click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_network_result(res))
-    sys.exit(0 if res.success else 1)
+    sys.exit(EXIT_OK if res.success else EXIT_FAILED)
 
 
 def _trials(
@@ -235,15 +223,12 @@ def _trials(
     from pathlib import Path
 
     from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
-    from dlovr.execution.variation import VaryError, parse_varies
+    from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
 
-    try:
-        variations = parse_varies(varies, scene)
-    except VaryError as e:
-        raise _BadInput(str(e)) from None
+    variations = parse_varies(varies, scene)
     if Path(out).exists() and not Path(out).is_dir():
-        raise _BadInput(f"{out}: exists and is not a directory")
+        raise UserError(f"{out}: exists and is not a directory")
     pieces = scene_pieces(scene)
     record_dir = str(Path(out).resolve()) if record else None
     setup = TrialSetup(
