@@ -70,10 +70,11 @@ def rounded_time(seconds: float) -> float:
 def load_scene_arg(ref: str, script: Any = None) -> Any:
     """Load and check a scene (name or path); one that a script names is reported with the script's
     file."""
-    from dlovr.scene import SceneError, load_scene
+    from dlovr.geometry.scene_checks import load_checked_scene
+    from dlovr.scene import SceneError
 
     try:
-        return load_scene(ref)
+        return load_checked_scene(ref)
     except SceneError as e:
         raise UserError(f"{script.source}: scene: {e}" if script is not None else str(e)) from None
 

@@ -3,9 +3,12 @@ the main group by :mod:`dlovr.cli`)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
 from dlovr.cli.common import UserError, finishes_on_sigterm, load_scene_arg
+from dlovr.scene import Scene
 
 
 @click.command("scenes", short_help="List the built-in scenes.")
@@ -31,8 +34,6 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
     """Print a scene: cable, gripper, objects, convex pieces, named faces and the edge table."""
     import json
 
-    from dlovr.scene import describe_scene, format_scene
-
     desc = describe_scene(load_scene_arg(ref))
     click.echo(json.dumps(desc, indent=2, ensure_ascii=False) if as_json else format_scene(desc))
 
@@ -56,3 +57,68 @@ def scene_export_cmd(ref: str, out: str) -> None:
     with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
         export_xml(sim.built, tmp)
     click.echo(f"wrote {out}")
+
+
+def describe_scene(scene: Scene) -> dict:
+    """JSON-able description of a scene and its geometry (objects, pieces, faces, edge table)."""
+    from dataclasses import asdict
+
+    from dlovr.geometry import SceneGeometry
+
+    g = SceneGeometry.from_scene(scene).describe()["objects"]
+    objs = []
+    for o, go in zip(scene.objects, g, strict=True):
+        d = {
+            "name": o.name,
+            "kind": o.kind,
+            "pos": list(o.pos),
+            "quat": list(o.quat),
+            "size": list(o.size) if o.size is not None else None,
+            "mesh": str(o.mesh_path) if o.mesh_path is not None else None,
+        }
+        d.update({k: v for k, v in go.items() if k != "name"})
+        objs.append(d)
+    return {
+        "name": scene.name,
+        "description": scene.description,
+        "path": str(scene.path),
+        "dlo": asdict(scene.dlo),
+        "gripper": {"pos": list(scene.gripper.pos), "quat": list(scene.gripper.quat)},
+        "model": asdict(scene.params),
+        "objects": objs,
+    }
+
+
+def format_scene(desc: dict) -> str:
+    """Human-readable text of :func:`describe_scene`'s output."""
+
+    def v(x: Any) -> str:
+        return "[" + ", ".join(f"{float(c):.4g}" for c in x) + "]"
+
+    d = desc["dlo"]
+    lines = [
+        f"scene {desc['name']}: {desc['description']}",
+        f"  file: {desc['path']}",
+        f"  cable: length {d['length']:g} m, radius {d['radius']:g} m, {d['segments']} segments, "
+        f"E {d['young']:g} Pa, mass {d['mass']:g} kg",
+        f"  gripper: pos {v(desc['gripper']['pos'])}, quat {v(desc['gripper']['quat'])}",
+        "  model: " + ", ".join(f"{k} {val:g}" for k, val in desc["model"].items()),
+    ]
+    for o in desc["objects"]:
+        what = f"box {v(o['size'])}" if o["kind"] == "box" else f"mesh {o['mesh']}"
+        kinds = sorted({p["kind"] for p in o["pieces"]})
+        lines.append(
+            f"object {o['name']}: {what} at {v(o['pos'])}, "
+            f"{len(o['pieces'])} piece(s) ({', '.join(kinds)}), {len(o['faces'])} faces"
+        )
+        for f in o["faces"]:
+            lines.append(f"  face {f['name']:<16} normal {v(f['normal'])}  area {f['area']:.4g} m^2")
+        for p in o["pieces"]:
+            fl = ", ".join(f"{x['face'] or '-'}:{x['kind']}" for x in p["faces"])
+            lines.append(f"  piece {p['index']} ({p['kind']}, volume {p['volume']:.4g} m^3): {fl}")
+        for e in o["edges"]:
+            lines.append(
+                f"  edge {e['faces'][0]} / {e['faces'][1]}: {e['kind']}, opening {e['opening_deg']:.4g} deg, "
+                f"length {e['length']:.4g} m"
+            )
+    return "\n".join(lines)

@@ -486,9 +486,9 @@ def network_scene(nprog: Any, scene_ref: str | None) -> Any:
     :class:`dlovr.execution.programs.ProgramError` when the scene lacks an object the network's
     contacts name, or ``dlovr.scene.SceneError``."""
     from dlovr.execution.programs import ProgramError
-    from dlovr.scene import load_scene
+    from dlovr.geometry.scene_checks import load_checked_scene
 
-    scene = load_scene(scene_ref or nprog.network.scene_name)
+    scene = load_checked_scene(scene_ref or nprog.network.scene_name)
     names = {o.name for o in scene.objects}
     used = {
         f.rpartition(".")[0]

@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 import viser
 
-from dlovr.scene import Scene, load_scene
+from dlovr.geometry.scene_checks import load_checked_scene
+from dlovr.scene import Scene
 from dlovr.transforms import quat_mul
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
 from dlovr.ui.loop import realtime_loop
@@ -100,7 +101,7 @@ class DemoServer:
         self.publish_hz = float(publish_hz)
         self.verbose = verbose
         self.lock = threading.RLock()
-        self.session = Session(scene if isinstance(scene, Scene) else load_scene(scene), self.lock)
+        self.session = Session(scene if isinstance(scene, Scene) else load_checked_scene(scene), self.lock)
         self.server: viser.ViserServer | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -223,7 +224,7 @@ class DemoServer:
 
     def load(self, scene: str | Path) -> None:
         """Switch to another scene (built-in name or path); finishes a recording in progress."""
-        new = Session(load_scene(scene), self.lock)
+        new = Session(load_checked_scene(scene), self.lock)
         with self.lock:
             self.recording_panel.finish()
             self.session = new
