@@ -3,6 +3,8 @@ on the main group by :mod:`dlovr.cli`)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
 from dlovr.batch import cluster_option
@@ -85,6 +87,12 @@ def compile_cmd(
     )
     results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
     record_compiled(results, output_dir)
+    if _report(results, summarize(done).retried):
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def _report(results: list[Any], retried: int) -> int:
+    """Print each recording's result and the counts; return how many failed."""
     failed = [r for r in results if r.error]
     for r in results:
         if r.error:
@@ -97,7 +105,5 @@ def compile_cmd(
     skipped = sum(1 for r in results if r.skipped and not r.error)
     compiled = len(results) - len(failed) - skipped
     counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
-    retried = summarize(done).retried
     click.echo(", ".join([*counts, f"{len(failed)} failed", f"{retried} retried"]))
-    if failed:
-        raise SystemExit(EXIT_BAD_INPUT)
+    return len(failed)

@@ -94,39 +94,18 @@ def run_cmd(
     `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
     writes each trial's run as DIR/trial_KKK.mcap.
     """
-    import json
-
     from dlovr.execution.executor import ExecOptions
-    from dlovr.execution.programs import ProgramError, find_recording, load_program
-    from dlovr.execution.run import load_track, resolve_scene
-    from dlovr.execution.scoring import format_result
+    from dlovr.execution.network_run import load_network_program
+    from dlovr.execution.programs import ProgramError
 
-    for name, value, allowed in (
-        ("--detect", detect, ("force", "oracle")),
-        ("--path", path_mode, ("auto", "demo", "program")),
-        ("--frame", frame, ("world", "relative")),
-        ("--baseline", baseline or "replay", ("replay",)),
-    ):
-        if value not in allowed:
-            raise UserError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+    _check_choices(detect, path_mode, frame, baseline)
     noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
     allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
     settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
     trials = _number("--trials", trials_raw, integer=True, minimum=1)
     seed = _number("--seed", seed_raw, integer=True, minimum=0)
     workers = _number("--workers", workers_raw, integer=True, minimum=1)
-    if trials is None and (varies or baseline):
-        raise UserError("--vary and --baseline need --trials N")
-    if trials is None and cluster:
-        raise UserError("--cluster is for --trials")
-    if trials is None and record:
-        raise UserError("--record is for --trials (a single run is recorded with -o run.mcap)")
-    if trials is None and out and not out.endswith(".mcap"):
-        raise UserError(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
-    if trials is not None and not out:
-        raise UserError("--trials needs -o DIR for its results")
-    from dlovr.execution.network_run import load_network_program
-
+    _check_combinations(trials, out, bool(varies or baseline), cluster, record)
     try:
         nprog = load_network_program(program_path)
     except ProgramError as e:
@@ -138,6 +117,55 @@ def run_cmd(
         _network(nprog, scene_ref, detect, noise, allowance, trials, seed, varies, workers, out, record,
                  cluster, as_json)  # fmt: skip
         return
+    program, scene, track = _program_scene_track(program_path, scene_ref, recording, path_mode, baseline)
+    try:
+        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle)
+    except ValueError as e:  # options the executor refuses
+        raise UserError(str(e)) from None
+    use_track = path_mode != "program" and track is not None
+    if trials is not None:
+        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers,
+                out or "", record, cluster)  # fmt: skip
+        return
+    _single(program, scene, opts, track if use_track else None, out, as_json)
+
+
+def _check_choices(detect: str, path_mode: str, frame: str, baseline: str | None) -> None:
+    """The options that take one of a few words."""
+    for name, value, allowed in (
+        ("--detect", detect, ("force", "oracle")),
+        ("--path", path_mode, ("auto", "demo", "program")),
+        ("--frame", frame, ("world", "relative")),
+        ("--baseline", baseline or "replay", ("replay",)),
+    ):
+        if value not in allowed:
+            raise UserError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+
+
+def _check_combinations(
+    trials: int | None, out: str | None, vary_or_baseline: bool, cluster: str | None, record: bool
+) -> None:
+    """Options that need --trials, and the output each mode writes."""
+    if trials is None and vary_or_baseline:
+        raise UserError("--vary and --baseline need --trials N")
+    if trials is None and cluster:
+        raise UserError("--cluster is for --trials")
+    if trials is None and record:
+        raise UserError("--record is for --trials (a single run is recorded with -o run.mcap)")
+    if trials is None and out and not out.endswith(".mcap"):
+        raise UserError(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
+    if trials is not None and not out:
+        raise UserError("--trials needs -o DIR for its results")
+
+
+def _program_scene_track(
+    program_path: str, scene_ref: str | None, recording: str | None, path_mode: str, baseline: str | None
+) -> tuple[Any, Any, Any]:
+    """The program, the scene it runs in and its demonstration's track (None when not needed or not
+    found and not required)."""
+    from dlovr.execution.programs import ProgramError, find_recording, load_program
+    from dlovr.execution.run import load_track, resolve_scene
+
     try:
         program = load_program(program_path)
         rec_path = find_recording(program, recording)
@@ -152,27 +180,30 @@ def run_cmd(
                     raise UserError(f"{program_path}: {why}")
             else:
                 track = load_track(rec_path)
-        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle)
-    except (ProgramError, ValueError) as e:  # ValueError: options the executor refuses
+    except (ProgramError, ValueError) as e:
         raise UserError(str(e)) from None
-    use_track = path_mode != "program" and track is not None
-    if trials is not None:
-        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers, out,
-                record, cluster)  # fmt: skip
-        return
+    return program, scene, track
+
+
+def _single(program: Any, scene: Any, opts: Any, track: Any, out: str | None, as_json: bool) -> None:
+    """One run of ``program`` (recorded to ``out`` when given); exit 0 when it reached the goal."""
+    import json
+
+    from dlovr.execution.scoring import format_result
+
     if out:
         from dlovr.execution.recorded import record_run
         from dlovr.outputs import output_error, prepare_output
 
         try:
             prepare_output(out)
-            res = record_run(program, scene, out, opts, track=track if use_track else None)
+            res = record_run(program, scene, out, opts, track=track)
         except OSError as e:
             raise UserError(str(output_error(out, e))) from None
     else:
         from dlovr.execution.run import run_program
 
-        res = run_program(program, scene, opts, track=track if use_track else None)
+        res = run_program(program, scene, opts, track=track)
     if as_json:
         click.echo(json.dumps(res.to_json(), indent=1))
     else:

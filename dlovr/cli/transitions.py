@@ -3,6 +3,8 @@ by :mod:`dlovr.cli`)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
 from dlovr.cli.common import UserError
@@ -30,19 +32,11 @@ def transitions_cmd(
     debounced as a simulation's is (flicker within --hold, brief intermediate states, flights within
     --flight) before it is classified; each row shows when its kept situation began.
     """
-    import json
-
     from dlovr.facts import load_facts
-    from dlovr.model.sequence import SequenceError, debounce_sequence, parse_sequence
-    from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S, classify_sequence, format_classes
+    from dlovr.inputs import read_text
+    from dlovr.model.sequence import SequenceError, parse_sequence
 
-    try:
-        with open(file, encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    except OSError as e:
-        raise UserError(f"{file}: cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise UserError(f"{file}: not a UTF-8 text file") from None
+    lines = read_text(file, what="sequence file").splitlines()
     book, vectors = load_facts(facts) if facts else (None, None)
     try:
         rows = parse_sequence(lines, book, vectors)  # type: ignore[arg-type]
@@ -51,25 +45,44 @@ def transitions_cmd(
     if rows[0].t is None:
         if hold is not None or flight is not None:
             raise UserError(f"{file}: --hold and --flight debounce timed input; no line starts with a time")
-        steps = classify_sequence([r.discrete for r in rows])
-        if as_json:
-            out = [
-                {
-                    "step": s.index + 1,
-                    "line": r.line,
-                    "topological": r.topological.format() if r.topological is not None else None,
-                    "discrete": s.situation.format(),
-                    "classes": list(s.classes),
-                    "label": s.label,
-                }
-                for s, r in zip(steps, rows, strict=True)
-            ]
-            click.echo(json.dumps(out, indent=2, ensure_ascii=False))
-            return
-        click.echo(f"{'step':>4}  {'class':<5}  situation")
-        for s in steps:
-            click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
+        _untimed(rows, as_json, unicode)
+    else:
+        _timed(rows, hold, flight, as_json, unicode)
+
+
+def _untimed(rows: list[Any], as_json: bool, unicode: bool) -> None:
+    """Print the classes of an untimed sequence, one row per line."""
+    import json
+
+    from dlovr.model.transitions import classify_sequence
+
+    steps = classify_sequence([r.discrete for r in rows])
+    if as_json:
+        out = [
+            {
+                "step": s.index + 1,
+                "line": r.line,
+                "topological": r.topological.format() if r.topological is not None else None,
+                "discrete": s.situation.format(),
+                "classes": list(s.classes),
+                "label": s.label,
+            }
+            for s, r in zip(steps, rows, strict=True)
+        ]
+        click.echo(json.dumps(out, indent=2, ensure_ascii=False))
         return
+    click.echo(f"{'step':>4}  {'class':<5}  situation")
+    for s in steps:
+        click.echo(f"{s.index + 1:>4}  {s.label:<5}  {s.situation.format(unicode)}")
+
+
+def _timed(rows: list[Any], hold: float | None, flight: float | None, as_json: bool, unicode: bool) -> None:
+    """Debounce a timed sequence (hold and flight times in s) and print its kept situations' classes."""
+    import json
+
+    from dlovr.model.sequence import debounce_sequence
+    from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S, format_classes
+
     kept = debounce_sequence(
         rows, DEFAULT_HOLD_S if hold is None else hold, DEFAULT_FLIGHT_S if flight is None else flight
     )
