@@ -28,9 +28,19 @@ def main() -> None:
 
 
 for _command in (
-    transitions_cmd, scenes_cmd, scene_group, compile_cmd, serve_cmd,
-    demo_cmd, record_cmd, replay_cmd, states_cmd, recover_cmd, network_cmd, run_cmd,
-):  # fmt: skip
+    transitions_cmd,
+    scenes_cmd,
+    scene_group,
+    compile_cmd,
+    serve_cmd,
+    demo_cmd,
+    record_cmd,
+    replay_cmd,
+    states_cmd,
+    recover_cmd,
+    network_cmd,
+    run_cmd,
+):
     main.add_command(_command)
 
 __all__ = ["main"]

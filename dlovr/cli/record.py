@@ -157,9 +157,13 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
 )
 @click.option(
-    "-o", "--output", "out", required=True, type=click.Path(),
+    "-o",
+    "--output",
+    "out",
+    required=True,
+    type=click.Path(),
     help="Output MCAP file (with --trials: a directory).",
-)  # fmt: skip
+)
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @click.option("--trials", type=click.IntRange(min=1), help="Record N demonstrations in perturbed scenes.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the trials.")
@@ -168,9 +172,16 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @cluster_option
 @finishes_on_sigterm
 def record_cmd(
-    scene_ref: str | None, script_path: str, out: str, force: bool, trials: int | None, seed: int,
-    varies: tuple[str, ...], workers: int, cluster: str | None,
-) -> None:  # fmt: skip
+    scene_ref: str | None,
+    script_path: str,
+    out: str,
+    force: bool,
+    trials: int | None,
+    seed: int,
+    varies: tuple[str, ...],
+    workers: int,
+    cluster: str | None,
+) -> None:
     """Record a scripted demonstration headless to an MCAP file.
 
     An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
@@ -197,9 +208,16 @@ def record_cmd(
 
 
 def _record_trials(
-    scene_ref: str | None, script_path: str, out: str, force: bool, n: int, seed: int,
-    varies: tuple[str, ...], workers: int, cluster: str | None,
-) -> None:  # fmt: skip
+    scene_ref: str | None,
+    script_path: str,
+    out: str,
+    force: bool,
+    n: int,
+    seed: int,
+    varies: tuple[str, ...],
+    workers: int,
+    cluster: str | None,
+) -> None:
     from pathlib import Path
 
     from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
@@ -214,8 +232,15 @@ def _record_trials(
     variations = parse_varies(varies, scene)
     if os.path.exists(out) and not os.path.isdir(out):
         raise UserError(f"{out}: exists and is not a directory")
-    setup = DemoSetup(scene, scene_pieces(scene), script, variations, seed, str(Path(out).resolve()),
-                      SceneBundle.from_path(scene.path).digest)  # fmt: skip
+    setup = DemoSetup(
+        scene,
+        scene_pieces(scene),
+        script,
+        variations,
+        seed,
+        str(Path(out).resolve()),
+        SceneBundle.from_path(scene.path).digest,
+    )
     existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
     if existing and not force:
         raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")

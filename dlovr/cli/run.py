@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import dataclass
 from typing import Any
 
 import click
@@ -40,18 +41,29 @@ _VARY_HELP = (
 @click.argument("program_path", metavar="PROGRAM.json")
 @click.option("--scene", "scene_ref", metavar="NAME|PATH", help="Scene (default: the program's).")
 @click.option(
-    "--detect", metavar="force|oracle", default="force", show_default=True,
+    "--detect",
+    metavar="force|oracle",
+    default="force",
+    show_default=True,
     help="End macros by force detection, or by the contact tracker (oracle).",
-)  # fmt: skip
+)
 @click.option("--noise", "noise_raw", metavar="N", help="Force sensor noise, std. dev. in N (default 0).")
 @click.option(
-    "--path", "path_mode", metavar="auto|demo|program", default="auto", show_default=True, help=_PATH_HELP,
-)  # fmt: skip
+    "--path",
+    "path_mode",
+    metavar="auto|demo|program",
+    default="auto",
+    show_default=True,
+    help=_PATH_HELP,
+)
 @click.option("--recording", metavar="FILE", help="The demonstration (default: the program's source).")
 @click.option(
-    "--frame", metavar="world|relative", default="world", show_default=True,
+    "--frame",
+    metavar="world|relative",
+    default="world",
+    show_default=True,
     help="Frame the demonstrated motion is repeated in.",
-)  # fmt: skip
+)
 @click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
 @click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
 @click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
@@ -60,19 +72,16 @@ _VARY_HELP = (
 @click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
 @click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
 @click.option(
-    "-o", "--output", "out", metavar="DIR|FILE",
+    "-o",
+    "--output",
+    "out",
+    metavar="DIR|FILE",
     help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
-)  # fmt: skip
+)
 @click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
 @cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
-def run_cmd(
-    program_path: str, scene_ref: str | None, detect: str, noise_raw: str | None, path_mode: str,
-    recording: str | None, frame: str, settle_raw: str | None, allowance_raw: str | None,
-    trials_raw: str | None, seed_raw: str,
-    varies: tuple[str, ...], baseline: str | None, workers_raw: str, out: str | None, record: bool,
-    cluster: str | None, as_json: bool,
-) -> None:  # fmt: skip
+def run_cmd(**given: Any) -> None:
     """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
     its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
 
@@ -94,90 +103,156 @@ def run_cmd(
     `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
     writes each trial's run as DIR/trial_KKK.mcap.
     """
-    from dlovr.execution.executor import ExecOptions
-    from dlovr.execution.network_run import load_network_program
-    from dlovr.execution.programs import ProgramError
-
-    _check_choices(detect, path_mode, frame, baseline)
-    noise = _number("--noise", noise_raw, minimum=0.0) or 0.0
-    allowance = _number("--allowance", allowance_raw, minimum=1.0) or 1.5
-    settle = _number("--settle", settle_raw, minimum=0.0) or 0.0
-    trials = _number("--trials", trials_raw, integer=True, minimum=1)
-    seed = _number("--seed", seed_raw, integer=True, minimum=0)
-    workers = _number("--workers", workers_raw, integer=True, minimum=1)
-    _check_combinations(trials, out, bool(varies or baseline), cluster, record)
-    try:
-        nprog = load_network_program(program_path)
-    except ProgramError as e:
-        raise UserError(str(e)) from None
+    a = RunArgs(**given)
+    _check_choices(a)
+    n = _numbers(a)
+    _check_combinations(a, n)
+    nprog = _network_program(a.program_path)
     if nprog is not None:
-        if baseline or recording or path_mode == "demo":
+        if a.baseline or a.recording or a.path_mode == "demo":
             why = "a network program has no single demonstration to replay or follow"
-            raise UserError(f"{program_path}: {why}")
-        _network(nprog, scene_ref, detect, noise, allowance, trials, seed, varies, workers, out, record,
-                 cluster, as_json)  # fmt: skip
+            raise UserError(f"{a.program_path}: {why}")
+        _network(nprog, a, n)
         return
-    program, scene, track = _program_scene_track(program_path, scene_ref, recording, path_mode, baseline)
-    try:
-        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance, frame=frame, start_settle=settle)
-    except ValueError as e:  # options the executor refuses
-        raise UserError(str(e)) from None
-    use_track = path_mode != "program" and track is not None
-    if trials is not None:
-        _trials(program, scene, track, use_track, opts, trials, seed, varies, bool(baseline), workers,
-                out or "", record, cluster)  # fmt: skip
+    program, scene, track = _program_scene_track(a)
+    opts = _exec_options(a, n)
+    use_track = a.path_mode != "program" and track is not None
+    if n.trials is not None:
+        _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline)), a, n)
         return
-    _single(program, scene, opts, track if use_track else None, out, as_json)
+    _single(program, scene, opts, track if use_track else None, a.out, a.as_json)
 
 
-def _check_choices(detect: str, path_mode: str, frame: str, baseline: str | None) -> None:
+@dataclass(frozen=True)
+class RunArgs:
+    """The options of ``dlovr run`` as given (numbers still text: :func:`_numbers` checks them)."""
+
+    program_path: str
+    scene_ref: str | None
+    detect: str
+    noise_raw: str | None
+    path_mode: str
+    recording: str | None
+    frame: str
+    settle_raw: str | None
+    allowance_raw: str | None
+    trials_raw: str | None
+    seed_raw: str
+    varies: tuple[str, ...]
+    baseline: str | None
+    workers_raw: str
+    out: str | None
+    record: bool
+    cluster: str | None
+    as_json: bool
+
+
+@dataclass(frozen=True)
+class Numbers:
+    """The numeric options, checked: noise (N), allowance (x demonstrated), settle (s), trials,
+    seed, workers."""
+
+    noise: float
+    allowance: float
+    settle: float
+    trials: int | None
+    seed: int
+    workers: int
+
+
+@dataclass(frozen=True)
+class TrialsArgs:
+    """What the trials of a program run: the program, its scene, the demonstration's track (or
+    None), whether macros follow it, the executor's options, whether the open-loop replay runs too."""
+
+    program: Any
+    scene: Any
+    track: Any
+    use_track: bool
+    opts: Any
+    baseline: bool
+    network: Any = None
+
+
+def _numbers(a: RunArgs) -> Numbers:
+    """The numeric options, each checked (one line naming the option when bad)."""
+    return Numbers(
+        noise=_number("--noise", a.noise_raw, minimum=0.0) or 0.0,
+        allowance=_number("--allowance", a.allowance_raw, minimum=1.0) or 1.5,
+        settle=_number("--settle", a.settle_raw, minimum=0.0) or 0.0,
+        trials=_number("--trials", a.trials_raw, integer=True, minimum=1),
+        seed=_number("--seed", a.seed_raw, integer=True, minimum=0),
+        workers=_number("--workers", a.workers_raw, integer=True, minimum=1),
+    )
+
+
+def _check_choices(a: RunArgs) -> None:
     """The options that take one of a few words."""
     for name, value, allowed in (
-        ("--detect", detect, ("force", "oracle")),
-        ("--path", path_mode, ("auto", "demo", "program")),
-        ("--frame", frame, ("world", "relative")),
-        ("--baseline", baseline or "replay", ("replay",)),
+        ("--detect", a.detect, ("force", "oracle")),
+        ("--path", a.path_mode, ("auto", "demo", "program")),
+        ("--frame", a.frame, ("world", "relative")),
+        ("--baseline", a.baseline or "replay", ("replay",)),
     ):
         if value not in allowed:
             raise UserError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
 
 
-def _check_combinations(
-    trials: int | None, out: str | None, vary_or_baseline: bool, cluster: str | None, record: bool
-) -> None:
+def _check_combinations(a: RunArgs, n: Numbers) -> None:
     """Options that need --trials, and the output each mode writes."""
-    if trials is None and vary_or_baseline:
+    if n.trials is None and (a.varies or a.baseline):
         raise UserError("--vary and --baseline need --trials N")
-    if trials is None and cluster:
+    if n.trials is None and a.cluster:
         raise UserError("--cluster is for --trials")
-    if trials is None and record:
+    if n.trials is None and a.record:
         raise UserError("--record is for --trials (a single run is recorded with -o run.mcap)")
-    if trials is None and out and not out.endswith(".mcap"):
-        raise UserError(f"-o {out}: a single run is recorded to an .mcap file (a directory needs --trials)")
-    if trials is not None and not out:
+    if n.trials is None and a.out and not a.out.endswith(".mcap"):
+        raise UserError(f"-o {a.out}: a single run is recorded to an .mcap file (a directory needs --trials)")
+    if n.trials is not None and not a.out:
         raise UserError("--trials needs -o DIR for its results")
 
 
-def _program_scene_track(
-    program_path: str, scene_ref: str | None, recording: str | None, path_mode: str, baseline: str | None
-) -> tuple[Any, Any, Any]:
-    """The program, the scene it runs in and its demonstration's track (None when not needed or not
-    found and not required)."""
+def _network_program(path: str) -> Any:
+    """The network program in ``path``, or None when it holds a plain program."""
+    from dlovr.execution.network_run import load_network_program
+    from dlovr.execution.programs import ProgramError
+
+    try:
+        return load_network_program(path)
+    except ProgramError as e:
+        raise UserError(str(e)) from None
+
+
+def _exec_options(a: RunArgs, n: Numbers) -> Any:
+    """The executor's options of a program run."""
+    from dlovr.execution.executor import ExecOptions
+
+    try:
+        return ExecOptions(
+            detect=a.detect, noise=n.noise, allowance=n.allowance, frame=a.frame, start_settle=n.settle
+        )
+    except ValueError as e:  # options the executor refuses
+        raise UserError(str(e)) from None
+
+
+def _program_scene_track(a: RunArgs) -> tuple[Any, Any, Any]:
+    """The program, the scene it runs in and its demonstration's track (None when not needed, or
+    not found and not required)."""
     from dlovr.execution.programs import ProgramError, find_recording, load_program
     from dlovr.execution.run import load_track, resolve_scene
 
     try:
-        program = load_program(program_path)
-        rec_path = find_recording(program, recording)
-        if recording is not None and (rec_path is None or not rec_path.is_file()):
-            raise UserError(f"{recording}: no such recording")
-        scene = resolve_scene(program, scene_ref, rec_path)
+        program = load_program(a.program_path)
+        rec_path = find_recording(program, a.recording)
+        if a.recording is not None and (rec_path is None or not rec_path.is_file()):
+            raise UserError(f"{a.recording}: no such recording")
+        scene = resolve_scene(program, a.scene_ref, rec_path)
         track = None
-        if path_mode in ("auto", "demo") or baseline:
+        if a.path_mode in ("auto", "demo") or a.baseline:
             if rec_path is None:
-                if path_mode == "demo" or baseline:
+                if a.path_mode == "demo" or a.baseline:
                     why = f"its demonstration {program.source!r} was not found: give --recording"
-                    raise UserError(f"{program_path}: {why}")
+                    raise UserError(f"{a.program_path}: {why}")
             else:
                 track = load_track(rec_path)
     except (ProgramError, ValueError) as e:
@@ -211,11 +286,7 @@ def _single(program: Any, scene: Any, opts: Any, track: Any, out: str | None, as
     sys.exit(EXIT_OK if res.success else EXIT_FAILED)
 
 
-def _network(
-    nprog: Any, scene_ref: str | None, detect: str, noise: float, allowance: float, trials: int | None,
-    seed: int, varies: tuple[str, ...], workers: int, out: str | None, record: bool, cluster: str | None,
-    as_json: bool,
-) -> None:  # fmt: skip
+def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
     """``dlovr run NETWORK-PROGRAM.json``: one run (optionally recorded), or trials."""
     import json
 
@@ -224,15 +295,15 @@ def _network(
     from dlovr.execution.programs import ProgramError, ProgramSpec
 
     try:
-        scene = network_scene(nprog, scene_ref)
-        opts = ExecOptions(detect=detect, noise=noise, allowance=allowance)
+        scene = network_scene(nprog, a.scene_ref)
+        opts = ExecOptions(detect=a.detect, noise=n.noise, allowance=n.allowance)
     except (ProgramError, ValueError) as e:  # ValueError: options the executor refuses
         raise UserError(str(e)) from None
-    if trials is not None:
+    if n.trials is not None:
         holder = ProgramSpec(nprog.name or "network", nprog.source, ())
-        _trials(holder, scene, None, False, opts, trials, seed, varies, False, workers, out or "", record,
-                cluster, nprog)  # fmt: skip
+        _trials(TrialsArgs(holder, scene, None, False, opts, False, nprog), a, n)
         return
+    out = a.out
     if out:
         from dlovr.execution.recorded import record_run
 
@@ -242,34 +313,47 @@ def _network(
             raise UserError(f"{out}: cannot write: {e.strerror}") from None
     else:
         res = run_network(nprog, scene, opts)
-    click.echo(json.dumps(res.to_json(), indent=1) if as_json else format_network_result(res))
+    click.echo(json.dumps(res.to_json(), indent=1) if a.as_json else format_network_result(res))
     sys.exit(EXIT_OK if res.success else EXIT_FAILED)
 
 
-def _trials(
-    program: Any, scene: Any, track: Any, use_track: bool, opts: Any, n: int, seed: int,
-    varies: tuple[str, ...], baseline: bool, workers: int, out: str, record: bool = False,
-    cluster: str | None = None, network: Any = None,
-) -> None:  # fmt: skip
+def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
+    """``--trials N -o DIR``: the trials run, their results written, a summary printed."""
     from pathlib import Path
 
     from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
 
-    variations = parse_varies(varies, scene)
+    out, trials = a.out or "", n.trials or 0  # both given (see _check_combinations)
+    variations = parse_varies(a.varies, t.scene)
     if Path(out).exists() and not Path(out).is_dir():
         raise UserError(f"{out}: exists and is not a directory")
-    pieces = scene_pieces(scene)
-    record_dir = str(Path(out).resolve()) if record else None
+    pieces = scene_pieces(t.scene)
+    record_dir = str(Path(out).resolve()) if a.record else None
     setup = TrialSetup(
-        program, scene, pieces, track, variations, seed, opts, baseline, use_track, record_dir, network
+        program=t.program,
+        scene=t.scene,
+        pieces=pieces,
+        track=t.track,
+        variations=variations,
+        seed=n.seed,
+        opts=t.opts,
+        baseline=t.baseline,
+        use_track=t.use_track,
+        record_dir=record_dir,
+        network=t.network,
     )
-    results = run_trials(setup, n, workers=workers, cluster=cluster, progress=True)
+    results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
     summary = summarize(results, setup)
     write_outputs(out, results, summary)
+    _print_summary(summary, trials, out)
+
+
+def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
+    """The trials' summary in a few lines."""
     rate = summary["program_success_rate"]
-    line = f"program reached the goal in {rate:.0%} of {n} trials"
+    line = f"program reached the goal in {rate:.0%} of {trials} trials"
     if summary["openloop_success_rate"] is not None:
         line += f", open-loop replay in {summary['openloop_success_rate']:.0%}"
     lat = summary["median_latency_s"]

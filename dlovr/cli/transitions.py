@@ -39,7 +39,7 @@ def transitions_cmd(
     lines = read_text(file, what="sequence file").splitlines()
     book, vectors = load_facts(facts) if facts else (None, None)
     try:
-        rows = parse_sequence(lines, book, vectors)  # type: ignore[arg-type]
+        rows = parse_sequence(lines, book, vectors)
     except SequenceError as e:
         raise UserError(f"{file}:{e.line}: {e}" if e.line else f"{file}: {e}") from None
     if rows[0].t is None:
