@@ -73,10 +73,12 @@ def load_scene_arg(ref: str, script: Any = None) -> Any:
     from dlovr.geometry.scene_checks import load_checked_scene
     from dlovr.scene import SceneError
 
+    if script is None:
+        return load_checked_scene(ref)
     try:
         return load_checked_scene(ref)
     except SceneError as e:
-        raise UserError(f"{script.source}: scene: {e}" if script is not None else str(e)) from None
+        raise UserError(f"{script.source}: scene: {e}") from None
 
 
 def script_scene(script: Any, scene_ref: str | None = None) -> Any:
