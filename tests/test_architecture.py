@@ -212,3 +212,37 @@ def test_rotation_helpers_live_in_transforms_only():
             if isinstance(node, ast.FunctionDef) and any(w in node.name.lower() for w in words):
                 elsewhere.append(f"{name}.{node.name}")
     assert not elsewhere, f"rotation helpers outside dlovr.transforms: {elsewhere}"
+
+
+#: Every top-level module's layer. ``base``: standard library, numpy or numba, and no dlovr module
+#: but another base one (any layer may import them); ``inputs``: the readers of the user's files
+#: (scene, script, facts) on ``dlovr.inputs``, above ``model/`` and below ``geometry/`` (no geometry);
+#: ``cli``: ``python -m dlovr``.
+TOP_LEVEL = {
+    "dlovr": "base",
+    "dlovr.cache": "base",
+    "dlovr.jit": "base",
+    "dlovr.inputs": "base",
+    "dlovr.outputs": "base",
+    "dlovr.transforms": "base",
+    "dlovr.scene": "inputs",
+    "dlovr.script": "inputs",
+    "dlovr.facts": "inputs",
+    "dlovr.__main__": "cli",
+}
+
+
+def test_every_top_level_module_has_a_layer_and_keeps_to_it():
+    modules = _modules()
+    top = {n for n, p in modules.items() if p.parent == ROOT and (n == "dlovr" or p.name != "__init__.py")}
+    assert top == set(TOP_LEVEL), f"top-level modules without a layer: {sorted(top - set(TOP_LEVEL))}"
+    base = {n for n, layer in TOP_LEVEL.items() if layer == "base"}
+    graph = import_graph()
+    wrong = []
+    for name, layer in TOP_LEVEL.items():
+        for d in graph[name]:
+            if layer == "base" and d not in base:
+                wrong.append(f"{name} -> {d}")
+            if layer == "inputs" and not (d in base or d.startswith("dlovr.model")):
+                wrong.append(f"{name} -> {d}")
+    assert not wrong, "top-level modules importing above their layer: " + "; ".join(sorted(wrong))
