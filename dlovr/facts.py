@@ -17,10 +17,10 @@ with a one-line message naming the file and the key.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
+from dlovr.inputs import Fields, InputError, read_json
 from dlovr.model.discrete import FaceFact, FactBook, PairFact
 from dlovr.model.topology import FACE_NAME_RE, face_object
 
@@ -31,7 +31,7 @@ _FACE_KEYS = ("normal", "internal")
 _PAIR_KEYS = ("a", "b", "concave", "opening_deg")
 
 
-class FactsError(ValueError):
+class FactsError(InputError):
     """A facts file is unusable: ``FILE: key: what is wrong`` (one line)."""
 
 
@@ -43,84 +43,76 @@ def _show(v: Any) -> str:
 
 def load_facts(path: str | Path) -> tuple[FactBook, dict[int, Vec3]]:
     """Read a facts file: the :class:`FactBook` of its faces and pairs, and DLO vectors by point index."""
-
-    def bad(where: str, msg: str) -> FactsError:
-        return FactsError(f"{path}: {where}: {msg}" if where else f"{path}: {msg}")
-
-    def table(v: Any, where: str, keys: tuple[str, ...]) -> dict[str, Any]:
-        if not isinstance(v, dict):
-            raise bad(where, f"must be a JSON object with keys {', '.join(keys)}, got {_show(v)}")
-        unknown = sorted(set(v) - set(keys))
-        if unknown:
-            raise bad(where, f"unknown key {unknown[0]!r} (allowed: {', '.join(keys)})")
-        return v
-
-    def vec3(v: Any, where: str) -> Vec3:
-        ok = isinstance(v, list) and len(v) == 3
-        ok = ok and all(not isinstance(x, bool) and isinstance(x, int | float) for x in v)
-        if not ok or not all(math.isfinite(x) for x in v):
-            raise bad(where, f"must be a list of 3 numbers, got {_show(v)}")
-        if not any(v):
-            raise bad(where, "must not be the zero vector")
-        return (float(v[0]), float(v[1]), float(v[2]))
-
-    def flag(v: Any, where: str) -> bool:
-        if not isinstance(v, bool):
-            raise bad(where, f"must be true or false, got {_show(v)}")
-        return v
-
-    def face_name(v: Any, where: str) -> str:
-        if not isinstance(v, str) or not FACE_NAME_RE.match(v):
-            raise bad(where, f"must be a face name OBJECT.F<number> such as box.F1, got {_show(v)}")
-        return v
-
-    try:
-        with open(path, encoding="utf-8") as fh:
-            raw = json.load(fh)
-    except OSError as e:
-        raise FactsError(f"{path}: cannot read facts file: {e.strerror or e}") from None
-    except UnicodeDecodeError:
-        raise FactsError(f"{path}: not a UTF-8 text file") from None
-    except json.JSONDecodeError as e:
-        raise FactsError(f"{path}: not valid JSON: {e.msg} at line {e.lineno}") from None
-    table(raw, "", _TOP_KEYS)
-    faces: dict[str, FaceFact] = {}
-    raw_faces = raw.get("faces", {})
-    if not isinstance(raw_faces, dict):
-        raise bad("faces", f"must be an object of face name -> {{...}}, got {_show(raw_faces)}")
-    for name, f in raw_faces.items():
-        where = f"faces.{name}"
-        face_name(name, "faces")
-        table(f, where, _FACE_KEYS)
-        if "normal" not in f:
-            raise bad(where, "missing key 'normal'")
-        normal = vec3(f["normal"], f"{where}.normal")
-        internal = flag(f.get("internal", False), f"{where}.internal")
-        faces[name] = FaceFact(name, face_object(name), normal, internal)
+    f = Fields(path, FactsError)
+    raw = _object(f, read_json(path, FactsError, "facts file"), "", _TOP_KEYS)
+    faces = _faces(f, raw.get("faces", {}))
     raw_pairs = raw.get("pairs", [])
     if not isinstance(raw_pairs, list):
-        raise bad("pairs", f"must be a list of objects, got {_show(raw_pairs)}")
-    pairs = []
-    for i, p in enumerate(raw_pairs):
-        where = f"pairs[{i}]"
-        table(p, where, _PAIR_KEYS)
-        missing = [k for k in _PAIR_KEYS if k not in p]
-        if missing:
-            raise bad(where, f"missing key {missing[0]!r}")
-        a, b = face_name(p["a"], f"{where}.a"), face_name(p["b"], f"{where}.b")
-        opening = p["opening_deg"]
-        if isinstance(opening, bool) or not isinstance(opening, int | float) or not 0 < opening < 360:
-            raise bad(f"{where}.opening_deg", f"must be a number in (0, 360), got {_show(opening)}")
-        pairs.append(PairFact(a, b, flag(p["concave"], f"{where}.concave"), float(opening), None))
+        raise f.err("pairs", f"must be a list of objects, got {_show(raw_pairs)}")
+    pairs = [_pair(f, p, f"pairs[{i}]") for i, p in enumerate(raw_pairs)]
     raw_vectors = raw.get("dlo_vectors", {})
     if not isinstance(raw_vectors, dict):
-        raise bad("dlo_vectors", f"must be an object of point index -> [x, y, z], got {_show(raw_vectors)}")
+        raise f.err("dlo_vectors", f"must be an object of point index -> [x, y, z], got {_show(raw_vectors)}")
     vectors: dict[int, Vec3] = {}
     for k, v in raw_vectors.items():
         if not k.isdigit():
-            raise bad("dlo_vectors", f"keys are point indices (0, 1, ...), got {_show(k)}")
-        vectors[int(k)] = vec3(v, f"dlo_vectors.{k}")
+            raise f.err("dlo_vectors", f"keys are point indices (0, 1, ...), got {_show(k)}")
+        vectors[int(k)] = _direction(f, v, f"dlo_vectors.{k}")
     return FactBook(faces, pairs), vectors
+
+
+def _object(f: Fields, v: Any, where: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    """A JSON object whose keys all lie in ``keys``."""
+    if not isinstance(v, dict):
+        raise f.err(where, f"must be a JSON object with keys {', '.join(keys)}, got {_show(v)}")
+    return f.table(v, where, set(keys))
+
+
+def _direction(f: Fields, v: Any, where: str) -> Vec3:
+    """A non-zero vector (world frame, any length)."""
+    x, y, z = f.vec(v, where, 3)
+    if not (x or y or z):
+        raise f.err(where, "must not be the zero vector")
+    return (x, y, z)
+
+
+def _flag(f: Fields, v: Any, where: str) -> bool:
+    if not isinstance(v, bool):
+        raise f.err(where, f"must be true or false, got {_show(v)}")
+    return v
+
+
+def _face_name(f: Fields, v: Any, where: str) -> str:
+    if not isinstance(v, str) or not FACE_NAME_RE.match(v):
+        raise f.err(where, f"must be a face name OBJECT.F<number> such as box.F1, got {_show(v)}")
+    return v
+
+
+def _faces(f: Fields, raw: Any) -> dict[str, FaceFact]:
+    """The ``faces`` object: name -> outward normal and ``internal``."""
+    if not isinstance(raw, dict):
+        raise f.err("faces", f"must be an object of face name -> {{...}}, got {_show(raw)}")
+    faces: dict[str, FaceFact] = {}
+    for name, face in raw.items():
+        where = f"faces.{name}"
+        _face_name(f, name, "faces")
+        _object(f, face, where, _FACE_KEYS)
+        normal = _direction(f, f.require(face, "normal", where), f"{where}.normal")
+        internal = _flag(f, face.get("internal", False), f"{where}.internal")
+        faces[name] = FaceFact(name, face_object(name), normal, internal)
+    return faces
+
+
+def _pair(f: Fields, p: Any, where: str) -> PairFact:
+    """One entry of ``pairs``: two faces, concave or not, the opening angle (degrees, in (0, 360))."""
+    _object(f, p, where, _PAIR_KEYS)
+    for k in _PAIR_KEYS:
+        f.require(p, k, where)
+    a, b = _face_name(f, p["a"], f"{where}.a"), _face_name(f, p["b"], f"{where}.b")
+    opening = p["opening_deg"]
+    if isinstance(opening, bool) or not isinstance(opening, int | float) or not 0 < opening < 360:
+        raise f.err(f"{where}.opening_deg", f"must be a number in (0, 360), got {_show(opening)}")
+    return PairFact(a, b, _flag(f, p["concave"], f"{where}.concave"), float(opening), None)
 
 
 __all__ = ["FactsError", "load_facts"]

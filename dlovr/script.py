@@ -14,8 +14,8 @@ pose the simulator is in) over its ``duration``. Between waypoints the position 
 linearly and the orientation by slerp. Bad files raise :class:`ScriptError` with a one-line message
 naming the file, the waypoint and the key.
 
-Limits: at most :data:`MAX_WAYPOINTS` waypoints and :data:`MAX_DURATION_S` seconds in all (moves and
-holds), so that no script runs for hours.
+Limits (:data:`dlovr.inputs.LIMITS`): at most ``script_waypoints`` waypoints and
+``script_duration_s`` seconds in all (moves and holds), so that no script runs for hours.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from __future__ import annotations
 import bisect
 import math
 import re
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -31,17 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import LIMITS, Fields, InputError, read_toml
 from dlovr.transforms import quat_normalize, slerp
 
 _TOP_KEYS = {"scene", "waypoints", "description"}
-#: Most waypoints a script may have.
-MAX_WAYPOINTS = 10_000
-#: Longest a script may run, in seconds of simulated time (durations and holds together).
-MAX_DURATION_S = 600.0
 _WP_KEYS = {"pos", "quat", "duration", "hold", "note"}
 
 
-class ScriptError(ValueError):
+class ScriptError(InputError):
     """A script file is invalid; the message is one line: ``file: waypoints[i].key: what is wrong``."""
 
 
@@ -144,65 +140,45 @@ class Plan:
         return leg.p0 + s * (leg.p1 - leg.p0), slerp(leg.q0, leg.q1, s)
 
 
-def _num(value: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ScriptError(f"{where}: expected a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise ScriptError(f"{where}: must be > 0, got {value!r}")
-    if nonneg and value < 0:
-        raise ScriptError(f"{where}: must be >= 0, got {value!r}")
-    return float(value)
-
-
-def _vec(value: Any, n: int, where: str) -> tuple[float, ...]:
-    if not isinstance(value, list) or len(value) != n:
-        raise ScriptError(f"{where}: expected a list of {n} numbers, got {value!r}")
-    return tuple(_num(v, where) for v in value)
-
-
 def parse_script(data: dict[str, Any], source: str = "<script>") -> Script:
-    """Validate a parsed TOML table as a script."""
-    for key in data:
-        if key not in _TOP_KEYS:
-            raise ScriptError(f"{source}: unknown key {key!r} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    """Validate a parsed TOML table as a script; every problem is a :class:`ScriptError`,
+    ``<source>: <where>: <problem>``."""
+    f = Fields(source, ScriptError)
+    f.table(data, "", _TOP_KEYS)
     scene = data.get("scene")
     if scene is not None and (not isinstance(scene, str) or not scene):
-        raise ScriptError(f"{source}: scene: expected a scene name (string), got {scene!r}")
-    wps = data.get("waypoints")
-    if wps is None:
-        raise ScriptError(f"{source}: missing [[waypoints]]")
+        raise f.err("scene", f"must be a scene name or path (a non-empty string), got {scene!r}")
+    wps = f.require(data, "waypoints")
     if not isinstance(wps, list) or not wps:
-        raise ScriptError(f"{source}: waypoints: expected at least one [[waypoints]] table")
-    if len(wps) > MAX_WAYPOINTS:
-        raise ScriptError(f"{source}: waypoints: {len(wps)} waypoints, at most {MAX_WAYPOINTS} allowed")
-    out = []
-    for i, w in enumerate(wps):
-        at = f"{source}: waypoints[{i}]"
-        if not isinstance(w, dict):
-            raise ScriptError(f"{at}: expected a table, got {w!r}")
-        for key in w:
-            if key not in _WP_KEYS:
-                raise ScriptError(f"{at}.{key}: unknown key (allowed: {', '.join(sorted(_WP_KEYS))})")
-        for key in ("pos", "duration"):
-            if key not in w:
-                raise ScriptError(f"{at}.{key}: missing")
-        pos = _vec(w["pos"], 3, f"{at}.pos")
-        quat = None
-        if "quat" in w:
-            quat = _vec(w["quat"], 4, f"{at}.quat")
-            if math.sqrt(sum(c * c for c in quat)) < 1e-9:
-                raise ScriptError(f"{at}.quat: must not be all zeros")
-            quat = tuple(float(c) for c in quat_normalize(quat))
-        duration = _num(w["duration"], f"{at}.duration", positive=True)
-        hold = _num(w.get("hold", 0.0), f"{at}.hold", nonneg=True)
-        out.append(Waypoint(pos=pos, quat=quat, duration=duration, hold=hold))  # type: ignore[arg-type]
+        raise f.err("waypoints", "must be at least one [[waypoints]] table")
+    f.at_most(len(wps), "script_waypoints", "waypoints", "waypoints")
+    out = [_waypoint(f, w, f"waypoints[{i}]") for i, w in enumerate(wps)]
     total = sum(w.duration + w.hold for w in out)
-    if total > MAX_DURATION_S:
-        raise ScriptError(
-            f"{source}: waypoints: the script lasts {total:.6g} s (durations and holds), "
-            f"at most {MAX_DURATION_S:g} s allowed"
+    if total > LIMITS["script_duration_s"]:
+        raise f.err(
+            "waypoints",
+            f"the script lasts {total:.6g} s (durations and holds), "
+            f"at most {LIMITS['script_duration_s']:g} s allowed",
         )
     return Script(waypoints=tuple(out), scene=scene, source=source)
+
+
+def _waypoint(f: Fields, raw: Any, where: str) -> Waypoint:
+    """One ``[[waypoints]]`` table: pos (m, world), optional quat (wxyz), duration and hold (s)."""
+    w = f.table(raw, where, _WP_KEYS)
+    for key in ("pos", "duration"):
+        f.require(w, key, where)
+    x, y, z = f.vec(w["pos"], f"{where}.pos", 3)
+    quat = None
+    if "quat" in w:
+        q = f.vec(w["quat"], f"{where}.quat", 4)
+        if math.sqrt(sum(c * c for c in q)) < 1e-9:
+            raise f.err(f"{where}.quat", "must not be all zeros")
+        qw, qx, qy, qz = (float(c) for c in quat_normalize(q))
+        quat = (qw, qx, qy, qz)
+    duration = f.number(w["duration"], f"{where}.duration", positive=True)
+    hold = f.number(w.get("hold", 0.0), f"{where}.hold", nonneg=True)
+    return Waypoint(pos=(x, y, z), quat=quat, duration=duration, hold=hold)
 
 
 def _is_scene_name(ref: str) -> bool:
@@ -216,15 +192,7 @@ def load_script(path: str | Path) -> Script:
     A ``scene`` that is a path (not a built-in scene's name) is taken relative to the script's folder.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ScriptError(f"{p}: cannot read: {e.strerror or e}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ScriptError(f"{p}: invalid TOML: {e}".replace("\n", " ")) from None
-    script = parse_script(data, str(p))
+    script = parse_script(read_toml(p, ScriptError, "script file"), str(p))
     if script.scene is not None and not _is_scene_name(script.scene):
         script = replace(script, scene=str(p.parent / Path(script.scene).expanduser()))
     return script

@@ -139,7 +139,8 @@ def test_model_imports_only_model_and_transforms():
     graph = import_graph()
     for name, deps in graph.items():
         if name.startswith("dlovr.model"):
-            bad = {d for d in deps if not (d.startswith("dlovr.model") or d in ("dlovr", "dlovr.transforms", "dlovr.inputs"))}
+            base = ("dlovr", "dlovr.transforms", "dlovr.inputs")
+            bad = {d for d in deps if not (d.startswith("dlovr.model") or d in base)}
             assert not bad, f"{name} imports {sorted(bad)}"
 
 
@@ -201,8 +202,8 @@ def test_modules_and_classes_stay_small():
     assert not too_long, "; ".join(too_long)
 
 
-# The data flow of docs/architecture.md: each package imports only the ones below it, ``cli*`` is on top, and
-# ``batch`` imports no other dlovr module.
+# The data flow of docs/architecture.md: each package imports only the ones below it, ``cli`` is on
+# top, and ``batch`` imports no other dlovr module but the input layer's base (its error type).
 LAYERS = ("dlovr.model", "dlovr.geometry", "dlovr.sim", "dlovr.recording", "dlovr.execution", "dlovr.ui")
 
 
@@ -219,10 +220,10 @@ def test_packages_import_only_the_layers_below_them_and_cli_is_on_top():
             there = _package(d)
             if here in LAYERS and there in LAYERS and LAYERS.index(there) > LAYERS.index(here):
                 upward.append(f"{name} -> {d}")
-            top = here.startswith("dlovr.cli") or name.endswith(".cli") or name == "dlovr.__main__"
-            if there.startswith("dlovr.cli") and not top:
+            top = here == "dlovr.cli" or name == "dlovr.__main__"
+            if there == "dlovr.cli" and not top:
                 upward.append(f"{name} -> {d}")
-            if here == "dlovr.batch" and there != "dlovr.batch":
+            if here == "dlovr.batch" and there not in ("dlovr.batch", "dlovr.inputs"):
                 upward.append(f"{name} -> {d}")
     assert not upward, "imports against the data flow of docs/architecture.md: " + "; ".join(sorted(upward))
 
@@ -258,3 +259,37 @@ def test_vector_helpers_live_in_transforms_only():
             if isinstance(node, ast.FunctionDef) and node.name.lstrip("_").lower() in _VECTOR_HELPERS:
                 elsewhere.append(f"{name}.{node.name}")
     assert not elsewhere, f"vector helpers outside dlovr.transforms: {elsewhere}"
+
+
+#: Every top-level module's layer. ``base``: standard library, numpy or numba, and no dlovr module
+#: but another base one (any layer may import them); ``inputs``: the readers of the user's files
+#: (scene, script, facts) on ``dlovr.inputs``, above ``model/`` and below ``geometry/`` (no geometry);
+#: ``cli``: ``python -m dlovr``.
+TOP_LEVEL = {
+    "dlovr": "base",
+    "dlovr.cache": "base",
+    "dlovr.jit": "base",
+    "dlovr.inputs": "base",
+    "dlovr.outputs": "base",
+    "dlovr.transforms": "base",
+    "dlovr.scene": "inputs",
+    "dlovr.script": "inputs",
+    "dlovr.facts": "inputs",
+    "dlovr.__main__": "cli",
+}
+
+
+def test_every_top_level_module_has_a_layer_and_keeps_to_it():
+    modules = _modules()
+    top = {n for n, p in modules.items() if p.parent == ROOT and (n == "dlovr" or p.name != "__init__.py")}
+    assert top == set(TOP_LEVEL), f"top-level modules without a layer: {sorted(top - set(TOP_LEVEL))}"
+    base = {n for n, layer in TOP_LEVEL.items() if layer == "base"}
+    graph = import_graph()
+    wrong = []
+    for name, layer in TOP_LEVEL.items():
+        for d in graph[name]:
+            if layer == "base" and d not in base:
+                wrong.append(f"{name} -> {d}")
+            if layer == "inputs" and not (d in base or d.startswith("dlovr.model")):
+                wrong.append(f"{name} -> {d}")
+    assert not wrong, "top-level modules importing above their layer: " + "; ".join(sorted(wrong))

@@ -130,7 +130,7 @@ def test_times_in_json_and_csv_are_rounded(touch):
 
 
 def test_one_macro_is_singular(tmp_path):
-    from dlovr.cli_common import _plural
+    from dlovr.cli.common import plural as _plural
 
     assert [_plural(n, "macro") for n in (1, 2, 0)] == ["1 macro", "2 macros", "0 macros"]
     r = cli("compile", SAMPLES / "l_block.mcap", "-o", tmp_path)
@@ -229,3 +229,43 @@ def test_a_replay_divergence_names_plain_numbers(touch, tmp_path):
     assert "np.float64" not in r.output and "recorded " in r.output
     recorded = r.output.split("recorded ")[1].split(",")[0]
     float(recorded)  # a plain number
+
+
+def test_one_user_error_class_turned_from_input_errors_in_one_place():
+    """``UserError`` is the CLI's only click exception class; every ``InputError`` a command (or an
+    option's callback) raises becomes it in ``Group.invoke`` (one line, exit 2), not in per-command
+    ``try``/``except`` copies."""
+    import ast
+
+    import click
+
+    from dlovr.cli.common import EXIT_BAD_INPUT, EXIT_CODES, Group
+    from dlovr.inputs import InputError
+
+    pkg = ROOT / "dlovr"
+    click_errors = [
+        f"{path.relative_to(pkg)}:{node.name}"
+        for path in sorted(pkg.rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ClassDef) and any("ClickException" in ast.unparse(b) for b in node.bases)
+    ]
+    assert click_errors == ["cli/common.py:UserError"]
+    readers = ("SceneError", "ScriptError", "FactsError", "NetworkError", "RecordingError", "VaryError")
+    for path in sorted((pkg / "cli").glob("*.py")):
+        if path.name == "common.py":  # a scene a script names is worded with the script's file there
+            continue
+        caught = [n for n in readers if f"except {n}" in path.read_text()]
+        assert not caught, f"{path.name} catches {caught} itself"
+
+    @click.group(cls=Group)
+    def group() -> None:
+        pass
+
+    @group.command()
+    @click.option("--x", callback=lambda *_: (_ for _ in ()).throw(InputError("f.toml: x: bad")))
+    def cmd(x: str) -> None:
+        pass
+
+    r = CliRunner().invoke(group, ["cmd", "--x", "1"])
+    assert r.exit_code == EXIT_BAD_INPUT and r.output == "Error: f.toml: x: bad\n"
+    assert {0, 1, 2, 130, 143} <= set(EXIT_CODES)

@@ -134,7 +134,7 @@ def test_recordings_of_different_scenes_are_refused_with_one_line(tmp_path):
     [
         (["network", "missing.mcap", "-o", "n.json"], "cannot read"),
         (["network", "empty_dir", "-o", "n.json"], "no recordings found"),
-        (["compile", "--network", "missing.json", "-o", "p.json"], "cannot read"),
+        (["compile", "--network", "missing.json", "-o", "p.json"], "missing.json: no such network file"),
         (["compile", "--network", "bad.json", "-o", "p.json"], "not valid JSON"),
         (["compile", "--network", "other.json", "-o", "p.json"], "not a transition network"),
         (["compile", "--network", "bad.json"], "needs -o"),

@@ -48,7 +48,7 @@ def test_malformed_line_names_the_line_and_exits_2_without_traceback(tmp_path):
 
 def test_missing_and_empty_files(tmp_path):
     r = invoke("transitions", str(tmp_path / "nope.txt"))
-    assert r.exit_code == 2 and "cannot read" in r.output
+    assert r.exit_code == 2 and "nope.txt: no such sequence file" in r.output
     f = tmp_path / "empty.txt"
     f.write_text("# nothing\n\n")
     r = invoke("transitions", str(f))

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 from dlovr.cli import main
 from dlovr.geometry import SceneGeometry
+from dlovr.geometry.scene_checks import load_checked_scene
 from dlovr.scene import SceneError, builtin_scenes, load_scene
 
 
@@ -102,14 +103,14 @@ def test_scene_by_path_and_mesh_relative_to_file(tmp_path):
 def error(tmp_path, text, meshes=None) -> str:
     p = write(tmp_path, text, meshes)
     with pytest.raises(SceneError) as ei:
-        load_scene(str(p))
+        load_checked_scene(str(p))
     msg = str(ei.value)
     assert msg.startswith(str(p)) and "\n" not in msg
     return msg
 
 
 def test_error_syntax(tmp_path):
-    assert "TOML syntax error" in error(tmp_path, HEADER + "\n[dlo\n")
+    assert "invalid TOML" in error(tmp_path, HEADER + "\n[dlo\n")
 
 
 def test_error_unknown_key(tmp_path):
@@ -167,11 +168,30 @@ def test_error_objects_overlap(tmp_path):
     assert "objects 'table' and 'b'" in msg and "overlap" in msg
 
 
+def test_load_scene_checks_the_file_and_not_the_geometry(tmp_path):
+    """``load_scene`` reads and checks the file alone; the checks that need meshes are
+    ``dlovr.geometry.scene_checks``'s, and ``dlovr/scene.py`` imports no geometry at all."""
+    import ast
+
+    import dlovr.scene
+
+    p = write(
+        tmp_path, HEADER + '[[objects]]\nname = "b"\nbox = { size = [0.1, 0.1, 0.1], pos = [0, 0, 0.0] }\n'
+    )
+    assert [o.name for o in load_scene(p).objects] == ["table", "b"]
+    with pytest.raises(SceneError, match="overlap"):
+        load_checked_scene(p)
+    tree = ast.parse(Path(dlovr.scene.__file__).read_text())
+    names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+    names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    assert not [n for n in names if n.startswith("dlovr.geometry") or n.split(".")[0] == "trimesh"]
+
+
 def test_touching_objects_do_not_overlap(tmp_path):
     p = write(
         tmp_path, HEADER + '[[objects]]\nname = "b"\nbox = { size = [0.1, 0.1, 0.1], pos = [0, 0, 0.05] }\n'
     )
-    assert len(load_scene(str(p)).objects) == 2
+    assert len(load_checked_scene(str(p)).objects) == 2
 
 
 def test_error_cable_longer_than_scene(tmp_path):
@@ -196,7 +216,7 @@ def test_error_cable_beyond_the_documented_limits(tmp_path, old, new, expected):
 
 def test_the_segment_limit_itself_is_accepted(tmp_path):
     p = write(tmp_path, HEADER.replace("segments = 20", "segments = 200"))
-    assert load_scene(p, check_geometry=False).dlo.segments == 200
+    assert load_scene(p).dlo.segments == 200
 
 
 def test_error_too_many_objects(tmp_path):
@@ -247,17 +267,18 @@ def test_cli_bad_scene_exit_code_2_no_traceback(tmp_path):
     p = write(tmp_path, HEADER + "\n[dlo\n")
     r = CliRunner().invoke(main, ["scene", "show", str(p)])
     assert r.exit_code == 2
-    assert "Traceback" not in r.output and "TOML syntax error" in r.output
+    assert "Traceback" not in r.output and "invalid TOML" in r.output
     assert r.output.count("\n") == 1
 
 
 def test_the_limits_are_documented_as_the_code_has_them():
-    from dlovr import scene, script
     from dlovr.geometry import mesh
+    from dlovr.inputs import LIMITS
 
     doc = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
-    assert f"| `dlo.segments` | 2 to {scene.MAX_SEGMENTS} |" in doc
-    assert f"| `dlo.length` | at most {scene.MAX_LENGTH_M:g} m" in doc
-    assert f"| objects | at most {scene.MAX_OBJECTS} |" in doc
+    assert f"| `dlo.segments` | 2 to {int(LIMITS['dlo_segments'])} |" in doc
+    assert f"| `dlo.length` | at most {LIMITS['dlo_length_m']:g} m" in doc
+    assert f"| objects | at most {int(LIMITS['scene_objects'])} |" in doc
     assert f"{mesh.MAX_MESH_TRIANGLES:,} triangles" in doc
-    assert f"at most {script.MAX_WAYPOINTS:,}" in doc and f"at most {script.MAX_DURATION_S:g} s in all" in doc
+    assert f"at most {int(LIMITS['script_waypoints']):,}" in doc
+    assert f"at most {LIMITS['script_duration_s']:g} s in all" in doc

@@ -9,15 +9,14 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import click
+from dlovr.inputs import InputError
 
 INSTALL_HINT = "pip install 'dlovr[ray]'"
 
 
-class BatchError(click.ClickException):
-    """A cluster that cannot be used (Ray missing, bad address, unreachable): one line, exit code 2."""
-
-    exit_code = 2
+class BatchError(InputError):
+    """A cluster that cannot be used (Ray missing, bad address, unreachable): one line, which the
+    command line reports with exit code 2."""
 
 
 @dataclass(frozen=True)

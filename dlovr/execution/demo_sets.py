@@ -45,7 +45,7 @@ def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
     """Record demonstration ``trial`` (see the module docstring); a JSON-able summary of it."""
     from dlovr.execution.run import fresh_simulator
     from dlovr.recording import DemoRecorder
-    from dlovr.sim import SimulationDiverged
+    from dlovr.recording.scripted import play_script
 
     scene, values = perturb(setup.scene, setup.variations, setup.seed, trial)
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "path": None}
@@ -61,13 +61,8 @@ def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
         "vary": json.dumps(values),
         "base_scene_sha256": setup.base_sha256,
     }
-    error = None
     with DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta) as rec:
-        try:
-            for r in sim.run(setup.script):
-                rec.step(r)
-        except SimulationDiverged as e:
-            rec.end_reason = error = str(e)
+        error = play_script(sim, setup.script, rec)
     return {**out, "path": path.name, "error": error, "situations": len(sim.tracker.kept)}
 
 

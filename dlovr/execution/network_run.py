@@ -553,9 +553,9 @@ def network_scene(nprog: NetworkProgram, scene_ref: str | None) -> Any:
     """The scene to run a network program in: ``scene_ref`` or the network's scene; raises
     :class:`dlovr.model.program.ProgramError` when the scene lacks an object the network's
     contacts name, or ``dlovr.scene.SceneError``."""
-    from dlovr.scene import load_scene
+    from dlovr.geometry.scene_checks import load_checked_scene
 
-    scene = load_scene(scene_ref or nprog.network.scene_name)
+    scene = load_checked_scene(scene_ref or nprog.network.scene_name)
     names = {o.name for o in scene.objects}
     used = {
         f.rpartition(".")[0]

@@ -82,7 +82,8 @@ def resolve_scene(program: Program, scene_ref: str | None, recording: Path | Non
     """The scene to run ``program`` in: ``scene_ref`` (name or path), else the program's ``scene``,
     else the scene its demonstration was recorded in, else the built-in scene named like the program.
     Raises :class:`ProgramError` or ``dlovr.scene.SceneError`` (one line)."""
-    from dlovr.scene import builtin_scenes, load_scene
+    from dlovr.geometry.scene_checks import load_checked_scene
+    from dlovr.scene import builtin_scenes
 
     ref = scene_ref or program.scene
     if ref is None and recording is not None and recording.is_file():
@@ -98,7 +99,7 @@ def resolve_scene(program: Program, scene_ref: str | None, recording: Path | Non
         ref = program.name
     if ref is None:
         raise ProgramError(f"{program.path or program.name}: cannot tell which scene it is for: give --scene")
-    scene = load_scene(ref)
+    scene = load_checked_scene(ref)
     check_program_scene(program, scene)
     return scene
 

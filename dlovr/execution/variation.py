@@ -32,12 +32,14 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import InputError
+
 NUMBER_KEYS = ("length", "radius", "young", "damping", "mass", "poisson", "friction")
 _POS_HINT = "positions vary by an absolute offset in metres, e.g. {key}=0.005"
 _NUM = r"[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?"
 
 
-class VaryError(ValueError):
+class VaryError(InputError):
     """A ``--vary`` argument is not understood; the message is one line."""
 
 

@@ -20,6 +20,8 @@ Pure: numpy, scipy, trimesh, manifold3d and (as a fallback) coacd. No simulator,
 - :mod:`~dlovr.geometry.facts`: the fact book of a scene: face normals, concave/convex and opening
   angles of face pairs (:class:`SceneFactBook`).
 - :mod:`~dlovr.geometry.scene_geometry`: :class:`SceneGeometry`, all of the above for a scene.
+- :mod:`~dlovr.geometry.scene_checks`: the checks of a scene file that need its meshes
+  (``load_checked_scene``).
 - :mod:`~dlovr.geometry.vectors`: small vector and polygon helpers (private).
 
 Typical use by the simulation::

@@ -115,7 +115,7 @@ def object_local_mesh(obj: SceneObject) -> trimesh.Trimesh:
     """The object's mesh in its own frame (trimesh); raises MeshError for an unreadable mesh file.
 
     ``obj``: a :class:`dlovr.scene.SceneObject` (a box of full extents ``size``, or a mesh file
-    scaled by ``scale``). :func:`dlovr.scene.object_local_mesh` gives the same as a SceneError.
+    scaled by ``scale``).
     """
     if obj.kind == "box":
         assert obj.size is not None

@@ -31,11 +31,13 @@ import json
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import networkx as nx
 import numpy as np
 
+from dlovr.inputs import InputError, read_json, where_msg
 from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
@@ -50,7 +52,7 @@ Vec3 = tuple[float, float, float]
 RISKS = ("none", "caution", "risky")
 
 
-class NetworkError(ValueError):
+class NetworkError(InputError):
     """A problem with the demonstrations or a network file; the message is one line."""
 
 
@@ -300,11 +302,22 @@ class Network:
 
     @staticmethod
     def loads(text: str) -> Network:
+        """A network from its JSON text (see :meth:`from_json`)."""
         try:
             data = json.loads(text)
         except json.JSONDecodeError as e:
             raise NetworkError(f"not valid JSON: {e.msg} at line {e.lineno}") from None
         return Network.from_json(data)
+
+
+def load_network(path: str | Path) -> Network:
+    """Read a network file (written by :meth:`Network.dumps`); every problem is one
+    :class:`NetworkError` line, ``<file>: <problem>``."""
+    data = read_json(path, NetworkError, "network file")
+    try:
+        return Network.from_json(data)
+    except NetworkError as e:
+        raise NetworkError(where_msg(path, "", str(e))) from None
 
 
 def _endpoint_json(p: Endpoint) -> dict[str, Any]:

@@ -17,6 +17,7 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from dlovr.inputs import InputError
 from dlovr.model.discrete import (
     CONTACT_KIND,
     DiscreteSituation,
@@ -40,7 +41,7 @@ from dlovr.model.transitions import (
 _TIMED_RE = re.compile(r"^([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s+(\S.*)$")
 
 
-class SequenceError(ValueError):
+class SequenceError(InputError):
     """A line of a sequence cannot be read: ``line`` is its number (1-based, 0 for the whole file)."""
 
     def __init__(self, line: int, message: str):

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 from itertools import groupby
 from typing import Literal
 
+from dlovr.inputs import InputError
+
 Vec3 = tuple[float, float, float]
 
 DloKind = Literal["VS", "VE", "E"]
@@ -33,7 +35,7 @@ DloKind = Literal["VS", "VE", "E"]
 FACE_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*(\.[A-Za-z_][A-Za-z0-9_\-]*)*\.F[0-9]+$")
 
 
-class NotationError(ValueError):
+class NotationError(InputError):
     """A string is not valid contact notation; the message says what is wrong and where."""
 
 

@@ -14,7 +14,10 @@
 - :mod:`dlovr.recording.integrity`: whole-file checksums and a tolerant scan of damaged files;
 - :mod:`dlovr.recording.recovery`: :func:`recover`, rescuing a damaged file or one whose writer was
   killed;
-- :mod:`dlovr.recording.compile`: :func:`compile_recording` and batch compilation with a cache.
+- :mod:`dlovr.recording.compile`: :func:`compile_recording` and batch compilation with a cache;
+- :mod:`dlovr.recording.scripted`: :func:`~dlovr.recording.scripted.play_script`, a demonstration
+  script played on a simulator and recorded (``dlovr demo``, ``dlovr record``);
+- :mod:`dlovr.recording.network_html`: a transition network as a self-contained HTML page.
 """
 
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, pieces_to_json

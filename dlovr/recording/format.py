@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import InputError
+
 FORMAT_VERSION = "2"  # 2: commands in messages of 50 steps, an end marker in the states
 PROFILE = "dlovr"
 TOPIC_COMMAND = "/dlovr/command"
@@ -54,7 +56,7 @@ MAX_ATTACHMENT_BYTES = 64 * 1024 * 1024
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
-class RecordingError(ValueError):
+class RecordingError(InputError):
     """A recording cannot be used; the message names the file and the problem in one line."""
 
 

@@ -30,11 +30,12 @@ class ReplayResult:
 
 def load_embedded_scene(recording: Recording, directory: str | Path) -> Any:
     """Load the recording's own scene (written into ``directory``; never a path named inside it)."""
-    from dlovr.scene import SceneError, load_scene
+    from dlovr.geometry.scene_checks import load_checked_scene
+    from dlovr.scene import SceneError
 
     path = recording.scene.materialize(directory)
     try:
-        return load_scene(path)
+        return load_checked_scene(path)
     except SceneError as e:
         raise RecordingError(f"{recording.path}: embedded scene is invalid: {e}") from None
 

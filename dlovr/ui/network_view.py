@@ -1,5 +1,6 @@
 """The current scene's transition network in the browser UI (no viser): where it comes
-from, and the HTML (inline SVG of :mod:`dlovr.network_html`) with the live situation highlighted.
+from, and the HTML (inline SVG of
+:mod:`dlovr.recording.network_html`) with the live situation highlighted.
 
 The network of a scene is the file ``<scene>.network.json`` (written by ``dlovr network``) in the
 recordings directory or the repository's ``recordings/``, else it is built on demand from the
@@ -14,8 +15,8 @@ from html import escape
 from pathlib import Path
 
 from dlovr.model.network import Network, NetworkError
-from dlovr.network_html import CSS, network_svg
 from dlovr.recording import RecordingError
+from dlovr.recording.network_html import CSS, network_svg
 
 LIVE_COLOR = "#1f77b4"
 FIT_CSS = """

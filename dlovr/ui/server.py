@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 import viser
 
-from dlovr.scene import load_scene
+from dlovr.geometry.scene_checks import load_checked_scene
+from dlovr.scene import Scene
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
@@ -90,7 +91,7 @@ class DemoServer:
 
     def __init__(
         self,
-        scene: str | Path = "table",
+        scene: str | Path | Scene = "table",
         *,
         host: str = "127.0.0.1",
         port: int | None = 8080,
@@ -104,7 +105,7 @@ class DemoServer:
         self.publish_hz = float(publish_hz)
         self.verbose = verbose
         self.lock = threading.RLock()
-        self.session = Session(load_scene(scene), self.lock)
+        self.session = Session(scene if isinstance(scene, Scene) else load_checked_scene(scene), self.lock)
         self.server: viser.ViserServer | None = None
         self._paused = False
         self._target = TargetCommand()
@@ -234,7 +235,7 @@ class DemoServer:
 
     def load(self, scene: str | Path) -> None:
         """Switch to another scene (built-in name or path); finishes a recording in progress."""
-        new = Session(load_scene(scene), self.lock)
+        new = Session(load_checked_scene(scene), self.lock)
         with self.lock:
             self.recording_panel.finish()
             self.session = new
@@ -394,10 +395,12 @@ def exposure_warning(host: str, port: int) -> str | None:
     )
 
 
-def serve(scene: str, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings") -> None:
-    """Run the server until Ctrl-C or SIGTERM (used by ``dlovr serve``; SIGTERM exits with 143 once
-    the server stopped, a recording in progress finished and the temporary folders removed); warns on
-    stderr when ``host`` is not loopback."""
+def serve(
+    scene: str | Path | Scene, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings"
+) -> None:
+    """Run the server on ``scene`` (loaded, or a name or path) until Ctrl-C or SIGTERM (used by
+    ``dlovr serve``; SIGTERM exits with 143 once the server stopped, a recording in progress finished
+    and the temporary folders removed); warns on stderr when ``host`` is not loopback."""
     from dlovr.recording import finish_on_sigterm
 
     srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()

@@ -156,7 +156,7 @@ def test_a_cluster_that_refuses_to_be_joined_is_one_line_with_the_token_hint(mon
                 monkeypatch.setenv("RAY_AUTH_MODE", mode)
             with pytest.raises(BatchError) as e:
                 connect(fake_ray, address, None)
-            msg = e.value.message
+            msg = str(e.value)
             assert msg.startswith(f"cannot join the Ray cluster at {address}: ConnectionError: Failed")
             assert "\n" not in msg and ("set RAY_AUTH_MODE=token and its token" in msg) == hint, msg
 

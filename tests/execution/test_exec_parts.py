@@ -256,7 +256,7 @@ def test_bad_vary_items_are_one_line_errors(item, message):
 def test_variation_is_deterministic_and_keys_are_independent():
     from dlovr.scene import load_scene
 
-    scene = load_scene("peg_in_hole", check_geometry=False)
+    scene = load_scene("peg_in_hole")
     a = [parse_vary("dlo.length=10%"), parse_vary("objects.pos=0.005")]
     s1, v1 = perturb(scene, a, seed=5, trial=3)
     s2, v2 = perturb(scene, a, seed=5, trial=3)

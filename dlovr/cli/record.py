@@ -4,84 +4,93 @@
 from __future__ import annotations
 
 import os
+from contextlib import nullcontext
+from typing import Any
 
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli_common import (
+from dlovr.cli.common import (
+    EXIT_FAILED,
     UserError,
-    _builtin_script,
-    _one_line,
-    _plural,
-    _progress,
-    _refuse_existing,
-    _scene,
-    _script,
-    _script_scene,
-    _t,
-    _warm_up,
+    builtin_script,
+    finishes_on_sigterm,
+    load_scene_arg,
+    plural,
+    progress_bar,
+    refuse_existing,
+    rounded_time,
+    script_scene,
+    warm_up,
 )
 
 
-def run_demonstration(scene_ref: str | None, script_path: str | None, out: str | None, label: str):
-    """Run a scripted demonstration headless (optionally recording it); return (scene, tracker).
+def demonstrate(scene_ref: str | None, script_path: str | None, out: str | None, label: str) -> Any:
+    """Run a scripted demonstration headless (optionally recording it to ``out``); return its tracker.
 
     Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
     relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
     it cannot be written, the partial file is removed and the run stops with one line.
     """
-    import os
-    from contextlib import nullcontext
-
     from dlovr.outputs import output_error, prepare_output, remove_partial
-    from dlovr.recording import DemoRecorder, StopSignals, finish_on_sigterm
-    from dlovr.sim import SimulationDiverged, Simulator
+    from dlovr.recording import StopSignals, finish_on_sigterm
+    from dlovr.recording.scripted import play_script
 
-    if script_path is None:
-        if scene_ref is None:
-            raise UserError("give --scene NAME|PATH or --script FILE")
-        scene = _scene(scene_ref)
-        script = _script(_builtin_script(scene_ref))
-    else:
-        script = _script(script_path)
-        scene = _script_scene(script, scene_ref)
-    try:
-        sim = Simulator(scene, track=True)
-    except ValueError as e:
-        raise UserError(f"{scene.path}: {e}") from None
-    tracker = sim.tracker
+    scene, script = _scene_and_script(scene_ref, script_path)
+    sim = _simulator(scene)
     nsteps = round(script.total_duration / sim.model.opt.timestep)
     existed = out is not None and os.path.lexists(out)
     if out is not None:
         prepare_output(out)
     stop = StopSignals() if out else None  # while recording, a signal ends it between two steps
+    rec = None
     try:
         with finish_on_sigterm(), stop or nullcontext():
-            recorder = DemoRecorder(out, scene, sim, tracker) if out else nullcontext()
-            with recorder as rec, _progress(nsteps, label) as bar:
-                try:
-                    for k, record in enumerate(sim.run(script), 1):
-                        if rec is not None:
-                            rec.step(record)
-                        if k % 100 == 0:
-                            bar.update(100)
-                        if stop is not None and stop.signum is not None:
-                            break
-                except SimulationDiverged as e:
-                    if rec is not None:  # the end marker says so; compile warns
-                        rec.end_reason = str(e)
+            rec = _recorder(out, scene, sim)
+            with rec or nullcontext(), progress_bar(nsteps, label) as bar:
+                diverged = play_script(sim, script, rec, progress=bar.update, stop=stop)
+                if diverged is not None:  # the end marker says so; compile warns
                     saved = f"; the recording up to there is kept: {out}" if out else ""
-                    raise click.ClickException(f"{e}{saved}") from None
+                    raise click.ClickException(f"{diverged}{saved}")
     except OSError as e:
         if out is None:
             raise
         removed = not existed and remove_partial(out)
         raise UserError(str(output_error(out, e)) + (" (partial file removed)" if removed else "")) from None
-    if stop is not None and stop.signum is not None:
+    if stop is not None and stop.signum is not None and rec is not None:
         kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
         click.echo(f"interrupted ({stop.name}): {kept}", err=True)
         raise SystemExit(stop.exit_code)
-    return scene, tracker
+    return sim.tracker
+
+
+def _scene_and_script(scene_ref: str | None, script_path: str | None) -> tuple[Any, Any]:
+    """The scene and script of a demonstration (see :func:`demonstrate`)."""
+    from dlovr.script import load_script
+
+    if script_path is None:
+        if scene_ref is None:
+            raise UserError("give --scene NAME|PATH or --script FILE")
+        return load_scene_arg(scene_ref), load_script(builtin_script(scene_ref))
+    script = load_script(script_path)
+    return script_scene(script, scene_ref), script
+
+
+def _simulator(scene: Any) -> Any:
+    """A tracking simulator of ``scene``; a scene MuJoCo refuses is one line naming its file."""
+    from dlovr.sim import Simulator
+
+    try:
+        return Simulator(scene, track=True)
+    except ValueError as e:
+        raise UserError(f"{scene.path}: {e}") from None
+
+
+def _recorder(out: str | None, scene: Any, sim: Any) -> Any:
+    """A recorder of the demonstration to ``out``, or None."""
+    from dlovr.recording import DemoRecorder
+
+    return DemoRecorder(out, scene, sim, sim.tracker) if out else None
 
 
 def _states_table(rows: list[dict]) -> str:
@@ -102,8 +111,8 @@ def _kept_rows(tracker) -> list[dict]:
         st = by_start.get((kept.start, kept.situation))
         rows.append(
             {
-                "t": _t(kept.start),
-                "duration": _t(kept.duration),
+                "t": rounded_time(kept.start),
+                "duration": rounded_time(kept.duration),
                 "topological": st.topological.format() if st else "",
                 "discrete": kept.situation.format(),
                 "classes": list(classes),
@@ -124,7 +133,7 @@ def _kept_rows(tracker) -> list[dict]:
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the situations as JSON.")
 @click.option("-f", "--force", is_flag=True, help="Overwrite the -o file if it exists.")
-@_one_line
+@finishes_on_sigterm
 def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: bool, force: bool) -> None:
     """Run a built-in demonstration headless and print its contact situations (Fig. 11 style).
 
@@ -133,11 +142,11 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     import json
 
     if out is not None:
-        _refuse_existing(out, force)
+        refuse_existing(out, force)
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
-    _warm_up()
-    _, tracker = run_demonstration(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
+    warm_up()
+    tracker = demonstrate(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
@@ -148,20 +157,31 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     "--script", "script_path", required=True, type=click.Path(dir_okay=False), help="Script (TOML)."
 )
 @click.option(
-    "-o", "--output", "out", required=True, type=click.Path(),
+    "-o",
+    "--output",
+    "out",
+    required=True,
+    type=click.Path(),
     help="Output MCAP file (with --trials: a directory).",
-)  # fmt: skip
+)
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @click.option("--trials", type=click.IntRange(min=1), help="Record N demonstrations in perturbed scenes.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the trials.")
 @click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help="Perturb, as `dlovr run --vary`.")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True, help="Processes.")
 @cluster_option
-@_one_line
+@finishes_on_sigterm
 def record_cmd(
-    scene_ref: str | None, script_path: str, out: str, force: bool, trials: int | None, seed: int,
-    varies: tuple[str, ...], workers: int, cluster: str | None,
-) -> None:  # fmt: skip
+    scene_ref: str | None,
+    script_path: str,
+    out: str,
+    force: bool,
+    trials: int | None,
+    seed: int,
+    varies: tuple[str, ...],
+    workers: int,
+    cluster: str | None,
+) -> None:
     """Record a scripted demonstration headless to an MCAP file.
 
     An existing output file is refused unless --force. Ctrl-C or SIGTERM end the recording between
@@ -180,35 +200,47 @@ def record_cmd(
             raise UserError("--vary and --cluster need --trials N")
         if os.path.isdir(out):
             raise UserError(f"{out}: is a directory (a directory of recordings needs --trials N)")
-        _refuse_existing(out, force)
-        _, tracker = run_demonstration(scene_ref, script_path, out, "recording")
-        click.echo(f"wrote {out}: {_plural(len(tracker.kept), 'contact situation')}")
+        refuse_existing(out, force)
+        tracker = demonstrate(scene_ref, script_path, out, "recording")
+        click.echo(f"wrote {out}: {plural(len(tracker.kept), 'contact situation')}")
         return
     _record_trials(scene_ref, script_path, out, force, trials, seed, varies, workers, cluster)
 
 
 def _record_trials(
-    scene_ref: str | None, script_path: str, out: str, force: bool, n: int, seed: int,
-    varies: tuple[str, ...], workers: int, cluster: str | None,
-) -> None:  # fmt: skip
+    scene_ref: str | None,
+    script_path: str,
+    out: str,
+    force: bool,
+    n: int,
+    seed: int,
+    varies: tuple[str, ...],
+    workers: int,
+    cluster: str | None,
+) -> None:
     from pathlib import Path
 
     from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
-    from dlovr.execution.variation import VaryError, parse_varies
+    from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
     from dlovr.outputs import prepare_output_dir
     from dlovr.recording.bundle import SceneBundle
+    from dlovr.script import load_script
 
-    script = _script(script_path)
-    scene = _script_scene(script, scene_ref)
-    try:
-        variations = parse_varies(varies, scene)
-    except VaryError as e:
-        raise UserError(str(e)) from None
+    script = load_script(script_path)
+    scene = script_scene(script, scene_ref)
+    variations = parse_varies(varies, scene)
     if os.path.exists(out) and not os.path.isdir(out):
         raise UserError(f"{out}: exists and is not a directory")
-    setup = DemoSetup(scene, scene_pieces(scene), script, variations, seed, str(Path(out).resolve()),
-                      SceneBundle.from_path(scene.path).digest)  # fmt: skip
+    setup = DemoSetup(
+        scene,
+        scene_pieces(scene),
+        script,
+        variations,
+        seed,
+        str(Path(out).resolve()),
+        SceneBundle.from_path(scene.path).digest,
+    )
     existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
     if existing and not force:
         raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")
@@ -225,13 +257,13 @@ def _record_trials(
         f"{retried} retried"
     )
     if bad:
-        raise SystemExit(1)
+        raise SystemExit(EXIT_FAILED)
 
 
 @click.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")
 @click.argument("recording", type=click.Path(dir_okay=False))
 @click.option("--verify", is_flag=True, help="Compare every checkpoint bit for bit and the contact states.")
-@_one_line
+@finishes_on_sigterm
 def replay_cmd(recording: str, verify: bool) -> None:
     """Re-simulate a recording from its embedded scene and command stream.
 
@@ -240,7 +272,7 @@ def replay_cmd(recording: str, verify: bool) -> None:
     """
     from dlovr.recording import replay
 
-    with _progress(1, "replay") as bar:
+    with progress_bar(1, "replay") as bar:
         done = [0]
 
         def progress(k: int, total: int) -> None:
@@ -267,7 +299,7 @@ def replay_cmd(recording: str, verify: bool) -> None:
     "--format", "fmt", type=click.Choice(["table", "json", "csv"]), default="table", show_default=True
 )
 @click.option("--raw", is_flag=True, help="Every recorded change, not debounced.")
-@_one_line
+@finishes_on_sigterm
 def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     """Print a recording's contact situations and transitions (reads only the contact-state channel)."""
     import csv
@@ -281,7 +313,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
     if raw:
         rows = [
             {
-                "t": _t(p["t"]),
+                "t": rounded_time(p["t"]),
                 "topological": p["topological"],
                 "discrete": p["discrete"],
                 "classes": p.get("classes", []),
@@ -293,8 +325,8 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
         kept = kept_states(rec)
         rows = [
             {
-                "t": _t(k.t),
-                "duration": _t(k.duration),
+                "t": rounded_time(k.t),
+                "duration": rounded_time(k.duration),
                 "topological": k.topological or "",
                 "discrete": k.situation.format(),
                 "classes": list(classes),
@@ -318,7 +350,7 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="Recovered file.")
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
-@_one_line
+@finishes_on_sigterm
 def recover_cmd(broken: str, out: str, force: bool) -> None:
     """Rescue every intact part of a damaged recording or of one whose writer was killed.
 
@@ -333,11 +365,11 @@ def recover_cmd(broken: str, out: str, force: bool) -> None:
 
     if Path(broken).resolve() == Path(out).resolve():
         raise RecordingError(f"{out}: recover writes a new file; choose another output path")
-    _refuse_existing(out, force)
+    refuse_existing(out, force)
     with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
         rep = recover(broken, tmp)
     click.echo(
-        f"wrote {out}: {_plural(rep.messages, 'message')}, {_plural(rep.attachments, 'attachment')}, "
+        f"wrote {out}: {plural(rep.messages, 'message')}, {plural(rep.attachments, 'attachment')}, "
         f"{rep.last_time_s:.2f} s"
     )
     for line in rep.skipped:

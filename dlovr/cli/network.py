@@ -11,12 +11,7 @@ from pathlib import Path
 import click
 
 from dlovr.batch import cluster_option
-
-
-class NetworkInputError(click.ClickException):
-    """A problem with the user's input: printed as one line, exit code 2 (as ``dlovr.cli.UserError``)."""
-
-    exit_code = 2
+from dlovr.cli.common import UserError
 
 
 def _write_text(path: str, text: str) -> None:
@@ -24,7 +19,7 @@ def _write_text(path: str, text: str) -> None:
         with open(path, "w", encoding="utf-8") as fh:
             fh.write(text)
     except OSError as e:
-        raise NetworkInputError(f"{path}: cannot write: {e.strerror}") from None
+        raise UserError(f"{path}: cannot write: {e.strerror}") from None
 
 
 @click.command("network", short_help="Merge recordings of one scene into a transition network.")
@@ -46,15 +41,14 @@ def network_cmd(
 ) -> None:
     """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
     situations, transitions with class, count, probability, durations, gripper motions and risk."""
-    from dlovr.model.network import NetworkError
     from dlovr.model.planning import NetworkProgram
-    from dlovr.network_html import network_html
-    from dlovr.recording import RecordingError, find_recordings
+    from dlovr.recording import find_recordings
     from dlovr.recording.demonstrations import network_from_recordings
+    from dlovr.recording.network_html import network_html
 
     paths = find_recordings(recordings, in_order=True)  # the first is the reference if it reached the goal
     if not paths:
-        raise NetworkInputError(f"no recordings found in {', '.join(recordings)}")
+        raise UserError(f"no recordings found in {', '.join(recordings)}")
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
         paths = [p.resolve() for p in paths]
     # a progress bar on a terminal only: elsewhere an error stays the one line on stderr
@@ -67,10 +61,7 @@ def network_cmd(
             bar.update(k - done[0])
             done[0] = k
 
-        try:
-            net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
-        except (NetworkError, RecordingError) as e:
-            raise NetworkInputError(str(e)) from None
+        net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
     _write_text(out, net.dumps())
     if html_out:
         _write_text(html_out, network_html(net, NetworkProgram(net)))
@@ -84,23 +75,14 @@ def network_cmd(
 
 def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None) -> None:
     """``dlovr compile --network NET.json -o PROGRAM.json``: write the network program."""
-    from dlovr.model.network import Network, NetworkError
+    from dlovr.model.network import load_network
     from dlovr.model.planning import NetworkProgram
 
     if inputs:
-        raise NetworkInputError("--network compiles a network file; give no recordings with it")
+        raise UserError("--network compiles a network file; give no recordings with it")
     if out is None:
-        raise NetworkInputError("--network needs -o PROGRAM.json")
-    try:
-        text = Path(network_path).read_text(encoding="utf-8")
-    except OSError as e:
-        raise NetworkInputError(f"{network_path}: cannot read: {e.strerror}") from None
-    except UnicodeDecodeError:
-        raise NetworkInputError(f"{network_path}: not a text file (a network JSON?)") from None
-    try:
-        prog = NetworkProgram(Network.loads(text), name=Path(out).stem, source=Path(network_path).name)
-    except NetworkError as e:
-        raise NetworkInputError(f"{network_path}: {e}") from None
+        raise UserError("--network needs -o PROGRAM.json")
+    prog = NetworkProgram(load_network(network_path), name=Path(out).stem, source=Path(network_path).name)
     _write_text(out, prog.dumps())
     plan = prog.plan_from_start()
     reach = plan[0].reach_probability if plan else 0.0

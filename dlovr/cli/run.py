@@ -1,0 +1,357 @@
+"""``dlovr run``: execute a compiled program in simulation, once or in perturbed trials."""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+import click
+
+from dlovr.batch import cluster_option
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError
+
+
+def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
+    if raw is None:
+        return None
+    try:
+        x = int(raw) if integer else float(raw)
+    except ValueError:
+        kind = "an integer" if integer else "a number"
+        raise UserError(f"{name}: {raw!r} is not {kind}") from None
+    if not math.isfinite(x) or (minimum is not None and x < minimum):
+        bound = f">= {minimum:g}" if minimum is not None else "finite"
+        raise UserError(f"{name}: must be {bound}, got {raw}")
+    return x
+
+
+_PATH_HELP = (
+    "Motion of a macro: the demonstration's recorded stretch (demo) or the screw between the program's "
+    "poses (program); auto: demo when the recording is found."
+)
+_VARY_HELP = (
+    "Perturb the scene per trial: dlo.length=10%, dlo.young=0.5..2, dlo.friction=30%, "
+    "objects.pos=0.005 (metres), gripper.pos=0.005 (repeatable; see dlovr.execution.variation)."
+)
+
+
+@click.command("run", short_help="Execute a program in simulation, or run robustness trials.")
+@click.argument("program_path", metavar="PROGRAM.json")
+@click.option("--scene", "scene_ref", metavar="NAME|PATH", help="Scene (default: the program's).")
+@click.option(
+    "--detect",
+    metavar="force|oracle",
+    default="force",
+    show_default=True,
+    help="End macros by force detection, or by the contact tracker (oracle).",
+)
+@click.option("--noise", "noise_raw", metavar="N", help="Force sensor noise, std. dev. in N (default 0).")
+@click.option(
+    "--path",
+    "path_mode",
+    metavar="auto|demo|program",
+    default="auto",
+    show_default=True,
+    help=_PATH_HELP,
+)
+@click.option("--recording", metavar="FILE", help="The demonstration (default: the program's source).")
+@click.option(
+    "--frame",
+    metavar="world|relative",
+    default="world",
+    show_default=True,
+    help="Frame the demonstrated motion is repeated in.",
+)
+@click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
+@click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
+@click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
+@click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
+@click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
+@click.option("--baseline", metavar="replay", help="Also replay the demonstration open loop.")
+@click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    metavar="DIR|FILE",
+    help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
+)
+@click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
+@cluster_option
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
+def run_cmd(**given: Any) -> None:
+    """Execute PROGRAM.json in simulation: each macro a guarded motion ended by the force detector of
+    its class (or, with --detect oracle, by the contact tracker), judged against the tracker.
+
+    Prints a table per macro (class, detected at, true transition at, latency, outcome) and the result.
+    A network program (from `dlovr compile --network`) runs with sensing and re-planning: after each
+    detection the sensed contact vector picks the node reached, and the planner chooses from there; a
+    situation outside the network stops the run (dlovr.execution.network_run).
+    Exit code: 0 the goal was reached, 1 the run failed (a macro's transition never came, the goal
+    was not reached, the simulation diverged), 2 bad input.
+
+    With --trials N -o DIR: N runs in scenes perturbed by --vary (deterministic from --seed), with
+    --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
+    summary.json and plot.png. The trials run on --workers local processes, or with --cluster on Ray
+    (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
+    the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
+
+    Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
+    events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
+    `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
+    writes each trial's run as DIR/trial_KKK.mcap.
+    """
+    a = RunArgs(**given)
+    _check_choices(a)
+    n = _numbers(a)
+    _check_combinations(a, n)
+    from dlovr.model.planning import NetworkProgram, load_runnable
+
+    runnable = load_runnable(a.program_path)  # a ProgramError is an InputError: one line, exit 2
+    if isinstance(runnable, NetworkProgram):
+        if a.baseline or a.recording or a.path_mode == "demo":
+            why = "a network program has no single demonstration to replay or follow"
+            raise UserError(f"{a.program_path}: {why}")
+        _network(runnable, a, n)
+        return
+    program = runnable
+    scene, track = _scene_track(program, a)
+    opts = _exec_options(a, n)
+    use_track = a.path_mode != "program" and track is not None
+    if n.trials is not None:
+        _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline)), a, n)
+        return
+    _single(program, scene, opts, track if use_track else None, a.out, a.as_json)
+
+
+@dataclass(frozen=True)
+class RunArgs:
+    """The options of ``dlovr run`` as given (numbers still text: :func:`_numbers` checks them)."""
+
+    program_path: str
+    scene_ref: str | None
+    detect: str
+    noise_raw: str | None
+    path_mode: str
+    recording: str | None
+    frame: str
+    settle_raw: str | None
+    allowance_raw: str | None
+    trials_raw: str | None
+    seed_raw: str
+    varies: tuple[str, ...]
+    baseline: str | None
+    workers_raw: str
+    out: str | None
+    record: bool
+    cluster: str | None
+    as_json: bool
+
+
+@dataclass(frozen=True)
+class Numbers:
+    """The numeric options, checked: noise (N), allowance (x demonstrated), settle (s), trials,
+    seed, workers."""
+
+    noise: float
+    allowance: float
+    settle: float
+    trials: int | None
+    seed: int
+    workers: int
+
+
+@dataclass(frozen=True)
+class TrialsArgs:
+    """What the trials of a program run: the program, its scene, the demonstration's track (or
+    None), whether macros follow it, the executor's options, whether the open-loop replay runs too."""
+
+    program: Any
+    scene: Any
+    track: Any
+    use_track: bool
+    opts: Any
+    baseline: bool
+
+
+def _numbers(a: RunArgs) -> Numbers:
+    """The numeric options, each checked (one line naming the option when bad)."""
+    return Numbers(
+        noise=_number("--noise", a.noise_raw, minimum=0.0) or 0.0,
+        allowance=_number("--allowance", a.allowance_raw, minimum=1.0) or 1.5,
+        settle=_number("--settle", a.settle_raw, minimum=0.0) or 0.0,
+        trials=_number("--trials", a.trials_raw, integer=True, minimum=1),
+        seed=_number("--seed", a.seed_raw, integer=True, minimum=0),
+        workers=_number("--workers", a.workers_raw, integer=True, minimum=1),
+    )
+
+
+def _check_choices(a: RunArgs) -> None:
+    """The options that take one of a few words."""
+    for name, value, allowed in (
+        ("--detect", a.detect, ("force", "oracle")),
+        ("--path", a.path_mode, ("auto", "demo", "program")),
+        ("--frame", a.frame, ("world", "relative")),
+        ("--baseline", a.baseline or "replay", ("replay",)),
+    ):
+        if value not in allowed:
+            raise UserError(f"{name}: {value!r} is not one of {', '.join(allowed)}")
+
+
+def _check_combinations(a: RunArgs, n: Numbers) -> None:
+    """Options that need --trials, and the output each mode writes."""
+    if n.trials is None and (a.varies or a.baseline):
+        raise UserError("--vary and --baseline need --trials N")
+    if n.trials is None and a.cluster:
+        raise UserError("--cluster is for --trials")
+    if n.trials is None and a.record:
+        raise UserError("--record is for --trials (a single run is recorded with -o run.mcap)")
+    if n.trials is None and a.out and not a.out.endswith(".mcap"):
+        raise UserError(f"-o {a.out}: a single run is recorded to an .mcap file (a directory needs --trials)")
+    if n.trials is not None and not a.out:
+        raise UserError("--trials needs -o DIR for its results")
+
+
+def _exec_options(a: RunArgs, n: Numbers) -> Any:
+    """The executor's options of a program run."""
+    from dlovr.execution.executor import ExecOptions
+
+    try:
+        return ExecOptions(
+            detect=a.detect, noise=n.noise, allowance=n.allowance, frame=a.frame, start_settle=n.settle
+        )
+    except ValueError as e:  # options the executor refuses
+        raise UserError(str(e)) from None
+
+
+def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
+    """The scene ``program`` runs in and its demonstration's track (None when not needed, or not
+    found and not required)."""
+    from dlovr.execution.run import find_recording, load_track, resolve_scene
+
+    try:
+        rec_path = find_recording(program, a.recording)
+        if a.recording is not None and (rec_path is None or not rec_path.is_file()):
+            raise UserError(f"{a.recording}: no such recording")
+        scene = resolve_scene(program, a.scene_ref, rec_path)
+        track = None
+        if a.path_mode in ("auto", "demo") or a.baseline:
+            if rec_path is None:
+                if a.path_mode == "demo" or a.baseline:
+                    why = f"its demonstration {program.source!r} was not found: give --recording"
+                    raise UserError(f"{a.program_path}: {why}")
+            else:
+                track = load_track(rec_path)
+    except ValueError as e:
+        raise UserError(str(e)) from None
+    return scene, track
+
+
+def _single(program: Any, scene: Any, opts: Any, track: Any, out: str | None, as_json: bool) -> None:
+    """One run of ``program`` (recorded to ``out`` when given); exit 0 when it reached the goal."""
+    import json
+
+    from dlovr.execution.engine import format_result
+
+    if out:
+        from dlovr.execution.recorded import record_run
+        from dlovr.outputs import output_error, prepare_output
+
+        try:
+            prepare_output(out)
+            res = record_run(program, scene, out, opts, track=track)
+        except OSError as e:
+            raise UserError(str(output_error(out, e))) from None
+    else:
+        from dlovr.execution.run import run_program
+
+        res = run_program(program, scene, opts, track=track)
+    if as_json:
+        click.echo(json.dumps(res.to_json(), indent=1))
+    else:
+        click.echo(format_result(res))
+    sys.exit(EXIT_OK if res.success else EXIT_FAILED)
+
+
+def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
+    """``dlovr run NETWORK-PROGRAM.json``: one run (optionally recorded), or trials."""
+    import json
+
+    from dlovr.execution.engine import format_result
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.network_run import network_scene
+    from dlovr.execution.run import run_program
+
+    try:
+        scene = network_scene(nprog, a.scene_ref)
+        opts = ExecOptions(detect=a.detect, noise=n.noise, allowance=n.allowance)
+    except ValueError as e:  # a ProgramError, a SceneError, or options the executor refuses
+        raise UserError(str(e)) from None
+    if n.trials is not None:
+        _trials(TrialsArgs(nprog, scene, None, False, opts, False), a, n)
+        return
+    out = a.out
+    if out:
+        from dlovr.execution.recorded import record_run
+
+        try:
+            res = record_run(nprog, scene, out, opts)
+        except OSError as e:
+            raise UserError(f"{out}: cannot write: {e.strerror}") from None
+    else:
+        res = run_program(nprog, scene, opts)
+    click.echo(json.dumps(res.to_json(), indent=1) if a.as_json else format_result(res))
+    sys.exit(EXIT_OK if res.success else EXIT_FAILED)
+
+
+def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
+    """``--trials N -o DIR``: the trials run, their results written, a summary printed."""
+    from pathlib import Path
+
+    from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
+    from dlovr.execution.variation import parse_varies
+    from dlovr.geometry import scene_pieces
+
+    out, trials = a.out or "", n.trials or 0  # both given (see _check_combinations)
+    variations = parse_varies(a.varies, t.scene)
+    if Path(out).exists() and not Path(out).is_dir():
+        raise UserError(f"{out}: exists and is not a directory")
+    pieces = scene_pieces(t.scene)
+    record_dir = str(Path(out).resolve()) if a.record else None
+    setup = TrialSetup(
+        program=t.program,
+        scene=t.scene,
+        pieces=pieces,
+        track=t.track,
+        variations=variations,
+        seed=n.seed,
+        opts=t.opts,
+        baseline=t.baseline,
+        use_track=t.use_track,
+        record_dir=record_dir,
+    )
+    results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
+    summary = summarize(results, setup)
+    write_outputs(out, results, summary)
+    _print_summary(summary, trials, out)
+
+
+def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
+    """The trials' summary in a few lines."""
+    rate = summary["program_success_rate"]
+    line = f"program reached the goal in {rate:.0%} of {trials} trials"
+    if summary["openloop_success_rate"] is not None:
+        line += f", open-loop replay in {summary['openloop_success_rate']:.0%}"
+    lat = summary["median_latency_s"]
+    line += f"; median detection latency {lat * 1000:.0f} ms" if lat is not None else "; no detection latency"
+    fr = summary["false_detection_rate"]
+    if fr is not None:
+        line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
+        line += f" ({fr:.1%})"
+    click.echo(line)
+    if summary["retried_trials"] or summary["lost_trials"]:
+        lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
+        click.echo(lost)
+    click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
