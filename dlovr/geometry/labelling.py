@@ -122,7 +122,9 @@ class _Labelling(_Classifier):
         """:meth:`pair_hits`, :meth:`label_slack` and the same slack per pair split by direction
         (:class:`LabelBudgets`), computed together."""
         out = self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, tuple(thresholds))
-        return out  # type: ignore[return-value]
+        slack, budgets = out[5], out[6]
+        assert slack is not None and budgets is not None  # computed: thresholds were given
+        return (*out[:5], slack, budgets)
 
     def _pair_hits(
         self,

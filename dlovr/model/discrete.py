@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 
@@ -51,6 +51,7 @@ class Stability(Enum):
 
 
 EnvType = Literal["F", "E^P", "E^L", "V", "G", "N"]
+StabilityLetter = Literal["", "S", "T", "I"]  # "" for F, E^P, G and N
 
 
 @dataclass(frozen=True, order=True)
@@ -63,7 +64,7 @@ class DiscreteState:
 
     dlo: Literal["V", "E"]
     env: EnvType
-    stability: Literal["", "S", "T", "I"] = ""
+    stability: StabilityLetter = ""
 
     def __post_init__(self) -> None:
         if self.env in ("E^L", "V"):
@@ -150,7 +151,9 @@ def _state(name: str) -> DiscreteState:
     m = re.fullmatch(r"([VE])/(F|E\^P|E\^L|V|G|N)([STI]?)", name)
     if not m:
         raise ValueError(f"unknown discrete state {name!r}")
-    return DiscreteState(m.group(1), m.group(2), m.group(3))  # type: ignore[arg-type]
+    # the pattern admits only the letters of the three Literal types
+    dlo, env, stab = cast("tuple[Literal['V', 'E'], EnvType, StabilityLetter]", m.groups())
+    return DiscreteState(dlo, env, stab)
 
 
 STATES: dict[str, DiscreteState] = {
@@ -308,7 +311,7 @@ def classify_contact(
 
 def _classify_faces(
     dlo: Literal["V", "E"], facts: ContactFacts, params: ModelParams, gripper: bool
-) -> DiscreteState | tuple[str, np.ndarray]:
+) -> DiscreteState | tuple[StabilityLetter, np.ndarray]:
     """Steps 1-3 of :func:`classify_contact`: the state, or for an E contact on an edge (whose point
     or line decision needs the DLO vector, step 4) its stability class and the real faces' normals."""
     if gripper:
@@ -338,6 +341,7 @@ def _classify_faces(
                 raise ValueError(f"no pair fact for faces {a} and {b} (concave or convex?)")
             relevant.append(p)
 
+    stab: StabilityLetter
     if any(not p.concave for p in relevant):
         stab = "I"
     elif any(p.opening_deg >= params.critical_angle_deg for p in relevant):
@@ -346,9 +350,9 @@ def _classify_faces(
         stab = "S"
 
     if rank >= 3:
-        return DiscreteState(dlo, "V", stab)  # type: ignore[arg-type]
+        return DiscreteState(dlo, "V", stab)
     if dlo == "V":
-        return DiscreteState("V", "E^L", stab)  # type: ignore[arg-type]
+        return DiscreteState("V", "E^L", stab)
     return stab, normals
 
 
@@ -361,13 +365,15 @@ def _crease(facts: ContactFacts, normals: np.ndarray) -> np.ndarray:
 _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contact?)"
 
 
-def _point_or_line(stab: str, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams) -> DiscreteState:
+def _point_or_line(
+    stab: StabilityLetter, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams
+) -> DiscreteState:
     """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
     ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease."""
     d = _unit(dlo_vector)
     angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
     if angle <= params.parallel_tol_deg:
-        return DiscreteState("E", "E^L", stab)  # type: ignore[arg-type]
+        return DiscreteState("E", "E^L", stab)
     return DiscreteState("E", "E^P")
 
 
@@ -450,7 +456,7 @@ class DiscreteSituation:
 #: What a contact's discrete contact takes from the scene facts alone: the state (for an E contact on
 #: an edge, its stability class), the crease of such an edge (else ``None``), the real faces, the
 #: contact vector and the pinch axis.
-_Parts = tuple[DiscreteState | str, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
+_Parts = tuple[DiscreteState | StabilityLetter, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
 
 
 def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Parts:
@@ -477,11 +483,11 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
 def _from_parts(parts: _Parts, contact: Contact, params: ModelParams) -> DiscreteContact:
     """The discrete contact of ``contact`` from its :data:`_Parts`."""
     st, crease, real, vec, axis = parts
-    if crease is not None:
+    if crease is not None and not isinstance(st, DiscreteState):
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
-        st = _point_or_line(st, crease, contact.dlo.vector, params)  # type: ignore[arg-type]
-    return DiscreteContact(st, real, vec, contact.dlo.span, axis)  # type: ignore[arg-type]
+        st = _point_or_line(st, crease, contact.dlo.vector, params)
+    return DiscreteContact(st, real, vec, contact.dlo.span, axis)
 
 
 def discretize_contact(

@@ -551,7 +551,7 @@ def _edge_track(
     mine = [k for k in have if xs[k][0] == reference]
     k = mine[0] if mine else have[representative([xs[i][2].world for i in have])]
     a, b, _ = steps[k]
-    return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)  # type: ignore[arg-type]
+    return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)
 
 
 def sensed_vectors(

@@ -47,7 +47,7 @@ class EdgeTrack:
         same = (self.demonstration, self.t0) == (other.demonstration, other.t0)
         return same and all(np.array_equal(a, b) for a, b in pairs)
 
-    __hash__ = None  # type: ignore[assignment]
+    # unhashable: a class that defines __eq__ alone gets __hash__ = None (and eq=False keeps it)
 
     def to_json(self) -> dict[str, Any]:
         """Written as stored: :func:`stretch` rounds to what JSON keeps, so a round trip is exact."""

@@ -242,7 +242,9 @@ class Simulator:
 
     # -- gripper ------------------------------------------------------------------------------------
 
-    def set_target(self, pos: Sequence[float], quat: Sequence[float] | None = None) -> None:
+    def set_target(
+        self, pos: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray | None = None
+    ) -> None:
         """Command the gripper pose (world ``pos``, ``quat`` wxyz; ``None`` keeps the orientation)."""
         p = np.asarray(pos, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
