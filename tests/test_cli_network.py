@@ -148,7 +148,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path, args, message):
     r = subprocess.run(
         [sys.executable, "-m", "dlovr", *args], capture_output=True, text=True, cwd=tmp_path,
         env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])},
-    )  # fmt: skip
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and message in r.stderr, r.stderr
 

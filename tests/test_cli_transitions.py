@@ -134,7 +134,7 @@ def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
         ({"faces": good_faces, "pairs": {"a": "box.F1"}}, "pairs:"),
         ({"faces": good_faces, "pairs": [pair]}, "pairs[0].concave"),
         ({"faces": good_faces, "dlo_vectors": {"x": [1, 0, 0]}}, "dlo_vectors"),
-    ):  # fmt: skip
+    ):
         facts.write_text(json.dumps(raw))
         r = subprocess.run(
             [sys.executable, "-m", "dlovr", "transitions", str(seq), "--facts", str(facts)],
@@ -188,7 +188,7 @@ def test_timed_lines_are_debounced_and_show_when_each_kept_situation_began(tmp_p
     data = json.loads(invoke("transitions", str(f), "--json").output)
     assert [(d["line"], d["t"], d["label"]) for d in data] == [
         (2, 0.0, "-"), (3, 0.5, "E"), (8, 1.0, "I"), (10, 1.3, "S,E"),
-    ]  # fmt: skip
+    ]
     assert data[3]["through_free"] and data[3]["duration"] == 0.7 and data[1]["duration"] == 0.5
     # with the hold and flight times given: the 2 ms excursion is kept, the flight is not one
     r = invoke("transitions", str(f), "--json", "--hold", "0.001", "--flight", "0.05")

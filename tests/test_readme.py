@@ -28,7 +28,7 @@ def test_readme_python_example_runs(code):
 SH_BLOCKS = [
     b for b in re.findall(r"```sh\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
     if "dlovr transitions" in b and "<<'X'" in b
-]  # fmt: skip
+]
 
 
 def test_readme_has_the_transitions_examples_with_and_without_facts():

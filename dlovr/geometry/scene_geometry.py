@@ -66,7 +66,7 @@ class SceneGeometry(_Labelling, _PairFacts):
                 pieces=None if pieces is None else pieces[o.name],
             )
             for o in scene.objects
-        ]  # fmt: skip
+        ]
         return cls(objs, scene.dlo.radius, scene.params)
 
     @classmethod

@@ -163,7 +163,7 @@ STATES: dict[str, DiscreteState] = {
         "E/E^LT", "E/VT", "V/E^LT", "V/VT",
         "E/E^LI", "E/VI", "V/E^LI", "V/VI",
     )
-}  # fmt: skip
+}
 """The 15 discrete contact states of Fig. 8, by name."""
 
 AUX_STATES: dict[str, DiscreteState] = {n: _state(n) for n in ("V/G", "E/G", "V/N", "E/N")}
@@ -553,7 +553,7 @@ _DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$"
 #: of three faces and a block edge of two, five faces); no upper bound.
 FACE_COUNTS: dict[str, tuple[int, int | None]] = {
     "F": (1, None), "E^P": (2, None), "E^L": (2, None), "V": (3, None)
-}  # fmt: skip
+}
 #: What a contact on each kind of environment is, for messages.
 CONTACT_KIND = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}
 
@@ -616,4 +616,4 @@ __all__ = [
     "Stability", "classify_contact", "contact_vector", "discretize", "discretize_contact", "face_object",
     "parse_any",
     "parse_discrete_contact", "parse_discrete_situation", "pinch_axis", "state",
-]  # fmt: skip
+]

@@ -82,7 +82,7 @@ def stretch(commands: PoseTrack, demonstration: int, t0: float, t1: float) -> Ed
     pos, quat = zip(*(commands.at(t) for t in times), strict=True)
     rel = np.round(np.array(times) - t0, 6)
     return EdgeTrack(demonstration, round(float(t0), 6), rel, np.round(np.array(pos, float), 7),
-                     np.round(np.array(quat, float), 8))  # fmt: skip
+                     np.round(np.array(quat, float), 8))
 
 
 def representative(displacements: Sequence[Sequence[float]]) -> int:

@@ -400,7 +400,7 @@ class DemoRecorder:
             self.rec.frame(
                 k, record.points, record.gripper_pos, record.gripper_quat, self._radius,
                 self._obstacles if first else (),
-            )  # fmt: skip
+            )
 
     def close(self) -> Path:
         """Finish the file (with a final checkpoint at the last step); return its path. Idempotent."""

@@ -223,7 +223,7 @@ def test_compile_joins_a_running_cluster_at_its_address(tmp_path):
 
     root = Path(dlovr.__file__).parents[1]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
-           "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}  # fmt: skip
+           "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
     env.pop("RAY_ADDRESS", None)
     pipe = {"stdin": subprocess.PIPE, "stdout": subprocess.PIPE, "text": True, "env": env}
     head = subprocess.Popen([sys.executable, "-c", HEAD], **pipe)
@@ -346,7 +346,7 @@ def _killing(monkeypatch, tmp_path: Path, modes: dict[int, str]) -> None:
 
     def run_batch_killing(fn, tasks, **kwargs):
         tasks = [Task(t.key, (fn, modes.get(i, ""), str(tmp_path / f"killed{i}"), *t.args), t.kwargs)
-                 for i, t in enumerate(tasks)]  # fmt: skip
+                 for i, t in enumerate(tasks)]
         return real(call_or_die, tasks, **kwargs)
 
     monkeypatch.setattr(dlovr.batch, "run_batch", run_batch_killing)
@@ -360,7 +360,7 @@ def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_pa
     prog = _touch_program(tmp_path)
     _killing(monkeypatch, tmp_path, {1: "once", 2: "always"})
     r = cli("run", prog, "--scene", "table", "--trials", "3", "--seed", "5", "--vary", "dlo.length=5%",
-            "--workers", "2", "-o", tmp_path / "trials")  # fmt: skip
+            "--workers", "2", "-o", tmp_path / "trials")
     assert r.exit_code == 0, r.output
     assert "2 trials retried (a worker died), 1 lost" in r.output
     summary = json.loads((tmp_path / "trials" / "summary.json").read_text())
@@ -373,7 +373,7 @@ def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_pa
         (tmp_path / f"killed{k}").unlink()
     script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
     r = cli("record", "--script", script, "--trials", "3", "--seed", "3", "--vary", "dlo.young=0.5..2",
-            "--workers", "2", "-o", tmp_path / "demos")  # fmt: skip
+            "--workers", "2", "-o", tmp_path / "demos")
     assert r.exit_code == 1 and "1 diverged or failed, 2 retried" in r.output, r.output
     demos = json.loads((tmp_path / "demos" / "demos.json").read_text())["demonstrations"]
     assert [d["attempts"] for d in demos] == [1, 2, 3] and demos[2]["path"] is None
@@ -383,7 +383,7 @@ def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_pa
 def test_run_trials_on_ray_give_the_same_outcomes_as_local_processes(ray_instance, tmp_path):
     prog = _touch_program(tmp_path)
     args = ["run", prog, "--scene", "table", "--trials", "3", "--seed", "5", "--baseline", "replay",
-            "--vary", "dlo.length=10%", "--vary", "objects.pos=0.004"]  # fmt: skip
+            "--vary", "dlo.length=10%", "--vary", "objects.pos=0.004"]
     local = cli(*args, "--workers", "2", "-o", tmp_path / "local")
     on_ray = cli(*args, "--cluster", "local", "-o", tmp_path / "ray")
     assert local.exit_code == 0 and on_ray.exit_code == 0, local.output + on_ray.output

@@ -13,7 +13,7 @@ from dlovr.model.program import PoseTrack, TimedSituation, compile_program
 
 
 def series(step_at: float, before: np.ndarray, after: np.ndarray, noise: float = 0.0, dt: float = 0.01,
-           t_end: float = 2.0, seed: int = 0) -> WrenchSeries:  # fmt: skip
+           t_end: float = 2.0, seed: int = 0) -> WrenchSeries:
     """A wrench series holding ``before`` (N) until ``step_at`` s, then ``after``, with noise."""
     t = np.arange(0.0, t_end, dt)
     f = np.where((t < step_at)[:, None], np.asarray(before, float), np.asarray(after, float))

@@ -81,7 +81,7 @@ def test_nodes_count_visits_and_held_times_exactly():
     net = small_network()
     assert [(n.id, n.situation) for n in net.nodes] == [
         ("n1", FREE), ("n2", TIP), ("n3", GROOVE), ("n4", LIE)
-    ]  # fmt: skip
+    ]
     by = {n.id: n for n in net.nodes}
     assert [by[k].visits for k in ("n1", "n2", "n3", "n4")] == [3, 2, 3, 2]
     assert by["n1"].total_time == 4.0 and by["n1"].mean_time == pytest.approx(4.0 / 3)
@@ -129,7 +129,7 @@ def test_edge_motions_are_mean_and_spread_of_the_demonstrated_displacements():
 def test_risk_per_class():
     assert [edge_risk(c) for c in [(), ("C",), ("E",), ("T",), ("I",), ("S", "E"), ("T", "E")]] == [
         "none", "none", "none", "caution", "risky", "risky", "caution"
-    ]  # fmt: skip
+    ]
 
 
 def test_goal_is_the_most_common_last_situation():
@@ -354,7 +354,7 @@ def test_merged_detections_take_the_median_of_the_derived_parameters():
 
     def det(thr: float, how: str = "derived: 40% of the step") -> Detection:
         return Detection("E", "force_along_contact_vector", {"force_threshold_n": thr, "max_angle_deg": 30.0},
-                         {"force_threshold_n": how, "max_angle_deg": "default: E keeps it"})  # fmt: skip
+                         {"force_threshold_n": how, "max_angle_deg": "default: E keeps it"})
 
     (m,) = merge_detections([[det(0.1)], [det(0.3)], [det(0.2)], [det(0.5, "default: no wrench signal")]])
     assert m.params == {"force_threshold_n": 0.2, "max_angle_deg": 30.0}  # the default one left out
@@ -382,7 +382,7 @@ def test_each_edge_keeps_the_reference_demonstrations_track_else_the_representat
 
     lie, groove = [FREE, TIP, LIE], [FREE, GROOVE]
     demos = [d("A", groove, 0.05), d("B", lie, 0.01), d("C", lie, 0.02), d("D", groove, 0.03),
-             d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]  # fmt: skip
+             d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]
     net = build_network(demos)
     assert net.goal == net.locate(LIE)
     paths = [["n1", "n4"], ["n1", "n3"], ["n1", "n2", "n3"], ["n1", "n2", "n3"]]

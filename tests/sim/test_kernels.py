@@ -81,4 +81,4 @@ def test_records_and_states_made_without_init_are_the_constructors_objects():
         assert list(vars(fast)) == [f.name for f in fields] == list(vars(slow))
         assert all(vars(fast)[k] is vars(slow)[k] for k in vars(slow))
         with pytest.raises(dataclasses.FrozenInstanceError):
-            fast.step = 0  # type: ignore[misc]
+            fast.step = 0
