@@ -213,6 +213,7 @@ ray.shutdown()
 """
 
 
+@pytest.mark.slow
 def test_compile_joins_a_running_cluster_at_its_address(tmp_path):
     """``--cluster HOST:PORT`` joins a cluster started elsewhere (here: another process, with token
     authentication as Ray sets it up by default, the token given to both as README says): the
@@ -352,6 +353,7 @@ def _killing(monkeypatch, tmp_path: Path, modes: dict[int, str]) -> None:
     monkeypatch.setattr(dlovr.batch, "run_batch", run_batch_killing)
 
 
+@pytest.mark.slow
 def test_run_and_record_trials_count_retried_and_lost_trials(monkeypatch, tmp_path):
     """A trial whose worker is killed once runs again; one killed on every attempt is a failed trial;
     ``run --trials`` and ``record --trials`` say how many of each (summary.json, demos.json, stdout)."""

@@ -211,6 +211,7 @@ def samples(tmp_path_factory) -> dict[tuple[str, str], tuple[Path, str]]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", ["crc", "no-crc"])
 @pytest.mark.parametrize("sample", [p.name for p in SAMPLES])
 @SAMPLE_FUZZ
@@ -250,6 +251,7 @@ def test_fuzz_a_sample_recording_through_replay_verify_and_compile(m, variant, s
     shutil.rmtree(bad.parent)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("m", [("flip", 5000, 0x10), ("zero", 30000, 500), ("truncate", 60000, 0)])
 def test_damaged_files_through_the_real_command_line(short, tmp_path, m):
     bad = tmp_path / "bad.mcap"
