@@ -7,6 +7,7 @@ import os
 import shutil
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from batch_tasks import always_die, call_or_die, die_once, fail_on, seeded, wait_for
@@ -86,7 +87,7 @@ def test_a_worker_that_dies_mid_task_gets_its_task_run_again(tmp_path, how):
 def test_a_task_whose_worker_always_dies_is_reported_failed(capsys):
     res = list(run_batch(always_die, seed_tasks(2), workers=2, retries=1))
     bad = next(r for r in res if r.key == "seed2")
-    assert not bad.ok and bad.attempts == 2 and "worker lost on each of 2 attempts" in bad.error
+    assert not bad.ok and bad.attempts == 2 and "worker lost on each of 2 attempts" in (bad.error or "")
     assert sum(r.ok for r in res) == 5 and summarize(res).failed == 1
     err = capsys.readouterr().err
     assert "running it again" in err and "giving up" in err  # reported as it happens
@@ -184,7 +185,7 @@ def test_ray_runs_a_killed_workers_task_again(ray_instance, tmp_path):
 def test_ray_reports_a_task_whose_worker_always_dies(ray_instance):
     res = run(always_die, seed_tasks(0), cluster="local", retries=1)
     bad = next(r for r in res if r.key == "seed0")
-    assert not bad.ok and bad.attempts == 2 and "WorkerCrashedError" in bad.error
+    assert not bad.ok and bad.attempts == 2 and "WorkerCrashedError" in (bad.error or "")
     assert summarize(res).ok == 5
 
 
@@ -195,7 +196,8 @@ def test_ray_streams_results_in_order_of_completion(ray_instance, tmp_path):
 
 
 def test_ray_and_local_processes_draw_the_progress_bar(ray_instance, capsys):
-    for kw in ({"cluster": "local"}, {"workers": 2}):
+    options: list[dict[str, Any]] = [{"cluster": "local"}, {"workers": 2}]
+    for kw in options:
         res = list(run_batch(seeded, seed_tasks(), label="seeding the walks", **kw))
         assert len(res) == len(SEEDS)
         assert "seeding the walks" in capsys.readouterr().err, kw

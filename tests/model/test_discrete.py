@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -222,7 +223,7 @@ def corner_facts(concave=True, vec=(1, 1, 1), third_opening=90.0):
     return ContactFacts(fs, ps, vec)
 
 
-CASES = {
+CASES: dict[str, tuple[Literal["V", "E"], ContactFacts]] = {
     # 90° groove (table top + box side), DLO along it
     "E/E^LS": ("E", groove_facts(90)),
     "V/E^LS": ("V", groove_facts(90)),
@@ -352,6 +353,7 @@ def test_discretize_a_whole_situation():
     )  # across the edge (along y)
     d = discretize(type(topo)(tuple(c)), book)
     assert d.format() == "V/G & E/N & E/E^P[box.F1,box.F2] & E/F[box.F1] & V/F[table.F1]"
+    assert d.contacts[2].vector is not None
     np.testing.assert_allclose(d.contacts[2].vector, np.array([-1, 0, -1]) / math.sqrt(2))
     assert d.contacts[1].vector == (0.0, 0.0, 0.0)
 

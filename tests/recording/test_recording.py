@@ -211,6 +211,7 @@ def test_replay_uses_the_embedded_decomposition(recorded, tmp_path, monkeypatch)
     from dlovr.scene import load_scene
 
     pieces = Recording(recorded).pieces
+    assert pieces is not None
     today = geometry.scene_pieces(load_scene("table"))
     assert set(pieces) == {"table"} and np.array_equal(pieces["table"][0][0], today["table"][0][0])
 

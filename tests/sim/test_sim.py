@@ -128,6 +128,7 @@ def test_run_script_is_deterministic_and_replayable() -> None:
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
     assert np.linalg.norm(b[-1][0] - [-0.15, 0.05, TABLE_TOP + 0.01]) < 2e-3
     # restore the step-100 checkpoint and continue with the same commands: bit-identical
+    assert checkpoint is not None
     sim.set_state(checkpoint)
     for k in range(101, 151):
         pos, quat = SCRIPT.target_at(k * 0.002, (-0.15, 0.0, TABLE_TOP + 0.0055), Q_X)
