@@ -483,9 +483,10 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
 def _from_parts(parts: _Parts, contact: Contact, params: ModelParams) -> DiscreteContact:
     """The discrete contact of ``contact`` from its :data:`_Parts`."""
     st, crease, real, vec, axis = parts
-    if crease is not None and not isinstance(st, DiscreteState):
+    if not isinstance(st, DiscreteState):  # an E contact on an edge: its stability class and crease
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
+        assert crease is not None
         st = _point_or_line(st, crease, contact.dlo.vector, params)
     return DiscreteContact(st, real, vec, contact.dlo.span, axis)
 

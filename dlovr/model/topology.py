@@ -360,7 +360,8 @@ def situation_from_points(
     env = [e if type(e) is list else list(e) for e in point_env]  # entries replaced below, not changed
     n = len(env) - 1
     to_list = getattr(vectors, "tolist", None)
-    vecs: list[Sequence[float]] = to_list() if to_list is not None else list(vectors)
+    rows = cast("Sequence[Sequence[float]]", vectors)  # when it has no tolist()
+    vecs: list[Sequence[float]] = to_list() if to_list is not None else list(rows)
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
     ends = [(n, n - 1, vecs[n - 1])]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeVar, cast
 
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 
@@ -477,7 +477,7 @@ def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: Discret
 
 #: :class:`Debouncer`'s default ``lands``, for S = DiscreteSituation (the debouncer of the tracker, of a
 #: sequence and of a recording).
-_LANDS_DISCRETE: Callable[[Any, Any, Any], bool] = is_flight
+_LANDS_DISCRETE = cast("Callable[[Any, Any, Any], bool]", is_flight)
 
 
 @dataclass
