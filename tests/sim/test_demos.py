@@ -123,6 +123,7 @@ def test_table_covers_all_fifteen_states():
         ),
     ],
 )
+@pytest.mark.slow
 def test_state_reached_live(state):
     if state in REACHED:
         scene, script, faces = REACHED[state]

@@ -235,6 +235,7 @@ def test_export_xml_loads_in_plain_mujoco(tmp_path) -> None:
     assert m.nq == sim.model.nq and m.ngeom == sim.model.ngeom and m.neq == sim.model.neq
 
 
+@pytest.mark.slow
 def test_table_demo_script_runs() -> None:
     """scenes/table.script.toml on the table of the table scene (top at z = 0), 20 segments."""
     from pathlib import Path
@@ -326,6 +327,7 @@ def test_tracking_simulator_gives_situations_per_step():
     assert Simulator(load_scene("table")).step().state is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("scene_name", "steps"), [("l_block", 5050), ("corners", 4000)])
 def test_label_reuse_changes_no_state_in_a_live_demo(scene_name, steps):
     """The simulator's tracker reuses labels while points stay within their slack; a second tracker
