@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from dlovr.execution.executor import execute
 from dlovr.execution.programs import load_program
 from dlovr.execution.run import demo_track, resolve_scene
@@ -13,6 +15,7 @@ from dlovr.sim import Simulator
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_stepped_execution_equals_the_blocking_one():
     program = load_program(ROOT / "recordings/programs/table.program.json")
     scene = resolve_scene(program, None)
