@@ -5,6 +5,7 @@ module has its layer and imports only downwards, and no function or class outgro
 from __future__ import annotations
 
 import ast
+import functools
 import pkgutil
 import subprocess
 import sys
@@ -52,6 +53,8 @@ def _imports(name: str, path: Path, modules: dict[str, Path], type_only: bool = 
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     targets: set[str] = set()
     for node in ast.walk(tree):
+        if not isinstance(node, ast.Import | ast.ImportFrom):
+            continue
         if not type_only and _in_type_checking(node, parents):
             continue
         if isinstance(node, ast.Import):
@@ -73,6 +76,7 @@ def _imports(name: str, path: Path, modules: dict[str, Path], type_only: bool = 
     return deps
 
 
+@functools.cache
 def import_graph(type_only: bool = False) -> dict[str, set[str]]:
     """Module -> the dlovr modules it imports (``if TYPE_CHECKING:`` imports too with ``type_only``)."""
     modules = _modules()
@@ -149,6 +153,7 @@ MODEL_MODULES = sorted(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", MODEL_MODULES)
 def test_model_package_is_pure(module):
     names = repr(FORBIDDEN_IN_MODEL)

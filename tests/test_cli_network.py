@@ -64,6 +64,7 @@ def test_network_of_three_copies_counts_every_transition_three_times(built):
     assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S,E"]
 
 
+@pytest.mark.slow
 def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_path):
     r = cli("compile", "--network", built[0], "-o", tmp_path / "prog.json")
     assert r.exit_code == 0, r.output
@@ -173,6 +174,7 @@ def _chromium() -> str:
     return path
 
 
+@pytest.mark.slow
 def test_html_view_loads_in_headless_chromium_without_errors(built):
     exe = _chromium()
     from playwright.sync_api import sync_playwright

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from dlovr.cli import main
@@ -95,6 +96,7 @@ def test_bad_facts_file(tmp_path):
     assert r.exit_code == 2 and "box.F2" in r.output and f"{seq}:1:" in r.output
 
 
+@pytest.mark.slow
 def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
     """One face for an edge, two for a vertex, five of one object for a vertex, three of one object for
     an edge, no E contact between the ends: one line each, exit 2. (Five faces of two objects are a
@@ -120,6 +122,7 @@ def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
     assert r.returncode == 0, r.stderr
 
 
+@pytest.mark.slow
 def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
     seq = tmp_path / "topo.txt"
     seq.write_text("VS/G & E5/N & E15/(box.F1,box.F2) & VE/N\n")
