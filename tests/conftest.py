@@ -1,5 +1,9 @@
 """Shared test setup: a private decomposition cache, so tests never touch the user's cache; the headless
-chromium of the browser tests (tests/test_ui.py, tests/test_ui_view.py)."""
+chromium of the browser tests (tests/ui/); the slow mark of every test that drives the browser UI.
+
+The fast tier, ``pytest -m "not slow"``, leaves out the tests marked ``@pytest.mark.slow`` (wheel builds,
+trials, long simulations, whole recordings replayed) and, by the rule below, every test that uses a
+fixture of :data:`SLOW_FIXTURES`. CI runs every test."""
 
 from __future__ import annotations
 
@@ -8,6 +12,17 @@ import shutil
 from collections.abc import Iterator
 
 import pytest
+
+#: Fixtures that make a test slow: headless Chromium (``browser``), the browser UI's server simulating in
+#: real time (``server``, tests/ui/conftest.py) and a local Ray instance (``ray_instance``,
+#: tests/batch/test_batch.py).
+SLOW_FIXTURES = frozenset({"browser", "server", "ray_instance"})
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(autouse=True, scope="session")

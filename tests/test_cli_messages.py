@@ -165,6 +165,7 @@ def _edit_scene(src: Path, dst: Path, edit) -> None:
     )
 
 
+@pytest.mark.slow
 def test_replay_refuses_an_embedded_scene_edited_beyond_the_limits(tmp_path):
     bad = tmp_path / "huge.mcap"
     _edit_scene(SAMPLES / "table.mcap", bad, lambda t: t.replace(b"segments = 40", b"segments = 100000"))
@@ -179,6 +180,7 @@ def test_replay_refuses_an_embedded_scene_edited_beyond_the_limits(tmp_path):
     assert "at most" in last or "from 2 to 200" in last
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 def test_replay_removes_its_temporary_folder_when_interrupted(tmp_path, sig):
     """The replay is stopped while its embedded scene is unpacked (the simulator build is made to

@@ -64,6 +64,7 @@ def test_network_of_three_copies_counts_every_transition_three_times(built):
     assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S,E"]
 
 
+@pytest.mark.slow
 def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_path):
     r = cli("compile", "--network", built[0], "-o", tmp_path / "prog.json")
     assert r.exit_code == 0, r.output
@@ -118,7 +119,8 @@ def test_network_nodes_carry_the_contact_vector_the_demonstrations_sensed(built)
         assert np.linalg.norm(n["sensed"]) == pytest.approx(1.0) or not any(n["sensed"])
     first = NetworkProgram(Network.from_json(net), 0.02).replan(net["start"], None)
     by_id = {n["id"]: n for n in net["nodes"]}
-    assert [list(s.vector) for s in first.successors] == [by_id[s.node]["sensed"] for s in first.successors]
+    vectors = [None if s.vector is None else list(s.vector) for s in first.successors]
+    assert vectors == [by_id[s.node]["sensed"] for s in first.successors]
 
 
 def test_recordings_of_different_scenes_are_refused_with_one_line(tmp_path):
@@ -148,7 +150,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path, args, message):
     r = subprocess.run(
         [sys.executable, "-m", "dlovr", *args], capture_output=True, text=True, cwd=tmp_path,
         env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])},
-    )  # fmt: skip
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and message in r.stderr, r.stderr
 
@@ -172,6 +174,7 @@ def _chromium() -> str:
     return path
 
 
+@pytest.mark.slow
 def test_html_view_loads_in_headless_chromium_without_errors(built):
     exe = _chromium()
     from playwright.sync_api import sync_playwright

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from dlovr.cli import main
@@ -95,6 +96,7 @@ def test_bad_facts_file(tmp_path):
     assert r.exit_code == 2 and "box.F2" in r.output and f"{seq}:1:" in r.output
 
 
+@pytest.mark.slow
 def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
     """One face for an edge, two for a vertex, five of one object for a vertex, three of one object for
     an edge, no E contact between the ends: one line each, exit 2. (Five faces of two objects are a
@@ -120,6 +122,7 @@ def test_wrong_face_counts_and_situation_structure_are_refused(tmp_path):
     assert r.returncode == 0, r.stderr
 
 
+@pytest.mark.slow
 def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
     seq = tmp_path / "topo.txt"
     seq.write_text("VS/G & E5/N & E15/(box.F1,box.F2) & VE/N\n")
@@ -134,7 +137,7 @@ def test_wrong_typed_facts_files_give_one_line_naming_the_key(tmp_path):
         ({"faces": good_faces, "pairs": {"a": "box.F1"}}, "pairs:"),
         ({"faces": good_faces, "pairs": [pair]}, "pairs[0].concave"),
         ({"faces": good_faces, "dlo_vectors": {"x": [1, 0, 0]}}, "dlo_vectors"),
-    ):  # fmt: skip
+    ):
         facts.write_text(json.dumps(raw))
         r = subprocess.run(
             [sys.executable, "-m", "dlovr", "transitions", str(seq), "--facts", str(facts)],
@@ -188,7 +191,7 @@ def test_timed_lines_are_debounced_and_show_when_each_kept_situation_began(tmp_p
     data = json.loads(invoke("transitions", str(f), "--json").output)
     assert [(d["line"], d["t"], d["label"]) for d in data] == [
         (2, 0.0, "-"), (3, 0.5, "E"), (8, 1.0, "I"), (10, 1.3, "S,E"),
-    ]  # fmt: skip
+    ]
     assert data[3]["through_free"] and data[3]["duration"] == 0.7 and data[1]["duration"] == 0.5
     # with the hold and flight times given: the 2 ms excursion is kept, the flight is not one
     r = invoke("transitions", str(f), "--json", "--hold", "0.001", "--flight", "0.05")

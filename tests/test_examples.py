@@ -35,6 +35,7 @@ def test_classify_sequence_prints_fig11_classes():
     assert rows == [["0", "-"], ["1", "E"], ["2", "C"], ["3", "-"], ["4", "C"], ["5", "C"]]
 
 
+@pytest.mark.slow
 def test_simulate_script_prints_kept_situations():
     out = run("simulate_script.py", "scenes/table.script.toml").splitlines()
     assert out, "no situation printed"

@@ -44,7 +44,7 @@ def test_the_wheel_ships_the_scenes_and_runs_a_demo(tmp_path):
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "--no-index",
          str(src), "-w", str(dist)],
         tmp_path, env, timeout=300,
-    )  # fmt: skip
+    )
     (wheel,) = dist.glob("dlovr-*.whl")
 
     venv = tmp_path / "venv"
@@ -61,7 +61,7 @@ def test_the_wheel_ships_the_scenes_and_runs_a_demo(tmp_path):
     where = run(
         [str(py), "-c", "import dlovr, dlovr.scene; print(dlovr.__file__); print(dlovr.scene.scenes_dir())"],
         work, env,
-    ).split()  # fmt: skip
+    ).split()
     assert all(Path(w).is_relative_to(venv) for w in where), where
     dlovr = str(venv / "bin" / "dlovr")
     listed = run([dlovr, "scenes"], work, env)

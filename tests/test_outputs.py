@@ -58,6 +58,7 @@ def test_unwritable_outputs_give_one_line_and_exit_2(short_script, tmp_path):
     one_line_exit_2(cli("record", "--script", short_script, "-o", "/dev/full"), "/dev/full", "exists")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not LINUX, reason="needs Linux's /dev/full")
 def test_unwritable_output_in_a_fresh_process_has_no_traceback(short_script):
     r = subprocess.run(
@@ -93,6 +94,7 @@ def _small_files(limit: int):
     return apply
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not LINUX, reason="needs RLIMIT_FSIZE")
 def test_a_write_that_fails_halfway_leaves_no_partial_file(short_script, tmp_path):
     """A file-size limit makes the disk "full" halfway through each output: one line, exit 2, and

@@ -71,7 +71,7 @@ def test_builtin_scenes_listed_and_load():
 def test_edges_scene_has_the_four_edges_within_single_objects():
     geom = SceneGeometry.from_scene(load_scene("edges"))
     want = {"concave90": (False, 90.0), "concave175": (False, 175.0), "convex185": (True, 185.0),
-            "convex270": (True, 270.0)}  # fmt: skip
+            "convex270": (True, 270.0)}
     for obj, (convex, opening) in want.items():
         o = geom.object(obj)
         assert len(o.pieces) >= 2  # non-convex object
@@ -89,7 +89,7 @@ def test_face_names_identical_across_loads():
 def test_scene_by_path_and_mesh_relative_to_file(tmp_path):
     mesh = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
     p = write(tmp_path, HEADER + '[[objects]]\nname = "cube"\nmesh = "m/cube.obj"\npos = [0, 0, 0.05]\n',
-              {"m/cube.obj": mesh})  # fmt: skip
+              {"m/cube.obj": mesh})
     s = load_scene(str(p))
     assert s.object("cube").mesh_path == (tmp_path / "m" / "cube.obj").resolve()
     assert s.params.critical_angle_deg == 170
@@ -137,7 +137,7 @@ def test_error_not_watertight(tmp_path):
     box = trimesh.creation.box(extents=[0.1, 0.1, 0.1])
     open_box = trimesh.Trimesh(box.vertices, box.faces[1:], process=False)
     msg = error(tmp_path, HEADER + '[[objects]]\nname = "cup"\nmesh = "open.obj"\npos = [0, 0, 0.05]\n',
-                {"open.obj": open_box})  # fmt: skip
+                {"open.obj": open_box})
     assert "object 'cup'" in msg and "not watertight" in msg
 
 
@@ -147,7 +147,7 @@ def test_error_self_intersecting(tmp_path):
     b.apply_translation([0.05, 0.05, 0.05])
     both = trimesh.util.concatenate([a, b])
     msg = error(tmp_path, HEADER + '[[objects]]\nname = "knot"\nmesh = "two.obj"\npos = [0, 0, 0.05]\n',
-                {"two.obj": both})  # fmt: skip
+                {"two.obj": both})
     assert "object 'knot'" in msg and "self-intersecting" in msg
 
 

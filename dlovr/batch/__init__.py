@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import logging
 import sys
-from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from collections.abc import Callable, Generator, Iterator, Sequence
+from typing import Any, cast
 
 import click
 
@@ -87,23 +87,25 @@ def run_batch(
         raise ValueError(f"retries must be at least 0, got {retries}")
     check_cluster(cluster)
     note: Callable[[str], None] = (lambda msg: click.echo(f"\n{msg}", err=True)) if progress else log.warning
+    inner: Generator[TaskResult, None, None]
     if cluster is not None:
         from dlovr.batch.on_ray import run_on_ray
 
-        inner = run_on_ray(fn, tasks, workers, cluster, retries, note)
-        next(inner)  # connected: a cluster that cannot be used fails here, before the progress bar
+        on_ray = run_on_ray(fn, tasks, workers, cluster, retries, note)
+        next(on_ray)  # connected: a cluster that cannot be used fails here, before the progress bar
+        inner = cast("Generator[TaskResult, None, None]", on_ray)  # only results follow the first None
     elif (workers or 1) == 1 or len(tasks) <= 1:
         inner = run_here(fn, tasks)
     else:
         inner = run_on_processes(fn, tasks, min(workers or 1, len(tasks)), retries, note)
     try:
         if not progress:
-            yield from inner  # type: ignore[misc]
+            yield from inner
             return
         with click.progressbar(length=len(tasks), label=label, file=sys.stderr, show_eta=True) as bar:
             for r in inner:
                 bar.update(1)
-                yield r  # type: ignore[misc]
+                yield r
     finally:
         inner.close()
 

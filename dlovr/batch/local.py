@@ -13,13 +13,13 @@ import multiprocessing.connection
 import signal
 import socket
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from typing import Any
 
 from dlovr.batch.core import Attempts, Task, TaskResult, call_task, one_line
 
 
-def run_here(fn: Callable[..., Any], tasks: Sequence[Task]) -> Iterator[TaskResult]:
+def run_here(fn: Callable[..., Any], tasks: Sequence[Task]) -> Generator[TaskResult, None, None]:
     """Run the tasks one after the other in this process."""
     book = Attempts(tasks, 0, lambda _msg: None)
     for i, t in enumerate(tasks):
@@ -87,7 +87,7 @@ def run_on_processes(
     workers: int,
     retries: int,
     note: Callable[[str], None],
-) -> Iterator[TaskResult]:
+) -> Generator[TaskResult, None, None]:
     """Run the tasks on ``workers`` worker processes; yield results in order of completion.
 
     ``fn`` and the tasks' arguments are pickled (``fn`` by name). A task whose worker dies runs again on

@@ -13,7 +13,7 @@ import logging
 import os
 import socket
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from typing import Any
 
 from dlovr.batch.core import (
@@ -106,7 +106,7 @@ def run_on_ray(
     cluster: str,
     retries: int,
     note: Callable[[str], None],
-) -> Iterator[TaskResult | None]:
+) -> Generator[TaskResult | None, None, None]:
     """Run the tasks as Ray tasks: first yield None once connected (so that a cluster that cannot be
     used fails before any progress is drawn), then the results in order of completion.
 

@@ -127,12 +127,12 @@ class _Classifier:
         h = kernels.pair_hits(
             pk.floats, pk.ints, pts, every, every, r, self.radius, float(contact_tol), ttol, _NO_THRESHOLDS,
             False, True, hit_i, hit_f, np.empty(len(pts)), np.empty((0, 6)),
-        )  # fmt: skip
+        )
         hits = [
             PointHit(int(hit_i[j, 0]), self.pieces[int(hit_i[j, 1])], hit_f[j, 1:].copy(), float(hit_f[j, 0]),
                      self.face_tuple(hit_i[j, 2:]))
             for j in range(h)
-        ]  # fmt: skip
+        ]
         hits.sort(key=lambda h: (h.point, h.piece.obj, h.piece.index))
         return hits
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -158,7 +159,7 @@ def decompose_approx(mesh: trimesh.Trimesh) -> list[np.ndarray]:
 
     coacd.set_log_level("error")
     parts = coacd.run_coacd(
-        coacd.Mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)),
+        coacd.Mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int32)),
         threshold=0.05,
         preprocess_mode="off",
         seed=0,
@@ -200,9 +201,8 @@ def decompose(mesh: trimesh.Trimesh, *, use_cache: bool = True) -> tuple[list[np
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             buf = io.BytesIO()
-            np.savez(
-                buf, n=len(pieces), approximate=approximate, **{f"p{i}": p for i, p in enumerate(pieces)}
-            )
+            arrays: dict[str, Any] = {f"p{i}": p for i, p in enumerate(pieces)}
+            np.savez(buf, n=len(pieces), approximate=approximate, **arrays)
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_bytes(buf.getvalue())
             os.replace(tmp, path)

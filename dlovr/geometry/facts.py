@@ -10,20 +10,19 @@ import numpy as np
 from dlovr.geometry.classify import _Classifier
 from dlovr.geometry.vectors import _points_in_triangles
 from dlovr.model.discrete import ContactFacts, FaceFact, FactBook, PairFact
-from dlovr.model.topology import Contact
+from dlovr.model.topology import Contact, Vec3, as_vec3
 from dlovr.transforms import units
 
 if TYPE_CHECKING:
     from dlovr.geometry.objects import GeomObject
-    from dlovr.geometry.scene_geometry import SceneGeometry
 
 
 class SceneFactBook(FactBook):
     """FactBook of a scene: every object face, and pair facts computed on demand from the geometry."""
 
-    def __init__(self, geom: SceneGeometry):
+    def __init__(self, geom: _PairFacts):
         faces = {
-            n: FaceFact(n, o.name, tuple(float(x) for x in o.face_normals[k]))  # type: ignore[arg-type]
+            n: FaceFact(n, o.name, as_vec3(o.face_normals[k]))
             for o in geom.objects
             for k, n in enumerate(o.face_names)
         }
@@ -36,7 +35,7 @@ class SceneFactBook(FactBook):
             self.pairs[key] = self._geom.pair_fact(a, b)
         return self.pairs[key]
 
-    def for_contact(self, contact: Contact, dlo_vector=None) -> ContactFacts:  # type: ignore[override]
+    def for_contact(self, contact: Contact, dlo_vector: Vec3 | None = None) -> ContactFacts:
         names = [f for f in contact.faces if f in self.faces]
         for i, a in enumerate(names):
             for b in names[i + 1 :]:
@@ -70,7 +69,7 @@ class _PairFacts(_Classifier):
         cosang = float(np.clip(na @ nb, -1.0, 1.0))
         alpha = float(np.degrees(np.arccos(cosang)))
         cross = np.cross(na, nb)
-        crease = tuple(float(x) for x in units(cross)) if np.linalg.norm(cross) > 1e-9 else None
+        crease = as_vec3(units(cross)) if np.linalg.norm(cross) > 1e-9 else None
         if np.linalg.norm(cross) <= 1e-12:
             # parallel (same side: one plane; opposite: facing walls, a slot): treat as concave
             return PairFact(a, b, True, 180.0 - alpha, None)
@@ -96,7 +95,7 @@ class _PairFacts(_Classifier):
             if ma is not pa:
                 concave = continues(ma, ua, ta, na, oa.name) and continues(mb, ub, tb, nb, ob.name)
         opening = 180.0 - alpha if concave else 180.0 + alpha
-        return PairFact(a, b, concave, opening, crease)  # type: ignore[arg-type]
+        return PairFact(a, b, concave, opening, crease)
 
 
 def _shared_edge_middle(

@@ -45,7 +45,7 @@ class LabelBudgets:
         kernels.budgets_keep(
             self.table(), np.ascontiguousarray(rows, dtype=np.int64),
             np.ascontiguousarray(moves, dtype=float).reshape(-1, 3), out,
-        )  # fmt: skip
+        )
         return out
 
     def table(self) -> np.ndarray:
@@ -122,7 +122,9 @@ class _Labelling(_Classifier):
         """:meth:`pair_hits`, :meth:`label_slack` and the same slack per pair split by direction
         (:class:`LabelBudgets`), computed together."""
         out = self._pair_hits(points, point_idx, piece_idx, contact_tol, tangential_tol, tuple(thresholds))
-        return out  # type: ignore[return-value]
+        slack, budgets = out[5], out[6]
+        assert slack is not None and budgets is not None  # computed: thresholds were given
+        return (*out[:5], slack, budgets)
 
     def _pair_hits(
         self,
@@ -157,7 +159,7 @@ class _Labelling(_Classifier):
         h = kernels.pair_hits(
             pk.floats, pk.ints, pts, pi, pc, r, r, float(contact_tol), ttol,
             np.asarray(thresholds or (), dtype=float), with_slack, False, hit_i, hit_f, slack, table,
-        )  # fmt: skip
+        )
         faces = [self.face_tuple(hit_i[j, 2:]) for j in range(h)]
         out = (hit_i[:h, 0].copy(), hit_i[:h, 1].copy(), hit_f[:h, 0].copy(), faces, hit_f[:h, 1:].copy())
         if not with_slack:

@@ -113,7 +113,7 @@ def build_object(
         tris_list.append(tris)
         areas.append(f.area)
     obj_faces = list(zip(names, normals, offsets, tris_list, strict=True))
-    pieces = [
+    built = [
         _build_piece(name, i, p @ rot.T + trans, approximate, obj_faces) for i, p in enumerate(pieces_local)
     ]
     edges = _edge_table(local_mesh, tri_face, names)
@@ -125,7 +125,7 @@ def build_object(
         np.array(offsets),
         tris_list,
         np.array(areas),
-        pieces,
+        built,
         edges,
         approximate,
     )

@@ -16,7 +16,7 @@ from dlovr.geometry.vectors import _tri_frames
 P_, F_, E_, T_, O_ = 0, 1, 2, 3, 4
 HEAD = 8
 FLOAT_SECTIONS = ("normals", "offsets", "lo", "hi", "eps", "edge_a", "edge_b", "tri_start", "tri_in",
-                  "outline_a", "outline_b")  # fmt: skip
+                  "outline_a", "outline_b")
 INT_SECTIONS = ("nfaces", "label", "name", "owner", "edge_range", "edge_faces", "tri_range", "outline_range")
 
 EXTERNAL, INTERNAL, MIXED = 1, 0, 2  # piece face labels (an internal face has no object face)

@@ -26,7 +26,7 @@ from dlovr.geometry.mesh import object_local_mesh
 from dlovr.geometry.objects import GeomObject, build_object
 from dlovr.geometry.packing import PackedPieces
 from dlovr.model.discrete import DiscreteSituation, ModelParams, discretize
-from dlovr.model.topology import Situation, situation_from_points
+from dlovr.model.topology import Situation, as_vec3, situation_from_points
 from dlovr.transforms import pose_matrix
 
 if TYPE_CHECKING:
@@ -66,7 +66,7 @@ class SceneGeometry(_Labelling, _PairFacts):
                 pieces=None if pieces is None else pieces[o.name],
             )
             for o in scene.objects
-        ]  # fmt: skip
+        ]
         return cls(objs, scene.dlo.radius, scene.params)
 
     @classmethod
@@ -110,14 +110,14 @@ class SceneGeometry(_Labelling, _PairFacts):
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         if len(pts) < 2:
             raise ValueError("a cable polyline needs at least two points")
-        z = tuple(float(x) for x in (gripper_z if gripper_z is not None else (0.0, 0.0, 1.0)))
+        z = as_vec3(gripper_z if gripper_z is not None else (0.0, 0.0, 1.0))
         return situation_from_points(
             self.point_primitives(pts, radius, contact_tol, tangential_tol),
             np.diff(pts, axis=0),
             self.face_normal,
             tip_angle_deg=self.params.tip_angle_deg,
             gripped=gripped,
-            gripper_z=z,  # type: ignore[arg-type]
+            gripper_z=z,
         )
 
     def discrete_situation(self, points: np.ndarray, **kw) -> DiscreteSituation:

@@ -46,7 +46,7 @@ DEFAULT_PARAMS: dict[str, dict[str, float]] = {
 }
 #: The threshold parameter of each class (what :func:`derive` derives from the step).
 THRESHOLD_PARAM = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
-                   "I": "min_force_n", "S": "jump_n"}  # fmt: skip
+                   "I": "min_force_n", "S": "jump_n"}
 #: Classes whose cone (``max_angle_deg``) is widened to the demonstrated step's direction.
 CONE_CLASSES = ("E", "C", "I")
 #: A contact vector, axis or turn (unit vectors, or differences of them) shorter than this has no
@@ -193,7 +193,7 @@ def derive(
             {**d.params, "step_n": 0.0},
             {**d.derivation, "step_n": f"derived: none measurable (the state {which} it held "
              f"{held * 1000:.0f} ms): the force cannot show this transition"},
-        )  # fmt: skip
+        )
     base = before.mean(axis=0)
     step = after.mean(axis=0) - base
     dirs = _directions(cls, released, established, axes)

@@ -371,7 +371,7 @@ class SDetector(Detector):
 
 _CLASSES: dict[str, type[Detector]] = {
     "E": EDetector, "C": CDetector, "T": TDetector, "I": IDetector, "S": SDetector,
-}  # fmt: skip
+}
 
 
 def make_detector(

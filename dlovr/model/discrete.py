@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 
@@ -52,6 +52,7 @@ class Stability(Enum):
 
 
 EnvType = Literal["F", "E^P", "E^L", "V", "G", "N"]
+StabilityLetter = Literal["", "S", "T", "I"]  # "" for F, E^P, G and N
 
 
 @dataclass(frozen=True, order=True)
@@ -64,7 +65,7 @@ class DiscreteState:
 
     dlo: Literal["V", "E"]
     env: EnvType
-    stability: Literal["", "S", "T", "I"] = ""
+    stability: StabilityLetter = ""
 
     def __post_init__(self) -> None:
         if self.env in ("E^L", "V"):
@@ -151,7 +152,9 @@ def _state(name: str) -> DiscreteState:
     m = re.fullmatch(r"([VE])/(F|E\^P|E\^L|V|G|N)([STI]?)", name)
     if not m:
         raise ValueError(f"unknown discrete state {name!r}")
-    return DiscreteState(m.group(1), m.group(2), m.group(3))  # type: ignore[arg-type]
+    # the pattern admits only the letters of the three Literal types
+    dlo, env, stab = cast("tuple[Literal['V', 'E'], EnvType, StabilityLetter]", m.groups())
+    return DiscreteState(dlo, env, stab)
 
 
 STATES: dict[str, DiscreteState] = {
@@ -161,7 +164,7 @@ STATES: dict[str, DiscreteState] = {
         "E/E^LT", "E/VT", "V/E^LT", "V/VT",
         "E/E^LI", "E/VI", "V/E^LI", "V/VI",
     )
-}  # fmt: skip
+}
 """The 15 discrete contact states of Fig. 8, by name."""
 
 AUX_STATES: dict[str, DiscreteState] = {n: _state(n) for n in ("V/G", "E/G", "V/N", "E/N")}
@@ -306,7 +309,7 @@ def classify_contact(
 
 def _classify_faces(
     dlo: Literal["V", "E"], facts: ContactFacts, params: ModelParams, gripper: bool
-) -> DiscreteState | tuple[str, np.ndarray]:
+) -> DiscreteState | tuple[StabilityLetter, np.ndarray]:
     """Steps 1-3 of :func:`classify_contact`: the state, or for an E contact on an edge (whose point
     or line decision needs the DLO vector, step 4) its stability class and the real faces' normals."""
     if gripper:
@@ -336,6 +339,7 @@ def _classify_faces(
                 raise ValueError(f"no pair fact for faces {a} and {b} (concave or convex?)")
             relevant.append(p)
 
+    stab: StabilityLetter
     if any(not p.concave for p in relevant):
         stab = "I"
     elif any(p.opening_deg >= params.critical_angle_deg for p in relevant):
@@ -344,9 +348,9 @@ def _classify_faces(
         stab = "S"
 
     if rank >= 3:
-        return DiscreteState(dlo, "V", stab)  # type: ignore[arg-type]
+        return DiscreteState(dlo, "V", stab)
     if dlo == "V":
-        return DiscreteState("V", "E^L", stab)  # type: ignore[arg-type]
+        return DiscreteState("V", "E^L", stab)
     return stab, normals
 
 
@@ -359,13 +363,15 @@ def _crease(facts: ContactFacts, normals: np.ndarray) -> np.ndarray:
 _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contact?)"
 
 
-def _point_or_line(stab: str, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams) -> DiscreteState:
+def _point_or_line(
+    stab: StabilityLetter, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams
+) -> DiscreteState:
     """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
     ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease."""
     d = _required(unit(dlo_vector))
     angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
     if angle <= params.parallel_tol_deg:
-        return DiscreteState("E", "E^L", stab)  # type: ignore[arg-type]
+        return DiscreteState("E", "E^L", stab)
     return DiscreteState("E", "E^P")
 
 
@@ -448,7 +454,7 @@ class DiscreteSituation:
 #: What a contact's discrete contact takes from the scene facts alone: the state (for an E contact on
 #: an edge, its stability class), the crease of such an edge (else ``None``), the real faces, the
 #: contact vector and the pinch axis.
-_Parts = tuple[DiscreteState | str, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
+_Parts = tuple[DiscreteState | StabilityLetter, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
 
 
 def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Parts:
@@ -475,11 +481,12 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
 def _from_parts(parts: _Parts, contact: Contact, params: ModelParams) -> DiscreteContact:
     """The discrete contact of ``contact`` from its :data:`_Parts`."""
     st, crease, real, vec, axis = parts
-    if crease is not None:
+    if not isinstance(st, DiscreteState):  # an E contact on an edge: its stability class and crease
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
-        st = _point_or_line(st, crease, contact.dlo.vector, params)  # type: ignore[arg-type]
-    return DiscreteContact(st, real, vec, contact.dlo.span, axis)  # type: ignore[arg-type]
+        assert crease is not None
+        st = _point_or_line(st, crease, contact.dlo.vector, params)
+    return DiscreteContact(st, real, vec, contact.dlo.span, axis)
 
 
 def discretize_contact(
@@ -545,7 +552,7 @@ _DC_RE = re.compile(r"^([VE]/(?:F|E\^P|E\^L[STI]|V[STI]|G|N))(?:\[([^\]]*)\])?$"
 #: of three faces and a block edge of two, five faces); no upper bound.
 FACE_COUNTS: dict[str, tuple[int, int | None]] = {
     "F": (1, None), "E^P": (2, None), "E^L": (2, None), "V": (3, None)
-}  # fmt: skip
+}
 #: What a contact on each kind of environment is, for messages.
 CONTACT_KIND = {"F": "a face", "E^P": "an edge", "E^L": "an edge", "V": "a vertex"}
 
@@ -608,4 +615,4 @@ __all__ = [
     "Stability", "classify_contact", "contact_vector", "discretize", "discretize_contact", "face_object",
     "parse_any",
     "parse_discrete_contact", "parse_discrete_situation", "pinch_axis", "state",
-]  # fmt: skip
+]

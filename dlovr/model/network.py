@@ -280,7 +280,7 @@ class Network:
                      float(n["total_time"]), float(n["mean_time"]),
                      None if n.get("sensed") is None else _vec(n["sensed"]))
                 for n in data["nodes"]
-            )  # fmt: skip
+            )
             edges = tuple(
                 Edge(str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
                      int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
@@ -288,13 +288,13 @@ class Network:
                      tuple(_detection_from_json(d) for d in e.get("detection", ())),
                      None if e.get("track") is None else EdgeTrack.from_json(e["track"]))
                 for e in data["edges"]
-            )  # fmt: skip
+            )
             net = Network(
                 str(data["scene_name"]), str(data["scene_sha256"]), tuple(map(str, data["demonstrations"])),
                 nodes, edges, tuple(map(_endpoint_from_json, data["starts"])),
                 tuple(map(_endpoint_from_json, data["ends"])), str(data["start"]), str(data["goal"]),
                 NETWORK_VERSION, None if ref is None else EdgeTrack.from_json(ref),
-            )  # fmt: skip
+            )
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise NetworkError(f"bad transition network: {type(e).__name__}: {e}") from None
         _check(net)
@@ -332,14 +332,14 @@ def _motion_from_json(d: Mapping[str, Any]) -> MotionStats:
     return MotionStats(
         _vec(d["world_mean"]), _vec(d["world_std"]), _vec(d["relative_mean"]), _vec(d["rotation_mean"]),
         _vec(d["start_mean"]), float(d["start_spread"]), _vec(d["end_mean"]),
-    )  # fmt: skip
+    )
 
 
 def _detection_from_json(d: Mapping[str, Any]) -> Detection:
     return Detection(
         str(d["cls"]), str(d["algorithm"]), {str(k): float(v) for k, v in d["params"].items()},
         {str(k): str(v) for k, v in d.get("derivation", {}).items()},
-    )  # fmt: skip
+    )
 
 
 def _derived(d: Detection, key: str) -> bool:
@@ -503,7 +503,7 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         nodes.append(
             Node(nid, by_id[nid], tuple(c.format() for c in principal_contacts(sit)),
                  situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)), sensed.get(nid))
-        )  # fmt: skip
+        )
     departures = Counter[str]()
     for (u, _), xs in occ.items():
         departures[u] += len(xs)
@@ -520,20 +520,20 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
             _vec(np.mean([x[2].relative for x in xs], axis=0)),
             _vec(np.mean([x[2].rotation for x in xs], axis=0)),
             _vec(starts.mean(axis=0)), _spread(starts), _vec(ends.mean(axis=0)),
-        )  # fmt: skip
+        )
         derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps[(u, v)]])
         edges.append(
             Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
                  tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,
                  _edge_track(demos, xs, steps[(u, v)], reference))
-        )  # fmt: skip
+        )
     order = list(ids.values())
     net = Network(
         demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
         _endpoints(firsts, order), _endpoints(lasts, order),
         _most_common(Counter(k for k, _ in firsts), order), _most_common(Counter(k for k, _ in lasts), order),
         NETWORK_VERSION, _whole_track(demos[reference], reference),
-    )  # fmt: skip
+    )
     _check(net)
     return net
 
@@ -565,7 +565,7 @@ def _edge_track(
     mine = [k for k in have if xs[k][0] == reference]
     k = mine[0] if mine else have[representative([xs[i][2].world for i in have])]
     a, b, _ = steps[k]
-    return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)  # type: ignore[arg-type]
+    return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)
 
 
 def sensed_vectors(

@@ -127,8 +127,9 @@ def parse_sequence(
         if t is not None:
             if not math.isfinite(t):
                 raise SequenceError(lineno, f"time {t} is not a finite number of seconds")
-            if out and t < out[-1].t:  # type: ignore[operator]
-                raise SequenceError(lineno, f"time {t:g} s is before the previous line's {out[-1].t:g} s")
+            before = out[-1].t if out else None  # timed too (checked above)
+            if before is not None and t < before:
+                raise SequenceError(lineno, f"time {t:g} s is before the previous line's {before:g} s")
         try:
             sit = parse_any(text)
             if isinstance(sit, DiscreteSituation):
@@ -162,13 +163,14 @@ def debounce_sequence(
     rows: Sequence[SequenceLine], hold: float = DEFAULT_HOLD_S, flight: float = DEFAULT_FLIGHT_S
 ) -> list[KeptLine]:
     """Debounce a timed sequence (hold and flight times in seconds) and classify its kept situations."""
-    if any(r.t is None for r in rows):
+    timed = [(r.t, r) for r in rows if r.t is not None]
+    if len(timed) != len(rows):
         raise ValueError("only a timed sequence is debounced")
     deb: Debouncer[DiscreteSituation] = Debouncer(hold, is_transient, flight)
     first: dict[tuple[float, DiscreteSituation], SequenceLine] = {}
-    for r in rows:
-        deb.push(r.t, r.discrete)  # type: ignore[arg-type]
-        first.setdefault((r.t, r.discrete), r)  # type: ignore[arg-type]
+    for t, r in timed:
+        deb.push(t, r.discrete)
+        first.setdefault((t, r.discrete), r)
     kept = deb.kept
     return [
         KeptLine(k, first[(k.start, k.situation)], c) for k, c in zip(kept, kept_classes(kept), strict=True)

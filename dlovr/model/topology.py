@@ -24,11 +24,23 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import groupby
-from typing import Literal
+from typing import Any, Literal, Protocol, cast
 
 from dlovr.inputs import InputError
 
 Vec3 = tuple[float, float, float]
+
+
+class ToList(Protocol):
+    """An array (numpy's ``ndarray``) read through ``tolist()``: this module does not import numpy."""
+
+    def tolist(self) -> Any: ...
+
+
+def as_vec3(v: Iterable[float]) -> Vec3:
+    """A 3-vector (a sequence or numpy array of three numbers) as a tuple of three Python floats."""
+    x, y, z = v
+    return (float(x), float(y), float(z))
 
 DloKind = Literal["VS", "VE", "E"]
 
@@ -263,7 +275,7 @@ def successional_runs(touching: Sequence[bool]) -> list[tuple[int, ...]]:
 
 def contract(
     point_env: Sequence[Iterable[EnvPrimitive]],
-    vectors: Sequence[Vec3] | None = None,
+    vectors: Sequence[Sequence[float]] | None = None,
 ) -> Situation:
     """Build a contact situation from the contacts of every DLO point ``P_0 … P_n`` (§III).
 
@@ -301,7 +313,7 @@ def contract(
 
 
 def tip_touches(
-    last_vector: Sequence[float], normals: Sequence[Sequence[float]], tip_angle_deg: float = 15.0
+    last_vector: Iterable[float], normals: Iterable[Iterable[float]], tip_angle_deg: float = 15.0
 ) -> bool:
     """End-vertex rule (docs/model.md, paper §III): is the tip itself the contact?
 
@@ -329,8 +341,8 @@ def tip_touches(
 
 def situation_from_points(
     point_env: Sequence[Iterable[EnvPrimitive]],
-    vectors: Sequence[Sequence[float]],
-    face_normal: Callable[[str], Sequence[float]],
+    vectors: Sequence[Sequence[float]] | ToList,
+    face_normal: Callable[[str], Iterable[float]],
     *,
     tip_angle_deg: float = 15.0,
     gripped: bool = True,
@@ -349,7 +361,9 @@ def situation_from_points(
     """
     env = [e if type(e) is list else list(e) for e in point_env]  # entries replaced below, not changed
     n = len(env) - 1
-    vecs = vectors.tolist() if hasattr(vectors, "tolist") else list(vectors)
+    to_list = getattr(vectors, "tolist", None)
+    rows = cast("Sequence[Sequence[float]]", vectors)  # when it has no tolist()
+    vecs: list[Sequence[float]] = to_list() if to_list is not None else list(rows)
     if len(vecs) not in (n, n + 1):
         raise ValueError(f"{len(env)} points need {n} DLO vectors, got {len(vecs)}")
     ends = [(n, n - 1, vecs[n - 1])]
@@ -363,7 +377,7 @@ def situation_from_points(
     if gripped:
         env[0] = [EnvPrimitive("G", (), gripper_z)]
     full = vecs if len(vecs) == n + 1 else [*vecs, vecs[-1]]
-    return contract(env, full)  # type: ignore[arg-type]
+    return contract(env, full)
 
 
 def _merge_primitives(a: Iterable[EnvPrimitive], b: Iterable[EnvPrimitive]) -> list[EnvPrimitive]:
@@ -428,7 +442,7 @@ def parse_contact(text: str, where: str = "contact") -> Contact:
         kind, idx = m.group(1), m.group(2)
         if kind != "E" and idx:
             raise NotationError(f"{where}: vertex {kind} takes no index")
-        this = DloPrimitive(kind, int(idx) if idx else None)  # type: ignore[arg-type]
+        this = DloPrimitive(cast("DloKind", kind), int(idx) if idx else None)  # _DLO_RE: VS, VE or E
         if dlo is None:
             dlo = this
         elif this.kind != dlo.kind or this.index != dlo.index:

@@ -47,7 +47,7 @@ class EdgeTrack:
         same = (self.demonstration, self.t0) == (other.demonstration, other.t0)
         return same and all(np.array_equal(a, b) for a, b in pairs)
 
-    __hash__ = None  # type: ignore[assignment]
+    # unhashable: a class that defines __eq__ alone gets __hash__ = None (and eq=False keeps it)
 
     def to_json(self) -> dict[str, Any]:
         """Written as stored: :func:`stretch` rounds to what JSON keeps, so a round trip is exact."""
@@ -82,7 +82,7 @@ def stretch(commands: PoseTrack, demonstration: int, t0: float, t1: float) -> Ed
     pos, quat = zip(*(commands.at(t) for t in times), strict=True)
     rel = np.round(np.array(times) - t0, 6)
     return EdgeTrack(demonstration, round(float(t0), 6), rel, np.round(np.array(pos, float), 7),
-                     np.round(np.array(quat, float), 8))  # fmt: skip
+                     np.round(np.array(quat, float), 8))
 
 
 def representative(displacements: Sequence[Sequence[float]]) -> int:

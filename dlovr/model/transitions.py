@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeVar, cast
 
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 
@@ -78,13 +78,25 @@ def contact_positions(a: DiscreteSituation, b: DiscreteSituation) -> tuple[list[
     With index ranges (``span``) on every contact, the points covered; else (a hand-written sequence)
     contact ``k`` of ``L`` covers ``[k/L, (k+1)/L)``, so the two ends of the DLO line up.
     """
-    if all(c.span is not None for s in (a, b) for c in s.contacts):
-        return tuple(  # type: ignore[return-value]
-            [(float(c.span[0]), float(c.span[1]) + 1.0) for c in s.contacts] for s in (a, b)  # type: ignore[index]
-        )
-    return tuple(  # type: ignore[return-value]
-        [(k / len(s.contacts), (k + 1) / len(s.contacts)) for k in range(len(s.contacts))] for s in (a, b)
-    )
+    ca, cb = _covered(a), _covered(b)
+    if ca is not None and cb is not None:
+        return ca, cb
+    return _fractions(a), _fractions(b)
+
+
+def _covered(s: DiscreteSituation) -> list[Interval] | None:
+    """The DLO points each contact of ``s`` covers, or ``None`` when a contact carries no span."""
+    out = []
+    for c in s.contacts:
+        if c.span is None:
+            return None
+        out.append((float(c.span[0]), float(c.span[1]) + 1.0))
+    return out
+
+
+def _fractions(s: DiscreteSituation) -> list[Interval]:
+    """Contact ``k`` of ``L`` as ``[k/L, (k+1)/L)``."""
+    return [(k / len(s.contacts), (k + 1) / len(s.contacts)) for k in range(len(s.contacts))]
 
 
 def _hull(ivs: Sequence[Interval]) -> Interval:
@@ -143,13 +155,13 @@ def match(
         ox, fx, px = _objects(x), _faces(x), set(principal(x))
         for j, y in enumerate(after):
             oy = _objects(y)
-            known = ox is not None and oy is not None
-            if known and not (ox & oy):  # type: ignore[operator]
+            shared = ox & oy if ox is not None and oy is not None else None  # None: not known
+            if shared is not None and not shared:
                 continue  # never pairs two successional contacts that share no object
             score = (
                 float(px == set(principal(y))),
                 float(bool(fx & _faces(y))),
-                float(known and bool(ox & oy)),  # type: ignore[operator]
+                float(bool(shared)),
                 _overlap(pa[i], pb[j]),
                 -_distance(pa[i], pb[j]),
             )
@@ -463,6 +475,11 @@ def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: Discret
     return released and landed
 
 
+#: :class:`Debouncer`'s default ``lands``, for S = DiscreteSituation (the debouncer of the tracker, of a
+#: sequence and of a recording).
+_LANDS_DISCRETE = cast("Callable[[Any, Any, Any], bool]", is_flight)
+
+
 @dataclass
 class Debouncer(Generic[S]):
     """Turns a per-step stream of situations into the demonstration's distinct situations.
@@ -485,7 +502,7 @@ class Debouncer(Generic[S]):
     hold: float
     transient: Callable[[S], bool]
     flight: float = DEFAULT_FLIGHT_S
-    lands: Callable[[S, S, S], bool] = is_flight  # type: ignore[assignment]
+    lands: Callable[[S, S, S], bool] = _LANDS_DISCRETE
     kept: list[Kept[S]] = field(default_factory=list)
 
     def __post_init__(self) -> None:

@@ -46,7 +46,7 @@ def scene_update(
         e: dict[str, Any] = {
             "timestamp": stamp, "frame_id": frame, "id": id_, "lifetime": {"sec": 0, "nsec": 0},
             "frame_locked": frame != "world", "metadata": [],
-        }  # fmt: skip
+        }
         for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
             e[kind] = primitives.get(kind, [])
         return e

@@ -105,7 +105,7 @@ class Recording:
         self._counts = {
             summary.channels[cid].topic: n for cid, n in (summary.statistics.channel_message_counts.items()
                                                          if summary.statistics else [])
-        }  # fmt: skip
+        }
         if SCENE_TOML not in attachments:
             raise RecordingError(f"{p}: recording has no embedded scene ({SCENE_TOML})")
         files = []
@@ -269,7 +269,7 @@ class Recording:
                            np.asarray(m["target_pos"], float).reshape(3),
                            np.asarray(m["target_quat"], float).reshape(4))
                 for m in self._iter(TOPIC_CHECKPOINT)
-            ]  # fmt: skip
+            ]
         except RecordingError:  # already names the file and the problem
             raise
         except _FIELD_ERRORS as e:

@@ -107,7 +107,7 @@ class _Clock:
             t0 = min((m.log_time for c in res.chunks for m in c), default=0)
         try:
             dt: float | None = float(meta["timestep"])
-            if not (0 < dt < 1):  # type: ignore[operator]
+            if not (0 < dt < 1):
                 dt = None
         except (KeyError, ValueError):
             dt = None

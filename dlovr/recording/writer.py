@@ -201,7 +201,9 @@ class Recorder:
             raise ValueError(f"no extra channel {topic} (register it with add_channel)")
         self._add(topic, step, dumps(dict(payload)))
 
-    def command(self, step: int, pos: Sequence[float], quat: Sequence[float]) -> None:
+    def command(
+        self, step: int, pos: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray
+    ) -> None:
         """The gripper target commanded for step ``step`` (applied before that step); steps come in
         order, written in messages of :data:`COMMAND_BATCH` steps."""
         c = self._commands
@@ -400,7 +402,7 @@ class DemoRecorder:
             self.rec.frame(
                 k, record.points, record.gripper_pos, record.gripper_quat, self._radius,
                 self._obstacles if first else (),
-            )  # fmt: skip
+            )
 
     def close(self) -> Path:
         """Finish the file (with a final checkpoint at the last step); return its path. Idempotent."""

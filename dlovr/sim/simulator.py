@@ -66,7 +66,7 @@ class StepRecord:
         cls, step: int, time: float, points: np.ndarray, gripper_pos: np.ndarray, gripper_quat: np.ndarray,
         target_pos: np.ndarray, target_quat: np.ndarray, contact_arrays: ContactArrays,
         gripper_force: np.ndarray, gripper_torque: np.ndarray,
-    ) -> StepRecord:  # fmt: skip
+    ) -> StepRecord:
         """The record of these fields, as the constructor makes it but without the dataclass's
         ``__init__``, which sets a frozen field at a time (the simulator makes one every step)."""
         rec = object.__new__(cls)
@@ -74,7 +74,7 @@ class StepRecord:
             step=step, time=time, points=points, gripper_pos=gripper_pos, gripper_quat=gripper_quat,
             target_pos=target_pos, target_quat=target_quat, contact_arrays=contact_arrays,
             gripper_force=gripper_force, gripper_torque=gripper_torque, state=None,
-        )  # fmt: skip
+        )
         return rec
 
     @cached_property
@@ -242,7 +242,9 @@ class Simulator:
 
     # -- gripper ------------------------------------------------------------------------------------
 
-    def set_target(self, pos: Sequence[float], quat: Sequence[float] | None = None) -> None:
+    def set_target(
+        self, pos: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray | None = None
+    ) -> None:
         """Command the gripper pose (world ``pos``, ``quat`` wxyz; ``None`` keeps the orientation)."""
         p = np.asarray(pos, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
@@ -369,7 +371,7 @@ class Simulator:
         code, index, value, rows, nself = kernels.step_record(
             views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
             table, grip, torque,
-        )  # fmt: skip
+        )
         if check and code:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS

@@ -30,6 +30,7 @@ def demos(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 def test_each_trial_is_a_recording_of_its_perturbed_scene(demos):
     from dlovr.recording import Recording, replay
     from dlovr.recording.bundle import SceneBundle
@@ -50,6 +51,7 @@ def test_each_trial_is_a_recording_of_its_perturbed_scene(demos):
     assert not replay(demos / names[1], verify=True).divergence
 
 
+@pytest.mark.slow
 def test_the_same_seed_records_the_same_demonstrations(demos, tmp_path):
     from dlovr.recording import Recording
 
@@ -61,6 +63,7 @@ def test_the_same_seed_records_the_same_demonstrations(demos, tmp_path):
     assert r.exit_code == 2 and "--force" in r.output
 
 
+@pytest.mark.slow
 def test_network_merges_the_perturbed_demonstrations(demos, tmp_path):
     r = cli("network", demos, "-o", tmp_path / "net.json")
     assert r.exit_code == 0, r.output

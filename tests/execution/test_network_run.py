@@ -55,6 +55,7 @@ def test_sensed_contact_vector_sign():
     assert sensed_contact_vector([0.0, 0.01, -0.6], weight, 0.05) is None
 
 
+@pytest.mark.slow
 def test_network_program_runs_to_its_goal_and_records(net, tmp_path):
     from mcap.reader import make_reader
 

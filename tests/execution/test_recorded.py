@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
 
@@ -22,6 +23,7 @@ def events(path: Path) -> list[dict]:
         return [json.loads(m.data) for _, _, m in make_reader(fh).iter_messages(topics=[TOPIC_EVENTS])]
 
 
+@pytest.mark.slow
 def test_a_recorded_run_verifies_and_carries_its_events(touch, tmp_path):
     from dlovr.recording import Recording, replay
 
@@ -69,6 +71,7 @@ def test_mesh_scenes_embed_their_meshes():
     assert b"mesh = \"meshes/hole_block.obj\"" in b.toml
 
 
+@pytest.mark.slow
 def test_cli_records_a_run_and_trials(touch, tmp_path):
     program, *_ = touch
     out = tmp_path / "run.mcap"

@@ -35,6 +35,7 @@ def test_force_guarded_program_reaches_its_goal(touch):
     assert "result: goal reached (V/F[table.F1])" in text and "ok" in text
 
 
+@pytest.mark.slow
 def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     """Trial 2 of seed 1 lowers the table by 7.5 mm: the replayed demonstration stops short of it,
     the guarded macro goes on until it feels the contact. (Found by running trials 0-11; pinned.)"""
@@ -94,6 +95,7 @@ def test_a_diverged_simulation_is_a_failed_result(touch, monkeypatch):
     assert "simulation diverged" in res.reason and res.macros[0].outcome == "diverged"
 
 
+@pytest.mark.slow
 def test_table_program_runs_to_its_goal_with_the_oracle():
     """The sample table program, each macro ended by the contact tracker: every transition of the
     demonstration comes again, and the cable ends in the air as demonstrated."""
@@ -114,6 +116,7 @@ def peg():
     return program, resolve_scene(program, None), load_track(ROOT / "recordings/peg_in_hole.mcap")
 
 
+@pytest.mark.slow
 def test_peg_in_hole_program_runs_to_its_goal_with_the_oracle(peg):
     """Every macro of the Fig. 11 program ends by its transition. Macro 3's transition comes a little
     later than demonstrated, in the turn about the edge: the gripper must go on turning (the recorded
@@ -125,6 +128,7 @@ def test_peg_in_hole_program_runs_to_its_goal_with_the_oracle(peg):
     assert [m.outcome for m in res.macros] == ["ok"] * len(res.macros)
 
 
+@pytest.mark.slow
 def test_peg_in_hole_force_detection_waits_for_the_last_motion_phase(peg):
     """The wrench shakes when the gripper stops and sets off again earlier in a stretch (macro 5: a
     lean, a hold, then the slide into the groove): armed in the last phase, no false detection, and
@@ -137,6 +141,7 @@ def test_peg_in_hole_force_detection_waits_for_the_last_motion_phase(peg):
     assert res.macros[4].detected_at is not None and 0.0 <= res.macros[4].latency < 0.1
 
 
+@pytest.mark.slow
 def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
     """A 10 % longer cable touches the block 2.5 cm sooner. The first touch tells the executor where
     the tip is: the lay-down turns about it (not about the demonstrated tip, which would slide the
@@ -147,6 +152,7 @@ def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
     assert res.success, format_result(res)
 
 
+@pytest.mark.slow
 def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose(peg):
     """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more friction.
     Its tip lands in the hole 2 cm short of the corner, and when the last slide stops it is still

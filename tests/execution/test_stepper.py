@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from dlovr.execution.engine import Engine, execute
 from dlovr.execution.run import demo_track, resolve_scene
 from dlovr.model.program import Program
@@ -13,6 +15,7 @@ from dlovr.sim import Simulator
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_stepped_execution_equals_the_blocking_one():
     program = Program.load(ROOT / "recordings/programs/table.program.json")
     scene = resolve_scene(program, None)

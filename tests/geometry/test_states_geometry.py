@@ -5,6 +5,7 @@ classified through geometry (dlovr.geometry) and the model (dlovr.model.discrete
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ ID = [1, 0, 0, 0]
 
 
 @pytest.fixture(scope="module")
-def geom(tmp_path_factory) -> SceneGeometry:
+def geom(tmp_path_factory) -> Iterator[SceneGeometry]:
     mp = pytest.MonkeyPatch()
     mp.setenv("DLOVR_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
     try:

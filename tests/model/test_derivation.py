@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 
 from dlovr.model.derivation import DEFAULT_PARAMS, DerivationRules, WrenchSeries, derive
 from dlovr.model.discrete import parse_discrete_situation as P
 from dlovr.model.program import PoseTrack, TimedSituation, compile_program
 
 
-def series(step_at: float, before: np.ndarray, after: np.ndarray, noise: float = 0.0, dt: float = 0.01,
-           t_end: float = 2.0, seed: int = 0) -> WrenchSeries:  # fmt: skip
+def series(step_at: float, before: ArrayLike, after: ArrayLike, noise: float = 0.0, dt: float = 0.01,
+           t_end: float = 2.0, seed: int = 0) -> WrenchSeries:
     """A wrench series holding ``before`` (N) until ``step_at`` s, then ``after``, with noise."""
     t = np.arange(0.0, t_end, dt)
     f = np.where((t < step_at)[:, None], np.asarray(before, float), np.asarray(after, float))

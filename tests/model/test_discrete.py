@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -40,7 +41,7 @@ FIG8 = {
     "V/F": (7, "S"), "V/E^LS": (8, "S"), "V/VS": (9, "S"),
     "E/E^LT": (9, "T"), "E/VT": (7, "T"), "V/E^LT": (8, "T"), "V/VT": (9, "T"),
     "E/E^LI": (6, "I"), "E/VI": (4, "I"), "V/E^LI": (5, "I"), "V/VI": (3, "I"),
-}  # fmt: skip
+}
 
 
 def test_there_are_exactly_the_15_states_of_fig8():
@@ -222,7 +223,7 @@ def corner_facts(concave=True, vec=(1, 1, 1), third_opening=90.0):
     return ContactFacts(fs, ps, vec)
 
 
-CASES = {
+CASES: dict[str, tuple[Literal["V", "E"], ContactFacts]] = {
     # 90° groove (table top + box side), DLO along it
     "E/E^LS": ("E", groove_facts(90)),
     "V/E^LS": ("V", groove_facts(90)),
@@ -310,7 +311,7 @@ def test_rank_merges_nearly_equal_normals_and_drops_internal_faces():
 def test_four_faces_in_a_corner_are_still_a_vertex():
     fs = (*corner_facts(True).faces, ff("w.F4", (-0.70710678, 0, 0.70710678)))
     ps = (*corner_facts(True).pairs, pair("w.F4", "t.F1", True, 135), pair("w.F4", "w.F2", True, 135),
-          pair("w.F4", "w.F3", True, 90))  # fmt: skip
+          pair("w.F4", "w.F3", True, 90))
     assert classify_contact("V", ContactFacts(fs, ps, X)).name == "V/VS"
 
 
@@ -352,6 +353,7 @@ def test_discretize_a_whole_situation():
     )  # across the edge (along y)
     d = discretize(type(topo)(tuple(c)), book)
     assert d.format() == "V/G & E/N & E/E^P[box.F1,box.F2] & E/F[box.F1] & V/F[table.F1]"
+    assert d.contacts[2].vector is not None
     np.testing.assert_allclose(d.contacts[2].vector, np.array([-1, 0, -1]) / math.sqrt(2))
     assert d.contacts[1].vector == (0.0, 0.0, 0.0)
 
@@ -366,7 +368,7 @@ def test_discretizer_gives_what_discretize_gives_annotations_and_all():
         {"box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X), "a.F1": ff("a.F1", UP),
          "b.F1": ff("b.F1", (0.0, 0.0, -1.0))},
         [PairFact("box.F1", "box.F2", False, 270)],
-    )  # fmt: skip
+    )
     d = Discretizer(book)
     topo = parse_situation("VS/G & E3/N & E9/(box.F1,box.F2) & E12/a.F1 + E12/b.F1 & VE/box.F1")
     for k, vec in enumerate([(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.3, 1.0, 0.01), (1.0, 0.0, 0.0)]):
@@ -436,7 +438,7 @@ def discrete_situations(draw):
         n = draw(st.sampled_from([0, *range(lo, (hi or 5) + 1)])) if lo else 0  # faces are optional
         fs = tuple(draw(st.lists(
             st.builds(lambda o, k: f"{o}.F{k}", st.sampled_from(["a", "box", "hole_b"]), st.integers(0, 20)),
-            min_size=n, max_size=n, unique=True)))  # fmt: skip
+            min_size=n, max_size=n, unique=True)))
         return DiscreteContact(state(name), fs)
 
     return DiscreteSituation(

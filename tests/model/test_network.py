@@ -46,6 +46,13 @@ def still(pos=(0.0, 0.0, 0.3)) -> PoseTrack:
     return PoseTrack(np.array([0.0]), np.array([pos]), np.array([[1.0, 0.0, 0.0, 0.0]]))
 
 
+def node(net: Network, situation: DiscreteSituation | str) -> str:
+    """The id of the node of ``situation``, which the test knows to be in ``net``."""
+    found = net.locate(situation)
+    assert found is not None, situation
+    return found
+
+
 def demo(name: str, seq, durations=None, poses=None, scene=("box", "abc")) -> Demonstration:
     durations = durations or [1.0] * len(seq)
     t = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
@@ -81,7 +88,7 @@ def test_nodes_count_visits_and_held_times_exactly():
     net = small_network()
     assert [(n.id, n.situation) for n in net.nodes] == [
         ("n1", FREE), ("n2", TIP), ("n3", GROOVE), ("n4", LIE)
-    ]  # fmt: skip
+    ]
     by = {n.id: n for n in net.nodes}
     assert [by[k].visits for k in ("n1", "n2", "n3", "n4")] == [3, 2, 3, 2]
     assert by["n1"].total_time == 4.0 and by["n1"].mean_time == pytest.approx(4.0 / 3)
@@ -129,7 +136,7 @@ def test_edge_motions_are_mean_and_spread_of_the_demonstrated_displacements():
 def test_risk_per_class():
     assert [edge_risk(c) for c in [(), ("C",), ("E",), ("T",), ("I",), ("S", "E"), ("T", "E")]] == [
         "none", "none", "none", "caution", "risky", "risky", "caution"
-    ]  # fmt: skip
+    ]
 
 
 def test_goal_is_the_most_common_last_situation():
@@ -188,7 +195,7 @@ def test_a_stable_path_is_preferred_over_a_shorter_risky_one_of_equal_probabilit
     assert labels[f"{net.locate(A)}->{net.locate(R)}"] == ("I", "risky")
     assert labels[f"{net.locate(R)}->{net.locate(G)}"] == ("S", "risky")
     prog = NetworkProgram(net)
-    ch = prog.replan(net.locate(A))
+    ch = prog.replan(node(net, A))
     assert ch is not None
     assert ch.path == tuple(net.locate(s) for s in (A, B, EP, G))
     assert (ch.reach_probability, ch.risky, ch.length) == (0.5, 0, 3)
@@ -197,23 +204,23 @@ def test_a_stable_path_is_preferred_over_a_shorter_risky_one_of_equal_probabilit
 
 def test_probability_comes_first_then_risk_then_length():
     risky_often = build_network([demo("r1", [A, R, G]), demo("r2", [A, R, G]), demo("s", [A, B, EP, G])])
-    ch = NetworkProgram(risky_often).replan(risky_often.locate(A))
+    ch = NetworkProgram(risky_often).replan(node(risky_often, A))
     assert ch.path[1] == risky_often.locate(R) and ch.reach_probability == round(2 / 3, 9) and ch.risky == 2
     short = build_network([demo("long", [A, B, EP, G]), demo("short", [A, B, G])])
-    ch = NetworkProgram(short).replan(short.locate(B))
+    ch = NetworkProgram(short).replan(node(short, B))
     assert ch.path == (short.locate(B), short.locate(G)) and ch.reach_probability == 0.5
 
 
 def test_a_step_without_class_joins_the_next_macro_and_a_final_macro_has_no_detection():
     lie2 = "V/G & E/N & E/F[box.F1] & E/E^P[box.F1,box.F2] & V/N"
     net = build_network([demo("d", [TIP, LIE, lie2, EP], [1.0, 1.0, 1.0, 1.0], line_track(0.01))])
-    ch = NetworkProgram(net).replan(net.locate(LIE))
+    ch = NetworkProgram(net).replan(node(net, LIE))
     assert ch.macro.edges == ("n2->n3", "n3->n4") and ch.macro.classes == ("C",) and not ch.macro.final
     np.testing.assert_allclose(ch.macro.world, [0.02, 0.0, 0.0], atol=1e-12)
     assert ch.macro.duration == 2.0
     assert [s.node for s in ch.successors] == ["n4"]  # reached through the undetectable step
     ends_flat = build_network([demo("d", [TIP, LIE, lie2])])
-    ch = NetworkProgram(ends_flat).replan(ends_flat.locate(LIE))
+    ch = NetworkProgram(ends_flat).replan(node(ends_flat, LIE))
     assert ch.macro.final and ch.macro.classes == () and ch.macro.target == ends_flat.goal
 
 
@@ -224,7 +231,7 @@ def test_the_gripper_position_tells_apart_two_visits_of_one_situation():
     track = PoseTrack(t, pos, np.tile([1.0, 0, 0, 0], (4, 1)))
     net = build_network([demo("d", [FREE, TIP, FREE, GROOVE], poses=track)])
     prog = NetworkProgram(net)
-    free = net.locate(FREE)
+    free = node(net, FREE)
     assert prog.replan(free, (0.0, 0.0, 0.3)).edge == f"{free}->{net.locate(TIP)}"
     assert prog.replan(free, (0.2, 0.0, 0.3)).edge == f"{free}->{net.locate(GROOVE)}"
     # position unknown: both departures, equal probability 1/2 of reaching the goal: the shorter one
@@ -253,7 +260,7 @@ def snapping_network() -> Network:
 def test_replanning_after_an_unexpected_transition():
     net = snapping_network()
     prog = NetworkProgram(net)
-    at = {s: net.locate(s) for s in (A, I_, G, X, GOAL)}
+    at = {s: node(net, s) for s in (A, I_, G, X, GOAL)}
     first = prog.replan(at[A], (0.0, 0.0, 0.3))
     assert first.macro.target == at[I_] and first.macro.classes == ("I",) and first.macro.risk == "risky"
     ch = prog.replan(at[I_], (0.0, 0.0, 0.3))
@@ -308,9 +315,9 @@ def test_no_path_to_the_goal_gives_no_choice():
     net = build_network([demo("a", [A, B, G]), demo("b", [A, R, EP]), demo("c", [A, B, G])])
     prog = NetworkProgram(net)
     assert net.goal == net.locate(G)
-    assert prog.replan(net.locate(EP)) is None
-    assert prog.replan(net.locate(R)) is None
-    assert prog.replan(net.locate(A)).path == tuple(net.locate(s) for s in (A, B, G))
+    assert prog.replan(node(net, EP)) is None
+    assert prog.replan(node(net, R)) is None
+    assert prog.replan(node(net, A)).path == tuple(net.locate(s) for s in (A, B, G))
 
 
 def test_network_program_json_round_trip():
@@ -354,7 +361,7 @@ def test_merged_detections_take_the_median_of_the_derived_parameters():
 
     def det(thr: float, how: str = "derived: 40% of the step") -> Detection:
         return Detection("E", "force_along_contact_vector", {"force_threshold_n": thr, "max_angle_deg": 30.0},
-                         {"force_threshold_n": how, "max_angle_deg": "default: E keeps it"})  # fmt: skip
+                         {"force_threshold_n": how, "max_angle_deg": "default: E keeps it"})
 
     (m,) = merge_detections([[det(0.1)], [det(0.3)], [det(0.2)], [det(0.5, "default: no wrench signal")]])
     assert m.params == {"force_threshold_n": 0.2, "max_angle_deg": 30.0}  # the default one left out
@@ -382,7 +389,7 @@ def test_each_edge_keeps_the_reference_demonstrations_track_else_the_representat
 
     lie, groove = [FREE, TIP, LIE], [FREE, GROOVE]
     demos = [d("A", groove, 0.05), d("B", lie, 0.01), d("C", lie, 0.02), d("D", groove, 0.03),
-             d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]  # fmt: skip
+             d("E", lie, 0.01), d("F", groove, 0.035), d("G", lie, 0.02)]
     net = build_network(demos)
     assert net.goal == net.locate(LIE)
     paths = [["n1", "n4"], ["n1", "n3"], ["n1", "n2", "n3"], ["n1", "n2", "n3"]]
@@ -436,7 +443,7 @@ def test_network_macros_follow_the_reference_demonstration_where_it_went():
     assert net.reference is not None and net.reference.demonstration == 0
     first = prog.replan(net.start, None)
     assert reference_span(prog, first.macro, net.start) == (0.0, 1.0)
-    tip = net.locate(TIP)
+    tip = node(net, TIP)
     at_tip = prog.replan(tip, None)
     assert at_tip.macro.target == net.locate(inst_y) and at_tip.macro.classes == ("I",)
     assert reference_span(prog, at_tip.macro, tip) == (1.0, 2.0)  # A's own I, from TIP to inst_x

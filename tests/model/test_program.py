@@ -86,7 +86,7 @@ def test_the_motion_after_the_last_classed_transition_is_a_final_macro():
 def test_risk_is_none_caution_or_risky():
     assert [risk(c) for c in [(), ("C",), ("E",), ("T",), ("I",), ("S", "E"), ("T", "C")]] == [
         "none", "none", "none", "caution", "risky", "risky", "caution",
-    ]  # fmt: skip
+    ]
     a, b = P("V/G & E/N & E/F[a.F1] & V/N"), P("V/G & E/N & E/E^LT[a.F1,a.F2] & V/N")
     prog = compile_program([TimedSituation(0, 1, a), TimedSituation(1, 1, b)], straight_track(2))
     assert prog.macros[0].risk == "caution" and prog.summary["caution"] == 1

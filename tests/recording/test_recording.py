@@ -37,6 +37,7 @@ def recorded(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_record_then_replay_verify_is_bit_exact(recorded):
     res = replay(recorded, verify=True)
     assert res.divergence is None and res.warnings == ()
@@ -140,6 +141,7 @@ def test_compile_one_and_two_workers_identical_and_failures_reported(recorded, t
     ("content", "message"),
     [(b"", "empty file"), (b"PK\x03\x04 zip", "not an MCAP file")],
 )
+@pytest.mark.slow
 def test_cli_errors_are_one_line_exit_2(tmp_path, content, message):
     f = tmp_path / "x.mcap"
     f.write_bytes(content)
@@ -171,6 +173,7 @@ def test_scene_export_loads_in_plain_mujoco(tmp_path):
     assert bad.exit_code == 2
 
 
+@pytest.mark.slow
 def test_version_mismatch_is_a_clear_warning(recorded, tmp_path):
     other = tmp_path / "old.mcap"
     rewrite_mcap(recorded, other, metadata=lambda name, d: {**d, "mujoco_version": "3.3.0"})
@@ -180,6 +183,7 @@ def test_version_mismatch_is_a_clear_warning(recorded, tmp_path):
     assert r.returncode == 0 and "warning: recorded with mujoco 3.3.0" in r.stderr
 
 
+@pytest.mark.slow
 def test_demo_prints_the_fig11_style_table_and_bad_scripts_exit_2(tmp_path):
     r = cli("demo", "--script", SCRIPT, "--json")
     rows = json.loads(r.stdout)
@@ -207,6 +211,7 @@ def test_replay_uses_the_embedded_decomposition(recorded, tmp_path, monkeypatch)
     from dlovr.scene import load_scene
 
     pieces = Recording(recorded).pieces
+    assert pieces is not None
     today = geometry.scene_pieces(load_scene("table"))
     assert set(pieces) == {"table"} and np.array_equal(pieces["table"][0][0], today["table"][0][0])
 

@@ -16,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from dlovr.cli import main
@@ -79,14 +80,13 @@ def contents(path: Path):
         msgs, meta, att = [], [], []
         chans = {}
         for r in StreamReader(io.BytesIO(path.read_bytes())).records:
-            kind = type(r).__name__
-            if kind == "Channel":
+            if isinstance(r, Channel):
                 chans[r.id] = r.topic
-            elif kind == "Message":
+            elif isinstance(r, Message):
                 msgs.append((chans.get(r.channel_id), r.log_time, r.data))
-            elif kind == "Metadata":
+            elif isinstance(r, Metadata):
                 meta.append((r.name, dict(r.metadata)))
-            elif kind == "Attachment":
+            elif isinstance(r, Attachment):
                 att.append((r.name, r.data))
         return msgs, meta, att
     except Exception:
@@ -211,6 +211,7 @@ def samples(tmp_path_factory) -> dict[tuple[str, str], tuple[Path, str]]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", ["crc", "no-crc"])
 @pytest.mark.parametrize("sample", [p.name for p in SAMPLES])
 @SAMPLE_FUZZ
@@ -250,6 +251,7 @@ def test_fuzz_a_sample_recording_through_replay_verify_and_compile(m, variant, s
     shutil.rmtree(bad.parent)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("m", [("flip", 5000, 0x10), ("zero", 30000, 500), ("truncate", 60000, 0)])
 def test_damaged_files_through_the_real_command_line(short, tmp_path, m):
     bad = tmp_path / "bad.mcap"

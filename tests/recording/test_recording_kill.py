@@ -75,6 +75,7 @@ def verified(path: Path) -> float:
         (signal.SIGINT, 2.0, 0.21),
     ],
 )
+@pytest.mark.slow
 def test_signal_leaves_a_finished_file_that_verifies(long_script, tmp_path, sig, seconds, extra):
     out, err = tmp_path / "rec.mcap", tmp_path / "stderr.txt"
     proc = start(long_script, out, err)
@@ -91,6 +92,7 @@ def test_signal_leaves_a_finished_file_that_verifies(long_script, tmp_path, sig,
     assert length >= seconds
 
 
+@pytest.mark.slow
 def test_sigkill_then_recover_verifies_and_loses_at_most_2_s(long_script, tmp_path):
     """The file a SIGKILL leaves is the file on disk at that moment: freeze the writer (SIGSTOP) and
     copy it; then let it finish on SIGTERM, which says how far it had got; then kill another writer

@@ -22,6 +22,7 @@ def test_there_are_samples_of_the_built_in_demonstrations():
         assert p.stat().st_size < 8_000_000, f"{p.name} is too large for a sample"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SAMPLES, ids=[p.stem for p in SAMPLES])
 def test_sample_replays_bit_exact(path):
     res = replay(path, verify=True)

@@ -80,7 +80,7 @@ def test_tracker_on_a_static_polyline_matches_the_geometry(geom):
 def test_hysteresis_enter_below_half_a_millimetre_leave_beyond_one(geom):
     tr = ContactTracker(geom, enter_tol=5e-4, leave_tol=1e-3)
     states = [tr.update(Rec(cable(R + gap_mm * 1e-3), step=k)).discrete.format() for k, gap_mm in
-              enumerate([0.8, 0.4, 0.8, 0.95, 1.1, 0.8])]  # fmt: skip
+              enumerate([0.8, 0.4, 0.8, 0.95, 1.1, 0.8])]
     free, lying = "V/G & E/N & V/N", "V/G & E/N & E/F[table.F1] & V/N"
     assert states == [free, lying, lying, lying, free, free]
 

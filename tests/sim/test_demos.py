@@ -123,6 +123,7 @@ def test_table_covers_all_fifteen_states():
         ),
     ],
 )
+@pytest.mark.slow
 def test_state_reached_live(state):
     if state in REACHED:
         scene, script, faces = REACHED[state]
@@ -156,6 +157,7 @@ WINDOWS = {
 }
 
 
+@pytest.mark.slow
 def test_edges_90_concave_stable_transition():
     kept = demo("edges").kept_in(*WINDOWS["concave90"])
     into = [c for k, c in kept if has(k.situation, "E/E^LS", ("concave90.F1", "concave90.F5"))]
@@ -163,6 +165,7 @@ def test_edges_90_concave_stable_transition():
     assert not {"T", "I", "S"} & {x for _, c in kept for x in c}
 
 
+@pytest.mark.slow
 def test_edges_175_concave_transient_transition():
     kept = demo("edges").kept_in(*WINDOWS["concave175"])
     semi = [
@@ -178,6 +181,7 @@ def test_edges_175_concave_transient_transition():
     "plate,faces",
     [("convex185", ("convex185.F2", "convex185.F3")), ("convex270", ("convex270.F2", "convex270.F4"))],
 )
+@pytest.mark.slow
 def test_edges_convex_instable_then_spontaneous(plate, faces):
     kept = demo("edges").kept_in(*WINDOWS[plate])
     classes = [c for _, c in kept]
@@ -217,6 +221,7 @@ def _principals(sit: DiscreteSituation) -> list[tuple[str, frozenset[str]]]:
     return [(c.state.name, frozenset(c.faces)) for c in principal_contacts(sit)]
 
 
+@pytest.mark.slow
 def test_peg_in_hole_tells_the_fig11_story_with_its_classes():
     """Paper Fig. 11, steps 2-10: exactly the classes E, C, C, C, E, I, S,E, E over these principal
     contacts, in this order, and nothing else classed in between."""
@@ -226,6 +231,7 @@ def test_peg_in_hole_tells_the_fig11_story_with_its_classes():
     assert got == want, [(",".join(c), k.situation.format()) for k, c in run.transitions if c]
 
 
+@pytest.mark.slow
 def test_peg_in_hole_flight_into_the_hole():
     """Paper step 9: the tip leaves the instable corner for free space and lands within the flight time;
     the free interval is no kept situation of its own (docs/model.md, section 5)."""
@@ -237,6 +243,7 @@ def test_peg_in_hole_flight_into_the_hole():
     assert 0.0 < landing.start - corner.end < DEFAULT_FLIGHT_S
 
 
+@pytest.mark.slow
 def test_peg_in_hole_block_part_has_no_class_where_the_paper_has_none():
     """Paper step 4: E/F -> E/F + E/E^P keeps the principal contact E/F, so no transition class."""
     transitions = demo("peg_in_hole").transitions

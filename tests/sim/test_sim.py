@@ -128,6 +128,7 @@ def test_run_script_is_deterministic_and_replayable() -> None:
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
     assert np.linalg.norm(b[-1][0] - [-0.15, 0.05, TABLE_TOP + 0.01]) < 2e-3
     # restore the step-100 checkpoint and continue with the same commands: bit-identical
+    assert checkpoint is not None
     sim.set_state(checkpoint)
     for k in range(101, 151):
         pos, quat = SCRIPT.target_at(k * 0.002, (-0.15, 0.0, TABLE_TOP + 0.0055), Q_X)
@@ -234,6 +235,7 @@ def test_export_xml_loads_in_plain_mujoco(tmp_path) -> None:
     assert m.nq == sim.model.nq and m.ngeom == sim.model.ngeom and m.neq == sim.model.neq
 
 
+@pytest.mark.slow
 def test_table_demo_script_runs() -> None:
     """scenes/table.script.toml on the table of the table scene (top at z = 0), 20 segments."""
     from pathlib import Path
@@ -325,6 +327,7 @@ def test_tracking_simulator_gives_situations_per_step():
     assert Simulator(load_scene("table")).step().state is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("scene_name", "steps"), [("l_block", 5050), ("corners", 4000)])
 def test_label_reuse_changes_no_state_in_a_live_demo(scene_name, steps):
     """The simulator's tracker reuses labels while points stay within their slack; a second tracker

@@ -68,6 +68,7 @@ def missing_contacts(script_path: Path) -> tuple[int, list[str]]:
     return steps, missing
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", SCRIPTS, ids=[p.name.removesuffix(".script.toml") for p in SCRIPTS])
 def test_every_forceful_contact_appears_in_the_situation(path):
     steps, missing = missing_contacts(path)

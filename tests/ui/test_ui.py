@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from dlovr.recording import Recording, replay
 from dlovr.ui import DemoServer, Stability, point_classes, segment_transforms
@@ -133,6 +134,7 @@ def test_exposure_warning_only_off_loopback():
         assert w is not None and "anyone who can reach port 8080" in w and "write recordings" in w
 
 
+@pytest.mark.slow
 def test_dlovr_serve_on_every_interface_prints_the_warning(tmp_path: Path):
     """``dlovr serve --host 0.0.0.0`` says on stderr that anyone who can reach the port can drive it."""
     import os

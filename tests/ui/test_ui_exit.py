@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from dlovr.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -22,6 +24,7 @@ def _env(tmp: Path) -> dict[str, str]:
     return {**os.environ, "TMPDIR": str(tmp), "PYTHONPATH": str(ROOT)}
 
 
+@pytest.mark.slow
 def test_an_opened_recordings_folder_is_removed_at_exit(tmp_path):
     code = (
         "import os, tempfile\n"
@@ -35,6 +38,7 @@ def test_an_opened_recordings_folder_is_removed_at_exit(tmp_path):
     assert list(tmp_path.iterdir()) == [], "the dlovr-ui-* folder was left behind"
 
 
+@pytest.mark.slow
 def test_serve_stops_on_sigterm_and_removes_its_folders(tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
