@@ -223,3 +223,19 @@ def test_public_names_import(module):
 def test_every_example_script_is_listed():
     listed = set(re.findall(r"`examples/(\w+\.py)`", ARCH))
     assert listed == {p.name for p in (ROOT / "examples").glob("*.py")}
+
+
+def test_inputs_doc_lists_every_limit_with_the_codes_value():
+    """docs/inputs.md's table of limits is ``dlovr.inputs.LIMITS``: every key, with its value."""
+    from dlovr.inputs import LIMITS
+
+    rows = {
+        line.split("|")[1].strip().strip("`"): line.split("|")[2].strip()
+        for line in (ROOT / "docs" / "inputs.md").read_text().splitlines()
+        if line.startswith("| `")
+    }
+    assert set(rows) == set(LIMITS)
+    for key, value in LIMITS.items():
+        number, _, unit = rows[key].partition(" ")
+        scale = {"MiB": 1024 * 1024, "m": 1, "s": 1, "": 1}[unit]
+        assert float(number) * scale == value, f"docs/inputs.md says {key} = {rows[key]}, the code {value}"
