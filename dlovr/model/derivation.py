@@ -185,59 +185,20 @@ def derive(
     before = wrench.window(max(t_prev, t - r.window_s), t - r.gap_s)
     after = wrench.window(t + r.gap_s, min(t_next, t + r.window_s))
     if len(before) < r.min_samples or len(after) < r.min_samples:
-        which = "before" if len(before) < r.min_samples else "after"
-        why = f"no signal (fewer than {r.min_samples} wrench samples {which} the transition)"
-        d = _default(cls, why)
-        held = (t - t_prev) if which == "before" else (t_next - t)
-        return Derived(
-            {**d.params, "step_n": 0.0},
-            {**d.derivation, "step_n": f"derived: none measurable (the state {which} it held "
-             f"{held * 1000:.0f} ms): the force cannot show this transition"},
-        )
+        return _unmeasurable(cls, r, len(before) < r.min_samples, t_prev, t, t_next)
     base = before.mean(axis=0)
     step = after.mean(axis=0) - base
     dirs = _directions(cls, released, established, axes)
-    if dirs:
-        u, name = max(dirs, key=lambda d: dot(step, d[0]))
-        size = dot(step, u)
-        noise = float((before * u).sum(axis=1).std())
-    else:
-        n = norm(step)
-        u, name, size = (step / n if n > 1e-12 else None), "its own direction", n
-        noise = norm(before.std(axis=0))
+    u, name, size, noise = _measure(step, before, dirs)
     p = dict(DEFAULT_PARAMS[cls])
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
-    frac = r.fraction * size
     armed = t_prev + r.armed_from * (t - t_prev) - r.window_s  # the reference reaches back one window
     # up to one window before the transition: the force may start to change before the contact
     # label does (the transition's onset belongs to the step, not to the quiet level)
     quiet_to = t - r.window_s
     quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), quiet_to, r.window_s) if u is not None else 0.0
-    thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
-    if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
-        texts[key] = (
-            f"derived: {r.quiet_margin:g}x the {quiet:.3g} N largest rise along {name} within "
-            f"{r.window_s:g} s while the previous state held (the step is {size:.3g} N"
-            + (", weak signal)" if thr >= size else ")")
-        )
-    elif size <= 0:
-        texts[key] = (
-            f"derived: {r.k_noise:g}x noise {noise:.3g} N (the demonstrated step along {name} is "
-            f"{size:.3g} N: no rise to detect)"
-        )
-    elif thr == frac:
-        texts[key] = f"derived: {r.fraction:.0%} of the {size:.3g} N step along {name}, noise {noise:.3g} N"
-    elif thr < size:
-        texts[key] = (
-            f"derived: {r.k_noise:g}x noise {noise:.3g} N (above {r.fraction:.0%} of the {size:.3g} N "
-            f"step along {name})"
-        )
-    else:
-        texts[key] = (
-            f"derived: {max(r.k_noise * noise, r.floor_n):.3g} N floor (the {size:.3g} N step along {name} "
-            f"is within {r.k_noise:g}x noise {noise:.3g} N: weak signal)"
-        )
+    thr, texts[key] = _threshold(r, size, noise, quiet, name)
     p[key] = round(thr, 6)
     lag_key = "window_s" if cls == "S" else "ref_lag_s"  # S compares over its own window
     p[lag_key] = r.window_s
@@ -246,20 +207,114 @@ def derive(
         for axis, x in zip("xyz", u, strict=True):
             p[f"dir_{axis}"] = round(float(x), 6)
             texts[f"dir_{axis}"] = "derived: the demonstrated step's direction (no contact vector to watch)"
-    p["step_n"] = round(size, 6)
-    p["noise_n"] = round(noise, 6)
-    texts["noise_n"] = (
-        f"derived: the standard deviation along {name} over the {len(before)} samples before the "
-        "transition; a step within a few times it is no signal to trust"
-    )
-    texts["step_n"] = (
-        f"derived: the demonstrated step along {name} (mean over {len(after)} samples after minus "
-        f"{len(before)} before); a threshold at or above it means the force cannot show the transition"
-    )
+    _step_and_noise(p, texts, name, size, noise, len(before), len(after))
     if cls == "C":
         texts.pop("min_turn_fraction", None)
         p.pop("min_turn_fraction", None)
-    if cls in CONE_CLASSES and dirs and u is not None and size > 0:
+    _cone(cls, p, texts, r, bool(dirs), u, step, size, name)
+    return Derived(p, {k: texts[k] for k in p})
+
+
+def _unmeasurable(
+    cls: str, r: DerivationRules, short_before: bool, t_prev: float, t: float, t_next: float
+) -> Derived:
+    """The class's defaults and ``step_n`` 0 for a transition with fewer than ``r.min_samples``
+    wrench samples in its window before (``short_before``) or else after it."""
+    which = "before" if short_before else "after"
+    why = f"no signal (fewer than {r.min_samples} wrench samples {which} the transition)"
+    d = _default(cls, why)
+    held = (t - t_prev) if which == "before" else (t_next - t)
+    return Derived(
+        {**d.params, "step_n": 0.0},
+        {**d.derivation, "step_n": f"derived: none measurable (the state {which} it held "
+         f"{held * 1000:.0f} ms): the force cannot show this transition"},
+    )
+
+
+def _measure(
+    step: np.ndarray, before: np.ndarray, dirs: list[tuple[np.ndarray, str]]
+) -> tuple[np.ndarray | None, str, float, float]:
+    """The direction watched (unit; ``None`` for a zero step without ``dirs``), its name, the
+    step's size along it and the noise of the samples ``before`` along it: the one of ``dirs``
+    the step rises most along, else the step's own direction."""
+    if dirs:
+        u, name = max(dirs, key=lambda d: dot(step, d[0]))
+        size = dot(step, u)
+        noise = float((before * u).sum(axis=1).std())
+    else:
+        n = norm(step)
+        u, name, size = (step / n if n > 1e-12 else None), "its own direction", n
+        noise = norm(before.std(axis=0))
+    return u, name, size, noise
+
+
+def _threshold(r: DerivationRules, size: float, noise: float, quiet: float, name: str) -> tuple[float, str]:
+    """The threshold (N) for a step of ``size`` along ``name`` with ``noise`` and a ``quiet`` level
+    before it, and the text saying which of the rules gave it."""
+    frac = r.fraction * size
+    thr = max(frac, r.k_noise * noise, r.quiet_margin * quiet, r.floor_n)
+    if thr == r.quiet_margin * quiet and thr > max(frac, r.k_noise * noise):
+        text = (
+            f"derived: {r.quiet_margin:g}x the {quiet:.3g} N largest rise along {name} within "
+            f"{r.window_s:g} s while the previous state held (the step is {size:.3g} N"
+            + (", weak signal)" if thr >= size else ")")
+        )
+    elif size <= 0:
+        text = (
+            f"derived: {r.k_noise:g}x noise {noise:.3g} N (the demonstrated step along {name} is "
+            f"{size:.3g} N: no rise to detect)"
+        )
+    elif thr == frac:
+        text = f"derived: {r.fraction:.0%} of the {size:.3g} N step along {name}, noise {noise:.3g} N"
+    elif thr < size:
+        text = (
+            f"derived: {r.k_noise:g}x noise {noise:.3g} N (above {r.fraction:.0%} of the {size:.3g} N "
+            f"step along {name})"
+        )
+    else:
+        text = (
+            f"derived: {max(r.k_noise * noise, r.floor_n):.3g} N floor (the {size:.3g} N step along {name} "
+            f"is within {r.k_noise:g}x noise {noise:.3g} N: weak signal)"
+        )
+    return thr, text
+
+
+def _step_and_noise(
+    p: dict[str, float],
+    texts: dict[str, str],
+    name: str,
+    size: float,
+    noise: float,
+    n_before: int,
+    n_after: int,
+) -> None:
+    """Record the demonstrated step and the noise (``step_n``, ``noise_n``) in ``p`` and ``texts``."""
+    p["step_n"] = round(size, 6)
+    p["noise_n"] = round(noise, 6)
+    texts["noise_n"] = (
+        f"derived: the standard deviation along {name} over the {n_before} samples before the "
+        "transition; a step within a few times it is no signal to trust"
+    )
+    texts["step_n"] = (
+        f"derived: the demonstrated step along {name} (mean over {n_after} samples after minus "
+        f"{n_before} before); a threshold at or above it means the force cannot show the transition"
+    )
+
+
+def _cone(
+    cls: str,
+    p: dict[str, float],
+    texts: dict[str, str],
+    r: DerivationRules,
+    has_dirs: bool,
+    u: np.ndarray | None,
+    step: np.ndarray,
+    size: float,
+    name: str,
+) -> None:
+    """For a class with a cone (:data:`CONE_CLASSES`): widen ``max_angle_deg`` in ``p`` to the
+    step's angle from the watched direction ``u`` plus the margin, or say in ``texts`` why not."""
+    if cls in CONE_CLASSES and has_dirs and u is not None and size > 0:
         n = norm(step)  # the angle to the unit u, rounded as numpy's arccos (programs stay bit for bit)
         ang = 180.0 if n < 1e-12 else float(np.degrees(np.arccos(np.clip(size / n, -1.0, 1.0))))
         cone = min(max(DEFAULT_PARAMS[cls]["max_angle_deg"], ang + r.cone_margin_deg), r.max_cone_deg)
@@ -269,6 +324,5 @@ def derive(
             f"(at least the default {DEFAULT_PARAMS[cls]['max_angle_deg']:g}, at most {r.max_cone_deg:g})"
         )
     elif cls in CONE_CLASSES:
-        why = "no expected contact vector to compare the step with" if not dirs else "no step along " + name
+        why = "no step along " + name if has_dirs else "no expected contact vector to compare the step with"
         texts["max_angle_deg"] = f"default: {why}"
-    return Derived(p, {k: texts[k] for k in p})
