@@ -30,7 +30,7 @@ from __future__ import annotations
 import json
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -447,6 +447,31 @@ def _most_common(counter: Counter[str], order: Sequence[str]) -> str:
     return next(k for k in order if counter.get(k) == best)
 
 
+#: One occurrence of an edge: (demonstration index, duration s, gripper motion, gripper position at
+#: its start and at its end, whether it went through free space).
+_Occurrence = tuple[int, float, Any, np.ndarray, np.ndarray, bool]
+#: One occurrence's two timed situations and its demonstration's wrench.
+_StepPair = tuple[TimedSituation, TimedSituation, WrenchSeries | None]
+
+
+@dataclass
+class _Visits:
+    """What the demonstrations visited, gathered by :func:`_visit`: node ids by situation key
+    (``ids``, in order of first visit), the situations, per node id the times held and the contact
+    vectors, per edge (node id pair) its occurrences and their steps, each demonstration's first and
+    last node with the gripper position there, and per demonstration the node id of each state."""
+
+    ids: dict[str, str] = field(default_factory=dict)
+    sits: dict[str, DiscreteSituation] = field(default_factory=dict)
+    held: dict[str, list[float]] = field(default_factory=dict)
+    vectors: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    occ: dict[tuple[str, str], list[_Occurrence]] = field(default_factory=dict)
+    steps: dict[tuple[str, str], list[_StepPair]] = field(default_factory=dict)
+    firsts: list[tuple[str, np.ndarray]] = field(default_factory=list)
+    lasts: list[tuple[str, np.ndarray]] = field(default_factory=list)
+    demo_keys: list[list[str]] = field(default_factory=list)
+
+
 def build_network(demos: Sequence[Demonstration]) -> Network:
     """Merge demonstrations of one scene into a transition network (module docstring)."""
     if not demos:
@@ -455,79 +480,15 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     for d in demos:
         if not d.states:
             raise NetworkError(f"{d.name}: demonstration has no contact situations")
-    ids: dict[str, str] = {}
-    sits: dict[str, DiscreteSituation] = {}
-    held: dict[str, list[float]] = {}
-    vectors: dict[str, list[np.ndarray]] = {}
-    occ: dict[tuple[str, str], list[tuple[int, float, Any, np.ndarray, np.ndarray, bool]]] = {}
-    steps: dict[tuple[str, str], list[tuple[TimedSituation, TimedSituation, WrenchSeries | None]]] = {}
-    firsts: list[tuple[str, np.ndarray]] = []
-    lasts: list[tuple[str, np.ndarray]] = []
-    demo_keys: list[list[str]] = []  # per demonstration, the node id of each of its states
+    seen = _Visits()
     for di, d in enumerate(demos):
-        keys: list[str] = []
-        demo_keys.append(keys)
-        for s in d.states:
-            key = s.situation.format()
-            if key not in ids:
-                ids[key] = f"n{len(ids) + 1}"
-                sits[key] = s.situation
-            keys.append(ids[key])
-            held.setdefault(ids[key], []).append(s.duration)
-            v = situation_vector(s.situation)
-            if v is not None:
-                vectors.setdefault(ids[key], []).append(v)
-        firsts.append((keys[0], d.poses.at(d.states[0].t)[0]))
-        end = d.states[-1]
-        lasts.append((keys[-1], d.poses.at(end.t + end.duration)[0]))
-        for k in range(1, len(d.states)):
-            a, b = d.states[k - 1], d.states[k]
-            mv = motion_between(d.poses, a.t, b.t)
-            occ.setdefault((keys[k - 1], keys[k]), []).append(
-                (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
-            )
-            steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
-    sensed = sensed_vectors(demos, demo_keys)
-    reference = reference_demonstration(demo_keys, list(ids.values()))
-    by_id = {v: k for k, v in ids.items()}
-    nodes = []
-    for nid in ids.values():
-        sit = sits[by_id[nid]]
-        vs = vectors.get(nid)
-        vec = None
-        if vs:
-            m = np.mean(vs, axis=0)
-            n = norm(m)
-            vec = _vec(m / n if n > 1e-9 else np.zeros(3))
-        h = held[nid]
-        nodes.append(
-            Node(nid, by_id[nid], tuple(c.format() for c in principal_contacts(sit)),
-                 situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)), sensed.get(nid))
-        )
-    departures = Counter[str]()
-    for (u, _), xs in occ.items():
-        departures[u] += len(xs)
-    edges = []
-    for (u, v), xs in sorted(occ.items(), key=lambda kv: (int(kv[0][0][1:]), int(kv[0][1][1:]))):
-        # a flight (through free space) is S,E where a direct step is S: an edge taken both ways has both
-        flights = sorted({x[5] for x in xs})
-        union = {c for f in flights for c in classify_step(sits[by_id[u]], sits[by_id[v]], f)}
-        classes = tuple(c for c in CLASS_ORDER if c in union)
-        world = np.array([x[2].world for x in xs])
-        starts, ends = np.array([x[3] for x in xs]), np.array([x[4] for x in xs])
-        motion = MotionStats(
-            _vec(world.mean(axis=0)), _vec(world.std(axis=0)),
-            _vec(np.mean([x[2].relative for x in xs], axis=0)),
-            _vec(np.mean([x[2].rotation for x in xs], axis=0)),
-            _vec(starts.mean(axis=0)), _spread(starts), _vec(ends.mean(axis=0)),
-        )
-        derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps[(u, v)]])
-        edges.append(
-            Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
-                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,
-                 _edge_track(demos, xs, steps[(u, v)], reference))
-        )
-    order = list(ids.values())
+        _visit(seen, di, d)
+    sensed = sensed_vectors(demos, seen.demo_keys)
+    reference = reference_demonstration(seen.demo_keys, list(seen.ids.values()))
+    by_id = {v: k for k, v in seen.ids.items()}
+    nodes = [_node(seen, by_id, nid, sensed) for nid in seen.ids.values()]
+    edges = _edges(demos, seen, by_id, reference)
+    firsts, lasts, order = seen.firsts, seen.lasts, list(seen.ids.values())
     net = Network(
         demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
         _endpoints(firsts, order), _endpoints(lasts, order),
@@ -536,6 +497,86 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
     )
     _check(net)
     return net
+
+
+def _visit(seen: _Visits, di: int, d: Demonstration) -> None:
+    """Add demonstration ``d`` (index ``di``) to ``seen``: its states as nodes, its steps as edge
+    occurrences."""
+    keys: list[str] = []
+    seen.demo_keys.append(keys)
+    for s in d.states:
+        key = s.situation.format()
+        if key not in seen.ids:
+            seen.ids[key] = f"n{len(seen.ids) + 1}"
+            seen.sits[key] = s.situation
+        keys.append(seen.ids[key])
+        seen.held.setdefault(seen.ids[key], []).append(s.duration)
+        v = situation_vector(s.situation)
+        if v is not None:
+            seen.vectors.setdefault(seen.ids[key], []).append(v)
+    seen.firsts.append((keys[0], d.poses.at(d.states[0].t)[0]))
+    end = d.states[-1]
+    seen.lasts.append((keys[-1], d.poses.at(end.t + end.duration)[0]))
+    for k in range(1, len(d.states)):
+        a, b = d.states[k - 1], d.states[k]
+        mv = motion_between(d.poses, a.t, b.t)
+        seen.occ.setdefault((keys[k - 1], keys[k]), []).append(
+            (di, b.t - a.t, mv, d.poses.at(a.t)[0], d.poses.at(b.t)[0], bool(b.through_free))
+        )
+        seen.steps.setdefault((keys[k - 1], keys[k]), []).append((a, b, d.wrench))
+
+
+def _node(seen: _Visits, by_id: Mapping[str, str], nid: str, sensed: Mapping[str, Vec3]) -> Node:
+    """The node ``nid``: its situation's principal contacts and stability, mean contact vector,
+    visits and times held."""
+    sit = seen.sits[by_id[nid]]
+    vs = seen.vectors.get(nid)
+    vec = None
+    if vs:
+        m = np.mean(vs, axis=0)
+        n = norm(m)
+        vec = _vec(m / n if n > 1e-9 else np.zeros(3))
+    h = seen.held[nid]
+    return Node(nid, by_id[nid], tuple(c.format() for c in principal_contacts(sit)),
+                situation_stability(sit), vec, len(h), _r(sum(h)), _r(sum(h) / len(h)), sensed.get(nid))
+
+
+def _edges(
+    demos: Sequence[Demonstration], seen: _Visits, by_id: Mapping[str, str], reference: int
+) -> list[Edge]:
+    """The edges, ordered by node number: classes, risk, probability, durations, motion statistics,
+    merged detections and track."""
+    departures = Counter[str]()
+    for (u, _), xs in seen.occ.items():
+        departures[u] += len(xs)
+    edges = []
+    for (u, v), xs in sorted(seen.occ.items(), key=lambda kv: (int(kv[0][0][1:]), int(kv[0][1][1:]))):
+        # a flight (through free space) is S,E where a direct step is S: an edge taken both ways has both
+        flights = sorted({x[5] for x in xs})
+        union = {c for f in flights for c in classify_step(seen.sits[by_id[u]], seen.sits[by_id[v]], f)}
+        classes = tuple(c for c in CLASS_ORDER if c in union)
+        motion = _motion_stats(xs)
+        steps = seen.steps[(u, v)]
+        derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps])
+        edges.append(
+            Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
+                 tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,
+                 _edge_track(demos, xs, steps, reference))
+        )
+    return edges
+
+
+def _motion_stats(xs: Sequence[_Occurrence]) -> MotionStats:
+    """The gripper motion of an edge's occurrences ``xs``: mean and spread of the displacement, mean
+    relative motion and rotation, mean and spread of the start points, mean end point."""
+    world = np.array([x[2].world for x in xs])
+    starts, ends = np.array([x[3] for x in xs]), np.array([x[4] for x in xs])
+    return MotionStats(
+        _vec(world.mean(axis=0)), _vec(world.std(axis=0)),
+        _vec(np.mean([x[2].relative for x in xs], axis=0)),
+        _vec(np.mean([x[2].rotation for x in xs], axis=0)),
+        _vec(starts.mean(axis=0)), _spread(starts), _vec(ends.mean(axis=0)),
+    )
 
 
 def reference_demonstration(demo_keys: Sequence[Sequence[str]], order: Sequence[str]) -> int:
