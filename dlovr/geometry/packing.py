@@ -47,75 +47,129 @@ class PackedPieces:
 
 def pack_pieces(pieces: Sequence[Piece], object_names: Sequence[str]) -> PackedPieces:
     """Pack ``pieces`` (world frame; ``object_names`` orders the objects for ``owner``)."""
-    n_p = len(pieces)
     n_f = max((len(p.faces) for p in pieces), default=1)
     names = sorted({pf.face for p in pieces for pf in p.faces if pf.face is not None})
     face_id = {n: i for i, n in enumerate(names)}
-    obj_index = {o: i for i, o in enumerate(object_names)}
-    normals = np.zeros((n_p, n_f, 3))
-    offsets = np.full((n_p, n_f), 1e9)
-    label = np.zeros((n_p, n_f), np.int64)
-    name = np.full((n_p, n_f), -1, np.int64)
-    eps = np.zeros(n_p)
-    edge_range = np.zeros(n_p + 1, np.int64)
-    tri_range = np.zeros(n_p * n_f + 1, np.int64)
-    outline_range = np.zeros(n_p * n_f + 1, np.int64)
-    starts: list[np.ndarray] = []
-    inwards: list[np.ndarray] = []
-    out_a: list[np.ndarray] = []
-    out_b: list[np.ndarray] = []
+    t = _face_tables(pieces, n_f, face_id)
+    floats = _float_sections(pieces, t)
+    ints = _int_sections(pieces, object_names, t)
+    counts = [len(pieces), n_f, int(t.edge_range[-1]), int(t.tri_range[-1]), int(t.outline_range[-1])]
+    flat_f, flat_i = _flatten(floats, ints, counts)
+    return PackedPieces(flat_f, flat_i, tuple(names), n_f)
+
+
+@dataclass(frozen=True, eq=False)
+class _FaceTables:
+    """The per-piece and per-face sections :func:`_face_tables` fills (names as in
+    :class:`PackedPieces`), with the exposed triangles' frames (``starts``/``inwards``) and outline
+    segments (``out_a``/``out_b``) of the mixed faces, one array per face, in order."""
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    label: np.ndarray
+    name: np.ndarray
+    eps: np.ndarray
+    edge_range: np.ndarray
+    tri_range: np.ndarray
+    outline_range: np.ndarray
+    starts: list[np.ndarray]
+    inwards: list[np.ndarray]
+    out_a: list[np.ndarray]
+    out_b: list[np.ndarray]
+
+
+def _face_tables(pieces: Sequence[Piece], n_f: int, face_id: dict[str, int]) -> _FaceTables:
+    """The faces of ``pieces`` padded to ``n_f`` per piece: planes, labels, face ids, tolerances and
+    the ranges into edges, exposed triangles and outlines."""
+    n_p = len(pieces)
+    t = _FaceTables(
+        normals=np.zeros((n_p, n_f, 3)),
+        offsets=np.full((n_p, n_f), 1e9),
+        label=np.zeros((n_p, n_f), np.int64),
+        name=np.full((n_p, n_f), -1, np.int64),
+        eps=np.zeros(n_p),
+        edge_range=np.zeros(n_p + 1, np.int64),
+        tri_range=np.zeros(n_p * n_f + 1, np.int64),
+        outline_range=np.zeros(n_p * n_f + 1, np.int64),
+        starts=[],
+        inwards=[],
+        out_a=[],
+        out_b=[],
+    )
     for k, p in enumerate(pieces):
-        eps[k] = 1e-9 * max(float(np.ptp(p.vertices, axis=0).max()), 1e-3)
-        edge_range[k + 1] = edge_range[k] + len(p.edge_a)
+        t.eps[k] = 1e-9 * max(float(np.ptp(p.vertices, axis=0).max()), 1e-3)
+        t.edge_range[k + 1] = t.edge_range[k] + len(p.edge_a)
         for f, pf in enumerate(p.faces):
-            normals[k, f], offsets[k, f] = pf.normal, pf.offset
+            t.normals[k, f], t.offsets[k, f] = pf.normal, pf.offset
             if pf.face is not None and pf.label != "internal":
-                name[k, f] = face_id[pf.face]
-                label[k, f] = EXTERNAL if pf.label == "external" else MIXED
+                t.name[k, f] = face_id[pf.face]
+                t.label[k, f] = EXTERNAL if pf.label == "external" else MIXED
             j = k * n_f + f
-            tri_range[j + 1] = tri_range[j]
-            outline_range[j + 1] = outline_range[j]
-            if label[k, f] == MIXED:
-                tris = np.asarray(pf.exposed, dtype=float).reshape(-1, 3, 3)
-                if len(tris):
-                    s, w = _tri_frames(tris)
-                    starts.append(s)
-                    inwards.append(w)
-                    tri_range[j + 1] += len(tris)
-                a, b = _outline(tris)
-                out_a.append(a)
-                out_b.append(b)
-                outline_range[j + 1] += len(a)
+            t.tri_range[j + 1] = t.tri_range[j]
+            t.outline_range[j + 1] = t.outline_range[j]
+            if t.label[k, f] == MIXED:
+                _add_exposed(t, j, np.asarray(pf.exposed, dtype=float).reshape(-1, 3, 3))
         for j in range(len(p.faces), n_f):  # padded faces: empty ranges
-            tri_range[k * n_f + j + 1] = tri_range[k * n_f + j]
-            outline_range[k * n_f + j + 1] = outline_range[k * n_f + j]
+            t.tri_range[k * n_f + j + 1] = t.tri_range[k * n_f + j]
+            t.outline_range[k * n_f + j + 1] = t.outline_range[k * n_f + j]
+    return t
+
+
+def _add_exposed(t: _FaceTables, j: int, tris: np.ndarray) -> None:
+    """Add the exposed triangles ``tris`` (m,3,3) of mixed face ``j`` (``k * F + f``) and their
+    outline to ``t``."""
+    if len(tris):
+        s, w = _tri_frames(tris)
+        t.starts.append(s)
+        t.inwards.append(w)
+        t.tri_range[j + 1] += len(tris)
+    a, b = _outline(tris)
+    t.out_a.append(a)
+    t.out_b.append(b)
+    t.outline_range[j + 1] += len(a)
+
+
+def _float_sections(pieces: Sequence[Piece], t: _FaceTables) -> list[np.ndarray]:
+    """The float sections, in the order of :data:`FLOAT_SECTIONS`."""
+    n_p = len(pieces)
     cat3 = lambda parts, shape: np.concatenate(parts).reshape(shape) if parts else np.zeros(shape)  # noqa: E731
-    floats = [
-        normals,
-        offsets,
+    return [
+        t.normals,
+        t.offsets,
         np.array([p.lo for p in pieces]).reshape(-1, 3),
         np.array([p.hi for p in pieces]).reshape(-1, 3),
-        eps,
+        t.eps,
         np.concatenate([p.edge_a for p in pieces]).reshape(-1, 3) if n_p else np.zeros((0, 3)),
         np.concatenate([p.edge_b for p in pieces]).reshape(-1, 3) if n_p else np.zeros((0, 3)),
-        cat3(starts, (-1, 3, 3)) if starts else np.zeros((0, 3, 3)),
-        cat3(inwards, (-1, 3, 3)) if inwards else np.zeros((0, 3, 3)),
-        np.concatenate(out_a).reshape(-1, 3) if out_a else np.zeros((0, 3)),
-        np.concatenate(out_b).reshape(-1, 3) if out_b else np.zeros((0, 3)),
+        cat3(t.starts, (-1, 3, 3)) if t.starts else np.zeros((0, 3, 3)),
+        cat3(t.inwards, (-1, 3, 3)) if t.inwards else np.zeros((0, 3, 3)),
+        np.concatenate(t.out_a).reshape(-1, 3) if t.out_a else np.zeros((0, 3)),
+        np.concatenate(t.out_b).reshape(-1, 3) if t.out_b else np.zeros((0, 3)),
     ]
-    ints = [
+
+
+def _int_sections(pieces: Sequence[Piece], object_names: Sequence[str], t: _FaceTables) -> list[np.ndarray]:
+    """The integer sections, in the order of :data:`INT_SECTIONS`."""
+    obj_index = {o: i for i, o in enumerate(object_names)}
+    return [
         np.array([len(p.faces) for p in pieces], np.int64),
-        label,
-        name,
+        t.label,
+        t.name,
         np.array([obj_index[p.obj] for p in pieces], np.int64),
-        edge_range,
+        t.edge_range,
         np.concatenate([np.asarray(p.edge_faces, np.int64).reshape(-1, 2) for p in pieces])
-        if n_p
+        if len(pieces)
         else np.zeros((0, 2), np.int64),
-        tri_range,
-        outline_range,
+        t.tri_range,
+        t.outline_range,
     ]
-    counts = [n_p, n_f, int(edge_range[-1]), int(tri_range[-1]), int(outline_range[-1])]
+
+
+def _flatten(
+    floats: list[np.ndarray], ints: list[np.ndarray], counts: list[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two flat arrays: the float sections one after the other, and the header (``counts``,
+    then the sections' offsets) followed by the integer sections."""
     head = np.zeros(HEAD + len(FLOAT_SECTIONS) + len(INT_SECTIONS) + 2, np.int64)
     head[: len(counts)] = counts
     pos = 0
@@ -130,7 +184,7 @@ def pack_pieces(pieces: Sequence[Piece], object_names: Sequence[str]) -> PackedP
     head[-1] = pos
     flat_f = np.concatenate([np.ascontiguousarray(a, dtype=float).ravel() for a in floats])
     flat_i = np.concatenate([head, *(np.ascontiguousarray(a, dtype=np.int64).ravel() for a in ints)])
-    return PackedPieces(flat_f, flat_i, tuple(names), n_f)
+    return flat_f, flat_i
 
 
 def _outline(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
