@@ -86,7 +86,7 @@ def main() -> None:
         first = _run(Path(tmp), args.scene, args.steps)
         cached = _run(Path(tmp), args.scene, args.steps)
     print(f"numba {__import__('numba').__version__}, NUMBA_OPT={os.environ.get('NUMBA_OPT', '(default)')}, "
-          f"{args.steps} steps of {args.scene}; seconds wall (CPU)")  # fmt: skip
+          f"{args.steps} steps of {args.scene}; seconds wall (CPU)")
     print(f"{'':28} {'first run':>16} {'cached':>16}")
 
     def cell(t: tuple) -> str:

@@ -60,11 +60,11 @@ def main() -> None:
         if a.source == "script":
             dlovr("record", "--script", "scenes/peg_in_hole.script.toml", "--trials", str(a.demos),
                   "--seed", "1", *vary, "--workers", str(a.workers), "--force",
-                  "-o", str(d / "demos"))  # fmt: skip
+                  "-o", str(d / "demos"))
         else:
             dlovr("run", "recordings/programs/peg_in_hole.program.json", "--trials", str(a.demos),
                   "--seed", "1", *vary, "--record", "--workers", str(a.workers),
-                  "-o", str(d / "demos"))  # fmt: skip
+                  "-o", str(d / "demos"))
         t_demos = time.perf_counter() - t0
         # the sample demonstration first: the network's reference, whose tracks its macros follow
         dlovr("network", "recordings/peg_in_hole.mcap", str(d / "demos"), "-o", str(d / "net.json"))
@@ -72,12 +72,12 @@ def main() -> None:
         prog = json.loads((d / "net.prog.json").read_text())
         t0 = time.perf_counter()
         dlovr("run", str(d / "net.prog.json"), "--trials", str(a.trials), "--seed", str(a.seed), *vary,
-              "--workers", str(a.workers), "-o", str(d / "network"))  # fmt: skip
+              "--workers", str(a.workers), "-o", str(d / "network"))
         t_net = time.perf_counter() - t0
         t0 = time.perf_counter()
         dlovr("run", "recordings/programs/peg_in_hole.program.json", "--trials", str(a.trials),
               "--seed", str(a.seed), *vary, "--baseline", "replay", "--workers", str(a.workers),
-              "-o", str(d / "single"))  # fmt: skip
+              "-o", str(d / "single"))
         t_single = time.perf_counter() - t0
         net = json.loads((d / "network" / "summary.json").read_text())
         single = json.loads((d / "single" / "summary.json").read_text())
@@ -86,7 +86,7 @@ def main() -> None:
     print(f"peg_in_hole, {a.trials} trials (seed {a.seed}), {a.demos} {what} (seed 1), {a.workers} workers")
     print(f"network: {s['nodes']} situations, {s['edges']} transitions, P(goal) from the start "
           f"{s['plan_reach_probability']:.3f} over {s['plan_macros']} macros "
-          f"({t_demos:.0f} s to record)")  # fmt: skip
+          f"({t_demos:.0f} s to record)")
     print(f"{'':24}{'goal reached':>14}{'wall':>9}")
     print(f"{'network program':24}{net['program_success_rate']:>13.0%}{t_net:>8.0f}s")
     print(f"{'single program':24}{single['program_success_rate']:>13.0%}{t_single:>8.0f}s")

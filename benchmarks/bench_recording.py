@@ -100,14 +100,14 @@ def main() -> None:
         size = out.stat().st_size / 1e6
         segments = load_scene(args.scene).dlo.segments
         print(f"scene {Path(args.scene).stem} ({segments} segments), script {script.name}, {sim_time:.1f} s "
-              f"simulated, {size:.2f} MB")  # fmt: skip
+              f"simulated, {size:.2f} MB")
         print(f"simulation alone        {plain:7.2f} s")
         print(f"simulation + recording  {recorded:7.2f} s   ratio {recorded / plain:.3f} (target <= 1.10)")
         bare = bare_rtf(args.scene, script)
         res = replay(out, verify=True)
         rtf = res.sim_time / res.wall_time
         print(f"replay --verify         {res.wall_time:7.2f} s   {rtf:.2f}x real time (target >= 15 at 40 "
-              f"segments), divergence: {res.divergence}")  # fmt: skip
+              f"segments), divergence: {res.divergence}")
         print(f"bare mj_step                       {bare:.2f}x real time (the bound of the above)")
         src = Path(tmp) / "many"
         src.mkdir()

@@ -95,7 +95,7 @@ def main() -> None:
         raise SystemExit(f"no script {script_path}; give --script")
     script = load_script(script_path)
     print(f"mujoco {mujoco.__version__}; {args.scene}; {script_path.name}; best of {args.repeat}; "
-          f"{args.clock} time")  # fmt: skip
+          f"{args.clock} time")
     head = ("segments", "steps", "bare µs", "sim µs", "sim+extract µs", "ratio", "RTF", "labelled all/some")
     print("{:>8} {:>6} {:>8} {:>8} {:>15} {:>6} {:>6} {:>18}".format(*head))
     for segments in args.segments:

@@ -45,7 +45,7 @@ def main() -> None:
     pieces = scene_pieces(scene)
     variations = tuple(parse_vary(v, scene) for v in VARY)
     setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=variations,
-                       seed=args.seed, opts=ExecOptions(), baseline=args.baseline)  # fmt: skip
+                       seed=args.seed, opts=ExecOptions(), baseline=args.baseline)
 
     walls, sims = [], []
     for k in range(args.trials):
@@ -54,7 +54,7 @@ def main() -> None:
         walls.append(time.perf_counter() - t0)
         sims.append(res["program"]["sim_time"] + (res.get("openloop") or {}).get("sim_time", 0.0))
         print(f"trial {k}: {walls[-1]:.2f} s wall, {sims[-1]:.2f} s simulated, "
-              f"goal {'reached' if res['program']['success'] else 'missed'}")  # fmt: skip
+              f"goal {'reached' if res['program']['success'] else 'missed'}")
 
     # the executor's own cost per step: a run of the program with the simulator's step timed apart
     scene0, _ = perturb(scene, variations, args.seed, 0)
@@ -68,7 +68,7 @@ def main() -> None:
         spent[1] += n
         return r
 
-    sim.step = timed_step  # type: ignore[method-assign]
+    sim.step = timed_step
     t0 = time.perf_counter()
     execute(program, sim, ExecOptions(), track=track)
     total = time.perf_counter() - t0
@@ -78,9 +78,9 @@ def main() -> None:
     mean_wall = sum(walls) / len(walls)
     simulated = sum(sims) / len(sims)
     print(f"\n{program.name}: {args.trials} trials, {mean_wall:.2f} s wall per trial ({simulated:.2f} s "
-          f"simulated), {60.0 / mean_wall:.1f} trials per minute per core")  # fmt: skip
+          f"simulated), {60.0 / mean_wall:.1f} trials per minute per core")
     print(f"per step of a program run: {step_us:.0f} us in Simulator(track=True).step, {own_us:.0f} us in "
-          f"the executor (path, sensing chain, detectors): {own_us / step_us:.1%} on top")  # fmt: skip
+          f"the executor (path, sensing chain, detectors): {own_us / step_us:.1%} on top")
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ from dlovr.script import load_script
 from dlovr.sim import Simulator
 
 _FIELDS = ("point", "segment", "geom", "obj", "piece", "dist", "normal", "pos", "force", "active",
-           "self_pairs")  # fmt: skip
+           "self_pairs")
 
 
 def _step_digest(rec) -> tuple:

@@ -21,7 +21,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, cast
 
 from dlovr import __version__
 from dlovr.cache import cache_dir
@@ -41,12 +41,23 @@ if "NUMBA_CACHE_DIR" not in os.environ and not (
 
 import numba  # noqa: E402  (after the cache directory is chosen)
 from llvmlite import ir  # noqa: E402
-from numba.core import cgutils, types  # noqa: E402
+from numba.core import cgutils, config, types  # noqa: E402
 from numba.core.registry import CPUDispatcher  # noqa: E402
 from numba.extending import intrinsic  # noqa: E402
 
-if os.environ.get("NUMBA_CACHE_DIR") and numba.config.CACHE_DIR != os.environ["NUMBA_CACHE_DIR"]:
-    numba.config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba was imported before dlovr
+
+class _NumbaSettings(Protocol):
+    """The settings of ``numba.core.config`` that dlovr reads and sets: numba makes them at import
+    time from the environment (through ``globals()``), so a type checker sees no such names."""
+
+    CACHE_DIR: str
+    DISABLE_JIT: int
+
+
+_numba_config = cast(_NumbaSettings, config)
+
+if os.environ.get("NUMBA_CACHE_DIR") and _numba_config.CACHE_DIR != os.environ["NUMBA_CACHE_DIR"]:
+    _numba_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # numba was imported before dlovr
 
 
 _KERNELS: dict[str, list[Any]] = {}  # the kernels of each module
@@ -75,7 +86,7 @@ def njit(fn: Callable[..., Any] | None = None, *, inner: bool = False, inline: b
     more in its own module."""
     if fn is None:
         return lambda f: njit(f, inner=inner, inline=inline)
-    if numba.config.DISABLE_JIT:
+    if _numba_config.DISABLE_JIT:
         return fn
     if inner:
         options = {**_OPTIONS, "nopython": True, "no_cpython_wrapper": True}

@@ -125,7 +125,7 @@ def _unit4(q: Sequence[float] | np.ndarray) -> list[float]:
     return [x / n for x in v]
 
 
-def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
+def quat_to_matrix(q: Sequence[float] | np.ndarray) -> np.ndarray:
     """Rotation matrix of a quaternion given as (w, x, y, z); normalised first."""
     w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
     return np.array(
@@ -137,7 +137,7 @@ def quat_to_matrix(q: Sequence[float]) -> np.ndarray:
     )
 
 
-def pose_matrix(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
+def pose_matrix(pos: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray) -> np.ndarray:
     """4x4 homogeneous transform from a position and a (w, x, y, z) quaternion."""
     t = np.eye(4)
     t[:3, :3] = quat_to_matrix(quat)
@@ -162,7 +162,7 @@ def matrix_to_rotvec(r: np.ndarray) -> np.ndarray:
     return axis * angle
 
 
-def rotvec_to_quat(w: Sequence[float]) -> np.ndarray:
+def rotvec_to_quat(w: Sequence[float] | np.ndarray) -> np.ndarray:
     """Unit quaternion (wxyz) of a rotation vector ``w`` (axis * angle, rad)."""
     th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     if th < 1e-12:

@@ -77,12 +77,12 @@ def record_demos(
     tasks = [Task(f"demo {k}", (setup, k)) for k in range(n)]
     done: dict[int, dict[str, Any]] = {}
     for r in run_batch(record_demo, tasks, workers=workers, cluster=cluster, progress=progress,
-                       label=f"{n} demonstrations"):  # fmt: skip
+                       label=f"{n} demonstrations"):
         if r.ok:
             done[r.index] = {**r.value, "attempts": r.attempts}
         else:
             done[r.index] = {"trial": r.index, "seed": setup.seed, "path": None, "error": str(r.error),
-                             "situations": 0, "attempts": r.attempts}  # fmt: skip
+                             "situations": 0, "attempts": r.attempts}
     return [done[k] for k in range(n)]
 
 

@@ -25,11 +25,11 @@ import itertools
 import math
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field, replace
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import numpy as np
 
-from dlovr.execution.motion import ScrewPath, TrackPath, last_start, local_twist
+from dlovr.execution.motion import Quat, ScrewPath, TrackPath, Vec, last_start, local_twist
 from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
@@ -116,7 +116,7 @@ class ExecOptions:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
         names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold", "blank",
-                 "arm", "bounce", "phase_blank", "min_snr")  # fmt: skip
+                 "arm", "bounce", "phase_blank", "min_snr")
         for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -286,7 +286,7 @@ class Session:
     def __init__(
         self, sim: Any, opts: ExecOptions, *, on_step: Callable[[Any], None] | None = None,
         on_event: Callable[[Event], None] | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.sim, self.opts = sim, opts
         self.on_step, self.on_event = on_step, on_event
         self.dt = float(sim.model.opt.timestep)
@@ -394,7 +394,7 @@ def touches_tip(m: Macro) -> bool:
         m.classes == ("E",) and not m.released and bool(m.established)
         and all(c.state.startswith("V/") for c in m.established)
         and d > 1e-6 and -float(mo.relative[2]) >= math.cos(math.radians(25.0)) * d
-    )  # fmt: skip
+    )
 
 
 def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
@@ -411,23 +411,29 @@ def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
 def _path(
     m: Macro, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None,
     tool: tuple[float, float, float] = (0.0, 0.0, 0.0),
-) -> Any:  # fmt: skip
+) -> Any:
     mid = sim.built.mocap_id
     mo = m.motion
-    here = tuple(float(x) for x in sim.data.mocap_pos[mid]), tuple(float(x) for x in sim.data.mocap_quat[mid])
+    here = (
+        cast(Vec, tuple(float(x) for x in sim.data.mocap_pos[mid])),
+        cast(Quat, tuple(float(x) for x in sim.data.mocap_quat[mid])),
+    )
     frame = m.frame or opts.frame
     if track is not None:
         # the track holds commanded targets, which lead the gripper: go on from the current target
-        here = tuple(float(x) for x in sim.target_pos), tuple(float(x) for x in sim.target_quat)
+        here = (
+            cast(Vec, tuple(float(x) for x in sim.target_pos)),
+            cast(Quat, tuple(float(x) for x in sim.target_quat)),
+        )
         t0 = m.t - mo.duration if t_from is None else min(t_from, m.t - mo.duration)
         # beyond its stretch the gripper keeps moving as it was when the transition should have come
         # (a turn keeps turning, an approach approaching); the macro's net motion if it held still
         span = max(m.t - t0, opts.min_duration)
         beyond = local_twist(track.t, track.pos, track.quat, t0, m.t, span) or (mo.rotation, mo.relative)
         return TrackPath(
-            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool,  # type: ignore[arg-type]
-        )  # fmt: skip
-    return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)  # type: ignore[arg-type]
+            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool,
+        )
+    return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)
 
 
 def _period(m: Macro, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
@@ -443,7 +449,7 @@ def bounces(macros: Any, within: float) -> set[int]:
     out: set[int] = set()
     for a, b in itertools.pairwise(macros):
         sa, sb = ({c.state for c in a.released}, {c.state for c in a.established}), (
-            {c.state for c in b.released}, {c.state for c in b.established})  # fmt: skip
+            {c.state for c in b.released}, {c.state for c in b.established})
         if b.motion.duration <= within and sa == (sb[1], sb[0]) and (sa[0] or sa[1]):
             out |= {a.index, b.index}
     return out
@@ -503,7 +509,7 @@ def run_macro(
         return MacroRun(
             macro=m, started_at=t0, ended_at=t, ended=how, detected_at=at, moved=s * scale, allowed=allowed,
             peak_signal=guard.peak, reason=reason, resume_at=resume,
-        )  # fmt: skip
+        )
 
     try:
         while True:
@@ -575,4 +581,4 @@ def _track_final(last: Macro, track: DemoTrack) -> Macro:
     return replace(
         last, index=last.index + 1, kind="final", classes=(), t=t_end, motion=mo, detection=(),
         changes=(), risk="none",
-    )  # fmt: skip
+    )

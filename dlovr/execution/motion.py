@@ -25,13 +25,15 @@ Everything here feeds the simulator, so it is computed in Python floats without 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
 from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, quat_to_rotvec, rotvec_to_quat, slerp
 
 Vec = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
 
 
 def _cross(a: Vec, b: Vec) -> Vec:
@@ -205,6 +207,11 @@ class TrackPath:
     frame: str = "world"
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
     tool: Vec = (0.0, 0.0, 0.0)  # the tip's offset from the demonstrated one (m, gripper frame)
+    # set once by __post_init__ (per path, not per step), and _end on the first step beyond s = 1
+    _p0: np.ndarray = field(init=False, repr=False, compare=False)
+    _inv0: np.ndarray = field(init=False, repr=False, compare=False)
+    _cur_q: np.ndarray = field(init=False, repr=False, compare=False)
+    _end: ScrewPath | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.frame not in ("world", "relative"):
@@ -236,14 +243,15 @@ class TrackPath:
     def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""
         if s > 1.0 and self.beyond is not None:
-            on = self._end  # type: ignore[has-type]
+            on = self._end
             if on is None:
                 pos, quat = self.at(1.0)
-                here = tuple(float(x) for x in quat)
-                on = ScrewPath(tuple(float(x) for x in pos), here, *self.beyond, here, "relative", self.tool)  # type: ignore[arg-type]
+                here = cast(Quat, tuple(float(x) for x in quat))
+                start = cast(Vec, tuple(float(x) for x in pos))
+                on = ScrewPath(start, here, *self.beyond, here, "relative", self.tool)
                 object.__setattr__(self, "_end", on)
             return on.at(s - 1.0)
-        p0, inv0, cur_q = self._p0, self._inv0, self._cur_q  # type: ignore[attr-defined]
+        p0, inv0, cur_q = self._p0, self._inv0, self._cur_q
         p, q = self._at_time(self.t0 + s * (self.t1 - self.t0))
         d = np.array([float(p[i]) - float(p0[i]) for i in range(3)])
         if self.frame == "relative":

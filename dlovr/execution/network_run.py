@@ -495,7 +495,7 @@ class _NetworkRun:
             success=self.arrived and reached, goal_reached=reached, goal=net.goal, goal_principals=goal_p,
             final_principals=final, reason=reason, path=tuple(self.path), replans=self.replans,
             macros=tuple(self.macros), sim_time=float(sim.time), wall_time=wall_time,
-        )  # fmt: skip
+        )
 
 
 def network_steps(
@@ -518,7 +518,7 @@ def failed_start(nprog: NetworkProgram, scene: Any, detect: str, why: str) -> Ne
         program=nprog.name, scene=scene.name, detect=detect, success=False, goal_reached=False, goal=net.goal,
         goal_principals=goal_p, final_principals=(), reason=why, path=(), replans=0, macros=(), sim_time=0.0,
         wall_time=0.0,
-    )  # fmt: skip
+    )
 
 
 def format_network_result(res: NetworkRunResult) -> str:

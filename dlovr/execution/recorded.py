@@ -125,7 +125,7 @@ def record_run(
             rec.rec.message(ev.step, TOPIC_EVENTS, ev.payload())
 
         eng = Engine(program, sim, opts, track=track, scene=scene, network=network, on_step=rec.step,
-                     on_event=on_event)  # fmt: skip
+                     on_event=on_event)
         res = eng.run()
         diverged = eng.execution.diverged if eng.execution is not None else _diverged(res.reason)
         if diverged:

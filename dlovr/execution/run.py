@@ -162,7 +162,7 @@ def not_started(program: Runnable, scene: Any, opts: ExecOptions, why: str) -> R
         program=program.name, scene=scene.name, detect=opts.detect, success=False, goal_reached=False,
         goal=goal, final_situation="", final_principals=(), failed_macro=0, reason=why, macros=(),
         sim_time=0.0, wall_time=0.0,
-    )  # fmt: skip
+    )
 
 
 @dataclass(frozen=True)

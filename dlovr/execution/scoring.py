@@ -110,7 +110,7 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
     return MacroScore(
         m.index, m.label, m.expected, run.started_at, run.detected_at, true_at, latency, outcome,
         run.moved, run.allowed, run.reason,
-    )  # fmt: skip
+    )
 
 
 def score(ex: Execution, scene_name: str = "") -> RunResult:

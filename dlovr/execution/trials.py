@@ -100,7 +100,7 @@ def _trial_result(res: RunResult | NetworkRunResult) -> dict[str, Any]:
     if isinstance(res, RunResult):
         return {"program": res.to_json()}
     prog = {"success": res.success, "goal_reached": res.goal_reached, "failed_macro": None,
-            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}  # fmt: skip
+            "reason": res.reason, "macros": [], "path": list(res.path), "replans": res.replans}
     return {"program": prog, "network_run": res.to_json()}
 
 
@@ -116,7 +116,7 @@ def _trial_metadata(setup: TrialSetup, trial: int, values: dict[str, Any]) -> di
     """A recorded trial's metadata: trial, seed, drawn values and the unperturbed scene's hash
     (``base_scene_sha256``), so that recorded trials of one scene merge into a network."""
     return {"trial": str(trial), "seed": str(setup.seed), "vary": json.dumps(values),
-            "base_scene_sha256": _scene_digest(str(setup.scene.path))}  # fmt: skip
+            "base_scene_sha256": _scene_digest(str(setup.scene.path))}
 
 
 def run_trials(
@@ -157,11 +157,11 @@ def lost_trial(setup: TrialSetup, trial: int, error: str) -> dict[str, Any]:
         "success": False, "goal_reached": False, "goal": list(setup.goal), "final_situation": "",
         "final_principals": [], "failed_macro": None, "reason": reason, "macros": [], "sim_time": 0.0,
         "wall_time": 0.0,
-    }  # fmt: skip
+    }
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "program": program}
     if setup.baseline and setup.track is not None:
         out["openloop"] = {"goal_reached": False, "final_situation": "", "final_principals": [],
-                           "reason": reason, "sim_time": 0.0, "wall_time": 0.0}  # fmt: skip
+                           "reason": reason, "sim_time": 0.0, "wall_time": 0.0}
     out["wall_time"] = 0.0
     return out
 
@@ -207,7 +207,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
             inside = [
                 i for i, t in enumerate(trials)
                 if lo <= v.level(t["values"][v.key]) <= hi + 1e-12 and not (hi < v.level(t["values"][v.key]))
-            ]  # fmt: skip
+            ]
             rows.append(
                 {
                     "level": [lo, hi],
@@ -260,7 +260,7 @@ def write_outputs(
     with (out / "trials.csv").open("w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["trial", *keys, "program_success", "failed_macro", "reason", "openloop_goal",
-                    "false_detections", "median_latency_s", "wall_time_s"])  # fmt: skip
+                    "false_detections", "median_latency_s", "wall_time_s"])
         for t in trials:
             p = t["program"]
             lat = [m["latency"] for m in p["macros"] if m["outcome"] == "ok" and m["latency"] is not None]
@@ -268,7 +268,7 @@ def write_outputs(
             w.writerow([t["trial"], *vals, p["success"], p["failed_macro"] or "", p["reason"],
                         t["openloop"]["goal_reached"] if "openloop" in t else "",
                         sum(m["outcome"] == "false" for m in p["macros"]),
-                        statistics.median(lat) if lat else "", round(t["wall_time"], 3)])  # fmt: skip
+                        statistics.median(lat) if lat else "", round(t["wall_time"], 3)])
     paths.append(out / "trials.csv")
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     paths.append(out / "summary.json")
@@ -320,7 +320,7 @@ def plot(summary: dict[str, Any], path: str | Path) -> Path:
     axes[0][0].set_ylabel("goal reached (fraction of trials)")
     axes[0][0].legend(fontsize=7)
     fig.suptitle(f"{summary['program']}: {summary['trials']} trials, seed {summary['seed']}, "
-                 f"detection {summary['detect']}", fontsize=9)  # fmt: skip
+                 f"detection {summary['detect']}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

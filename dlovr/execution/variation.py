@@ -28,7 +28,7 @@ import re
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -62,7 +62,8 @@ class Variation:
         """This variation's value in ``trial`` of ``seed``: a factor, or an offset (m, world)."""
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(trial), zlib.crc32(self.key.encode())])
         if self.kind == "offset":
-            return tuple(float(x) for x in rng.uniform(-self.hi, self.hi, 3))  # type: ignore[return-value]
+            offset = tuple(float(x) for x in rng.uniform(-self.hi, self.hi, 3))
+            return cast(tuple[float, float, float], offset)
         if self.kind == "range":
             return float(math.exp(rng.uniform(math.log(self.lo), math.log(self.hi))))
         return float(rng.uniform(self.lo, self.hi))
@@ -141,14 +142,15 @@ def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) 
         x = v.draw(seed, trial)
         values[v.key] = list(x) if isinstance(x, tuple) else x
         parts = v.key.split(".")
+        off = cast(tuple[float, float, float], x)  # what a ".pos" key draws; the others draw a factor
         if parts[0] == "dlo":
-            dlo = replace(dlo, **{parts[1]: getattr(dlo, parts[1]) * float(x)})  # type: ignore[arg-type]
+            dlo = replace(dlo, **{parts[1]: getattr(dlo, parts[1]) * float(cast(float, x))})
         elif v.key == "gripper.pos":
-            gripper = replace(gripper, pos=_shift(gripper.pos, x))  # type: ignore[arg-type]
+            gripper = replace(gripper, pos=_shift(gripper.pos, off))
         elif v.key == "objects.pos":
-            objects = [replace(o, pos=_shift(o.pos, x)) for o in objects]  # type: ignore[arg-type]
+            objects = [replace(o, pos=_shift(o.pos, off)) for o in objects]
         else:
-            objects = [replace(o, pos=_shift(o.pos, x)) if o.name == parts[1] else o for o in objects]  # type: ignore[arg-type]
+            objects = [replace(o, pos=_shift(o.pos, off)) if o.name == parts[1] else o for o in objects]
     if not -1.0 < dlo.poisson < 0.5:
         dlo = replace(dlo, poisson=min(max(dlo.poisson, -0.99), 0.49))
     return replace(scene, dlo=dlo, gripper=gripper, objects=tuple(objects)), values

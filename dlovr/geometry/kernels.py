@@ -53,7 +53,7 @@ def dot3(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> fl
 @njit(inner=True)
 def dot3f(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
     """Dot product rounded as BLAS's matrix product (fused multiply-adds, x first)."""
-    return fma(az, bz, fma(ay, by, ax * bx))
+    return fma(az, bz, fma(ay, by, ax * bx))  # type: ignore[call-arg]  # numba's stubs ask for typingctx too
 
 
 @njit(inner=True)
@@ -228,7 +228,7 @@ def outline_slack(qx: float, qy: float, qz: float, a: np.ndarray, b: np.ndarray,
 def inside_other(
     qx: float, qy: float, qz: float, obj: int, margin: float, normals: np.ndarray, offsets: np.ndarray,
     nfaces: np.ndarray, owner: np.ndarray,
-) -> bool:  # fmt: skip
+) -> bool:
     """Whether ``q`` lies inside (deeper than ``margin``) a piece of an object other than ``obj``."""
     for k in range(nfaces.shape[0]):
         if owner[k] == obj:
@@ -248,7 +248,7 @@ def inside_other(
 def cover_margin(
     qx: float, qy: float, qz: float, obj: int, normals: np.ndarray, offsets: np.ndarray, nfaces: np.ndarray,
     owner: np.ndarray,
-):  # fmt: skip
+):
     """For a free-side probe ``q`` of a face of object ``obj``: whether a piece of another object
     covers it (its largest plane residual below -1e-9) and how far it may move before that changes."""
     covered = False
@@ -437,7 +437,7 @@ def pair_hits(
     hit_f: np.ndarray,
     slack: np.ndarray,
     budgets: np.ndarray,
-) -> int:
+) -> int | np.int64:
     """Hits of the (point ``pi``, piece ``pc``) pairs, sorted by point then piece; returns their count.
     ``radius``: the cable's (its free-side probes); ``r``: the one the contact distance
     ``r + contact_tol`` is measured with; ``every_piece``: classify each point of ``pi`` against
@@ -542,7 +542,7 @@ def pair_hits(
             h, si = classify_point(
                 pts[i, 0], pts[i, 1], pts[i, 2], i, gf, gi, r, radius, contact_tol, ttol, thresholds,
                 with_slack, hit_i, hit_f, h,
-            )  # fmt: skip
+            )
             if with_slack:
                 slack[i] = min(slack[i], si)
     if with_slack:  # near an edge or vertex: the point's slack, in every direction

@@ -39,7 +39,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -120,11 +120,11 @@ class Context:
     choice: Choice | None
 
 
-def _r(x: float) -> float:
+def _r(x: float | Fraction) -> float:
     return round(float(x), 9) + 0.0
 
 
-def _dist(a: Sequence[float], b: Sequence[float]) -> float:
+def _dist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> float:
     return math.sqrt(sum((float(x) - float(y)) ** 2 for x, y in zip(a, b, strict=True)))
 
 
@@ -140,7 +140,7 @@ def _expected(node: Any) -> Vec3 | None:
 
 def identify(
     successors: Sequence[Successor],
-    sensed_vector: Sequence[float] | None,
+    sensed_vector: Sequence[float] | np.ndarray | None,
     tolerance: float | None = None,
     sigma: float | None = None,
 ) -> Successor | None:
@@ -257,12 +257,12 @@ class NetworkProgram:
         chain = [eid]
         while (nx := self._next[chain[-1]]) is not None:
             chain.append(nx)
-        pos = None if position is None else tuple(_r(x) for x in position)
+        pos = None if position is None else cast(Vec3, tuple(_r(x) for x in position))
         return Choice(
-            node, pos, eid, _r(Fraction(self._edges[eid].count, total)), _r(-negp), risky, caution, length,  # type: ignore[arg-type]
+            node, pos, eid, _r(Fraction(self._edges[eid].count, total)), _r(-negp), risky, caution, length,
             (node, *(self._edges[c].target for c in chain)), self._macro(chain),
             self._successors(node, position),
-        )  # fmt: skip
+        )
 
     def _macro(self, chain: Sequence[str]) -> MacroPlan:
         edges: list[Edge] = []
@@ -278,9 +278,9 @@ class NetworkProgram:
         duration = sum(sum(e.durations) / len(e.durations) for e in edges)
         return MacroPlan(
             tuple(e.id for e in edges), last.classes, max((e.risk for e in edges), key=RISKS.index),
-            last.target, not last.classes, tuple(map(_r, world)), tuple(map(_r, std)), tuple(map(_r, rot)),  # type: ignore[arg-type]
-            _r(duration), last.detection,
-        )  # fmt: skip
+            last.target, not last.classes, cast(Vec3, tuple(map(_r, world))), cast(Vec3, tuple(map(_r, std))),
+            cast(Vec3, tuple(map(_r, rot))), _r(duration), last.detection,
+        )
 
     def _outcomes(
         self, node: str, position: Sequence[float] | None, cut: frozenset[str]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -74,6 +74,9 @@ __all__ = [  # the program format's names, importable from here too (dlovr.model
     "summarize",
 ]
 
+_Vec3 = tuple[float, float, float]
+_Quat = tuple[float, float, float, float]
+
 
 @dataclass(frozen=True)
 class TimedSituation:
@@ -124,8 +127,9 @@ def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
         return tuple(round(float(x), 9) + 0.0 for x in a)
 
     return Motion(
-        tup(d), tup(r0.T @ d), tup(matrix_to_rotvec(r0.T @ r1)), round(t1 - t0, 9), tup(p0), tup(q0)
-    )  # type: ignore[arg-type]
+        cast(_Vec3, tup(d)), cast(_Vec3, tup(r0.T @ d)), cast(_Vec3, tup(matrix_to_rotvec(r0.T @ r1))),
+        round(t1 - t0, 9), cast(_Vec3, tup(p0)), cast(_Quat, tup(q0)),
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -162,8 +166,8 @@ DETECTORS: dict[str, dict[str, Any]] = {
 
 
 def _spec(c: DiscreteContact) -> ContactSpec:
-    def tup(v: tuple[float, ...] | None) -> tuple[float, float, float] | None:
-        return None if v is None else tuple(round(float(x), 9) + 0.0 for x in v)  # type: ignore[return-value]
+    def tup(v: tuple[float, ...] | None) -> _Vec3 | None:
+        return None if v is None else cast(_Vec3, tuple(round(float(x), 9) + 0.0 for x in v))
 
     return ContactSpec(c.format(), tup(c.vector), tup(c.axis))
 

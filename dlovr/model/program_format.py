@@ -215,7 +215,7 @@ class Program:
             if m["frame"] is None:
                 del m["frame"]
         return {"version": d["version"], "name": d["name"], "source": d["source"],
-                "macros": d["macros"], "summary": d["summary"]}  # fmt: skip
+                "macros": d["macros"], "summary": d["summary"]}
 
     def dumps(self) -> str:
         return json.dumps(self.to_json(), indent=2, sort_keys=False, ensure_ascii=False) + "\n"

@@ -39,7 +39,7 @@ from dlovr.sim.kernels import (
     T_POS,
     T_SEGMENT,
     pack_config,
-)  # fmt: skip  # fmt: skip
+)
 
 
 @dataclass(frozen=True)
@@ -209,7 +209,7 @@ class MjViews:
             self._head[C_LAYOUT:C_HEAD] = (
                 stride // 8, off(c.dist, 8), off(c.pos, 8), off(c.frame, 8), stride // 4, off(c.dim, 4),
                 off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4),
-            )  # fmt: skip
+            )
             self.cfg[C_LAYOUT:C_HEAD] = self._head[C_LAYOUT:C_HEAD]
             size = int(self._data.narena) // 8
             self.arena = np.ctypeslib.as_array((ctypes.c_double * size).from_address(base))

@@ -113,7 +113,7 @@ def new_work(
             wi[slot] = old[slot]
         old_h = old[W_CAP_H]
         for sec, n in ((W_TOUCH, old_h), (W_KEPT, old_h * (width + 1)), (W_GROUP, old_h * width),
-                       (W_START, n1 + 1)):  # fmt: skip
+                       (W_START, n1 + 1)):
             wi[wi[sec] : wi[sec] + n] = old[old[sec] : old[sec] + n]
     return wi, np.zeros(3 * cap_q + 2 * n1 + 8)
 
@@ -249,7 +249,7 @@ def track_step(
 def _outcome(
     reuse: bool, k: int, nq: int, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray,
     pairs: np.ndarray, qpts: np.ndarray, again: np.ndarray,
-) -> int:  # fmt: skip
+) -> int:
     """KEPT when the last labels hold for the step's ``k`` pairs at its ``nq`` query points (the same
     pairs, every point within its slack or its budgets), PARTIAL with the points to label again in
     ``again`` (their number in the work header), or FULL."""
@@ -291,7 +291,7 @@ def _outcome(
 def _relabel(
     full: bool, k: int, nq: int, n_pieces: int, gf: np.ndarray, gi: np.ndarray,
     params: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, work_i: np.ndarray, work_f: np.ndarray,
-) -> bool:  # fmt: skip
+) -> bool:
     """Label every queried pair (``full``) or the pairs of the points to label again (a point's
     labels depend on it alone) and splice them into the labels, in place; False (nothing changed)
     when the labels or the work arrays lack room (the room needed goes into the work header)."""
@@ -341,7 +341,7 @@ def _relabel(
     h = pair_hits(
         gf, gi, qp, pi, pc, params[P_RADIUS], params[P_RADIUS], params[P_TOL], params[P_TTOL], thresholds,
         yes, not yes, hit_i, hit_f, slack, budgets,
-    )  # fmt: skip
+    )
     if full:
         _store_labels(k, nq, pairs, pi, qp, hit_i, hit_f, h, slack, budgets, lab_i, lab_f, width, thresholds)
     else:
@@ -354,7 +354,7 @@ def _store_labels(
     k: int, nq: int, pairs: np.ndarray, pi: np.ndarray, qp: np.ndarray, hit_i: np.ndarray,
     hit_f: np.ndarray, h: int, slack: np.ndarray, budgets: np.ndarray, lab_i: np.ndarray,
     lab_f: np.ndarray, width: int, thresholds: np.ndarray,
-) -> None:  # fmt: skip
+) -> None:
     """The labels of every queried pair: the ``k`` pairs at the ``nq`` query points ``qp``, the
     ``h`` hits of :func:`pair_hits` (``hit_*``), the query points' slacks and the pairs' budgets
     (``thresholds``: the enter and the leave distance)."""
@@ -380,7 +380,7 @@ def _splice_labels(
     redo: np.ndarray, sub: np.ndarray, qpts: np.ndarray, hit_i: np.ndarray, hit_f: np.ndarray, h: int,
     slack: np.ndarray, budgets: np.ndarray, lab_i: np.ndarray, lab_f: np.ndarray, width: int,
     thresholds: np.ndarray,
-) -> None:  # fmt: skip
+) -> None:
     """The labels of the query points in ``redo`` (labelled again: the pairs ``sub`` of the labels,
     at ``qpts``) spliced into the last labels: their budgets, points and slacks, and their ``h`` new
     hits merged with the others' kept ones (``thresholds``: the enter and the leave distance)."""
@@ -408,7 +408,7 @@ def _splice_labels(
 def _merge_hits(
     old: np.ndarray, redo: np.ndarray, hit_i: np.ndarray, hit_f: np.ndarray, n_new: int, enter: float,
     leave: float, out: np.ndarray,
-) -> int:  # fmt: skip
+) -> int:
     """The label hit rows ``old`` of the points not in ``redo`` and the ``n_new`` new hits of
     :func:`pair_hits` (``hit_*``), merged into ``out`` by (query point, piece); returns their count.
     The old ones come first among equals (there are none: a point's hits are all old or all new)."""

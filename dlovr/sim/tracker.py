@@ -16,13 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from dlovr.geometry import SceneGeometry, point_primitives
 from dlovr.model.discrete import DiscreteSituation, Discretizer, ModelParams
-from dlovr.model.topology import Situation, situation_from_points, tip_touches
+from dlovr.model.topology import Situation, Vec3, situation_from_points, tip_touches
 from dlovr.model.transitions import (
     DEFAULT_FLIGHT_S,
     DEFAULT_HOLD_S,
@@ -58,14 +58,14 @@ class ContactState:
         cls, step: int, t: float, topological: Situation, discrete: DiscreteSituation,
         forces: tuple[float, ...], gripper_pos: tuple[float, float, float],
         gripper_quat: tuple[float, float, float, float], gripper_force: tuple[float, float, float],
-    ) -> ContactState:  # fmt: skip
+    ) -> ContactState:
         """The state of these fields, as the constructor makes it but without the dataclass's
         ``__init__``, which sets a frozen field at a time (the tracker makes one every step)."""
         state = object.__new__(cls)
         state.__dict__.update(
             step=step, t=t, topological=topological, discrete=discrete, forces=forces,
             gripper_pos=gripper_pos, gripper_quat=gripper_quat, gripper_force=gripper_force,
-        )  # fmt: skip
+        )
         return state
 
     def payload(self, classes: Sequence[str] = ()) -> dict[str, Any]:
@@ -177,13 +177,13 @@ class ContactTracker:
         if signature == self._signature and self._situation is not None:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
-        z = tuple(float(x) for x in gripper_z) if gripper_z is not None else (0.0, 0.0, 1.0)
+        z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
         sit = situation_from_points(
             self._env,
             pts[1:] - pts[:-1],
             self._normal,
             tip_angle_deg=self.params.tip_angle_deg,
-            gripper_z=z,  # type: ignore[arg-type]
+            gripper_z=z,
         )
         self._signature, self._situation = signature, sit
         return sit
@@ -223,12 +223,12 @@ class ContactTracker:
         pm = self._piece_map
         if has and (pm is None or pm[0] is not arrays.names[0]):
             pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
-        pmap = pm[1] if has else _NO_MAP
+        pmap = pm[1] if has and pm is not None else _NO_MAP
         while True:
             out, changed, bad = _track_step(
                 pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
                 self._lab_i, self._lab_f, self._work_i, self._work_f,
-            )  # fmt: skip
+            )
             if out != _GROW:
                 break
             self._grow()
@@ -318,7 +318,7 @@ class ContactTracker:
             _tuple(getattr(record, "gripper_pos", _ORIGIN)),
             _tuple(getattr(record, "gripper_quat", _IDENTITY)),
             _tuple(getattr(record, "gripper_force", _ORIGIN)),
-        )  # fmt: skip
+        )
         if new:
             self.changes.append(state)
         self.current = state
@@ -376,7 +376,7 @@ def _table_of(arrays: Any) -> np.ndarray:
     n = len(arrays.point)
     table = np.zeros((n, T_WIDTH))
     for col, name in ((T_POINT, "point"), (T_SEGMENT, "segment"), (T_OBJ, "obj"), (T_PIECE, "piece"),
-                      (T_FORCE, "force")):  # fmt: skip
+                      (T_FORCE, "force")):
         table[:, col] = np.asarray(getattr(arrays, name), dtype=float).reshape(n)
     table[:, T_POS : T_POS + 3] = np.asarray(arrays.pos, dtype=float).reshape(n, 3)
     return table

@@ -26,7 +26,7 @@ FILL = 0.86
 """Fraction of the view's limiting half-extent that the framed box covers."""
 
 
-def box_corners(lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
+def box_corners(lo: Sequence[float] | np.ndarray, hi: Sequence[float] | np.ndarray) -> np.ndarray:
     """The 8 corners (8, 3) of the axis-aligned box ``lo``-``hi`` (m, world frame)."""
     lo_, hi_ = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
     idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)
@@ -44,8 +44,8 @@ def _basis(direction: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def frame_box(
-    lo: Sequence[float],
-    hi: Sequence[float],
+    lo: Sequence[float] | np.ndarray,
+    hi: Sequence[float] | np.ndarray,
     *,
     direction: Sequence[float] = VIEW_DIRECTION,
     fov: float = FOV,

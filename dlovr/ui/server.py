@@ -26,13 +26,13 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import viser
 
 from dlovr.geometry.scene_checks import load_checked_scene
-from dlovr.scene import Scene
+from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
@@ -317,8 +317,8 @@ class DemoServer:
                     return
                 view.draw_cable(pts, colors, arrows)
                 view.faces.show(faces)
-                view.body.position = tuple(map(float, rec.gripper_pos))
-                view.body.wxyz = tuple(map(float, rec.gripper_quat))
+                view.body.position = cast(Vec3, tuple(map(float, rec.gripper_pos)))
+                view.body.wxyz = cast(Quat, tuple(map(float, rec.gripper_quat)))
                 if text is not None:
                     self.state_panel.show_live(text)
             srv.flush()
@@ -334,6 +334,7 @@ class DemoServer:
     # -- the GUI ----------------------------------------------------------------------------------
 
     def _build_gui(self) -> None:
+        assert self.server is not None, "the GUI is built on the started server"
         gui = self.server.gui
         self.viewport.build_gizmo()
         self.state_panel.build(gui)

@@ -175,9 +175,9 @@ def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:
     scene = load_embedded_scene(rec, tmp)
     kept = kept_states(rec)
     tl = Timeline(source=Path(path).name)
-    for k, classes in zip(kept, kept_classes(kept), strict=True):  # flights included
+    for k, into in zip(kept, kept_classes(kept), strict=True):  # flights included
         tl.bands.append(
-            Band(k.t, k.t + k.duration, k.situation.format(), tuple(classes), situation_faces(k.situation))
+            Band(k.t, k.t + k.duration, k.situation.format(), tuple(into), situation_faces(k.situation))
         )
     states = rec.states()
     st_t = np.array([float(p["t"]) for p in states])

@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import trimesh
 
 from dlovr.geometry import SceneGeometry
-from dlovr.scene import Scene
+from dlovr.scene import Scene, Vec3
 from dlovr.ui.app import App
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
 from dlovr.ui.framing import FOV, frame_box
@@ -37,8 +37,8 @@ class Viewport:
         self.dragging: dict[int, float | None] = {}
         self.obstacle_handles: list[Any] = []
         self.shown_geometry: Any = None
-        self.cable: Any = None
-        self.joints: Any = None
+        self.cable: viser.BatchedMeshHandle | None = None
+        self.joints: viser.BatchedMeshHandle | None = None
         self.cable_n = -1
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
@@ -86,6 +86,7 @@ class Viewport:
         if self.cable is None or self.cable_n != n:
             self._make_cable(n, r)
         cable, joints = self.cable, self.joints
+        assert cable is not None and joints is not None  # made just above when missing
         cable.batched_positions = pos.astype(np.float32)
         cable.batched_wxyzs = wxyz.astype(np.float32)
         cable.batched_scales = scales.astype(np.float32)
@@ -148,7 +149,7 @@ class Viewport:
         colors = {o.name: o.color for o in scene.objects}
         for obj in geometry.objects:
             c = colors.get(obj.name)
-            rgb = tuple(int(255 * x) for x in c) if c else (150, 155, 170)
+            rgb = cast(tuple[int, int, int], tuple(int(255 * x) for x in c)) if c else (150, 155, 170)
             self.obstacle_handles.append(
                 api.add_mesh_simple(
                     f"/obstacles/{obj.name}",
@@ -207,8 +208,8 @@ class Viewport:
             pos, look = frame_box(lo, hi, aspect=1.0)
             cam = srv.initial_camera
             cam.fov = FOV
-            cam.look_at = tuple(map(float, look))
-            cam.position = tuple(map(float, pos))
+            cam.look_at = cast(Vec3, tuple(map(float, look)))
+            cam.position = cast(Vec3, tuple(map(float, pos)))
         clients = [client] if client is not None else list(srv.get_clients().values())
         for c in clients:
             if c.client_id not in self.camera_ready:
@@ -218,8 +219,8 @@ class Viewport:
             pos, look = frame_box(lo, hi, aspect=aspect)
             with c.atomic():
                 cam.fov = FOV
-                cam.position = tuple(map(float, pos))  # moves look_at along; set it after
-                cam.look_at = tuple(map(float, look))
+                cam.position = cast(Vec3, tuple(map(float, pos)))  # moves look_at along; set it after
+                cam.look_at = cast(Vec3, tuple(map(float, look)))
             self.camera_ready[c.client_id] = (aspect, pos)
 
     def camera_update(self, client: Any) -> None:

@@ -26,12 +26,13 @@ from dlovr.ui.timeline import Timeline
 
 if TYPE_CHECKING:
     import viser
+    from viser import uplot
 
 
-def _series(points: bool) -> tuple[dict[str, Any], ...]:
-    out: list[dict[str, Any]] = [{"label": SERIES_LABELS[0]}]
+def _series(points: bool) -> tuple[uplot.Series, ...]:
+    out: list[uplot.Series] = [{"label": SERIES_LABELS[0]}]
     for label, color in zip(SERIES_LABELS[1:], SERIES_COLORS[1:], strict=True):
-        s: dict[str, Any] = {"label": label, "stroke": color, "width": 2.0 if label == "|F|" else 1.25}
+        s: uplot.Series = {"label": label, "stroke": color, "width": 2.0 if label == "|F|" else 1.25}
         if label == "transition":
             s.update(scale="mark", width=1.0, dash=(4.0, 3.0), points={"show": False})
         elif points:  # a recording: samples only where the contact state changed
@@ -41,8 +42,10 @@ def _series(points: bool) -> tuple[dict[str, Any], ...]:
         out.append(s)
     for label, color in zip(SIGNAL_LABELS, SIGNAL_COLORS, strict=True):
         dash = (2.0, 2.0) if label == "threshold" else None
-        sig: dict[str, Any] = {"label": label, "stroke": color, "scale": "signal", "width": 1.5}
-        sig.update(points={"show": False}, **({"dash": dash} if dash else {}))
+        sig: uplot.Series = {"label": label, "stroke": color, "scale": "signal", "width": 1.5}
+        sig["points"] = {"show": False}
+        if dash:
+            sig["dash"] = dash
         out.append(sig)
     return tuple(out)
 
@@ -118,6 +121,7 @@ class ForcePanel:
         caption = "transitions (dashed): " + ", ".join(marks[-6:]) if marks else "no transition in the window"
         if extra:
             caption += "  \n" + extra
+        assert self.app.server is not None, "the plot exists: the server is started"
         with self.app.server.atomic():
             if mode != self._mode:
                 self.plot.series = _series(points=mode == "recording")

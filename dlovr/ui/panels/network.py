@@ -29,7 +29,11 @@ class NetworkPanel:
         with gui.add_folder("Transition network", expand_by_default=True):
             self.rebuild_btn = gui.add_button("Rebuild network", icon=viser.Icon.REFRESH)
             self.view = gui.add_html("")
-        self.rebuild_btn.on_click(lambda _e: self.load())
+
+        @self.rebuild_btn.on_click
+        def _(_e: Any) -> None:
+            self.load()
+
         self.load()
 
     def folders(self) -> list[Any]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import datetime as _dt
 import threading
 from pathlib import Path
+from typing import Any
 
 import viser
 
@@ -30,8 +31,14 @@ class RecordingPanel:
             self.stop_btn = gui.add_button("Stop recording", icon=viser.Icon.PLAYER_STOP, disabled=True)
             self.rec_md = gui.add_markdown(f"Recordings go to `{app.recordings_dir}/`")
             self.program_html = gui.add_html("")
-        self.rec_btn.on_click(lambda _e: app.start_recording())
-        self.stop_btn.on_click(lambda _e: app.stop_recording(wait=False))
+
+        @self.rec_btn.on_click
+        def _(_e: Any) -> None:
+            app.start_recording()
+
+        @self.stop_btn.on_click
+        def _(_e: Any) -> None:
+            app.stop_recording(wait=False)
 
     def start(self, path: str | Path | None = None) -> Path:
         app = self.app

@@ -31,7 +31,7 @@ from dlovr.ui.program_view import program_html
 SAMPLE_PROGRAMS = Path(__file__).resolve().parents[3] / "recordings" / "programs"
 """The repository's sample programs (one per built-in scene)."""
 
-NO_PROGRAM = "(no program for this scene)"
+NO_PROGRAM: str = "(no program for this scene)"
 
 
 class RunPanel:
@@ -74,7 +74,7 @@ class RunPanel:
         for folder, kind in ((app.recordings_dir / "programs", "program"), (SAMPLE_PROGRAMS, "sample")):
             if folder.is_dir():
                 cands += [(f"{kind}: {p.name.removesuffix('.program.json')}", p)
-                          for p in sorted(folder.glob("*.program.json"))]  # fmt: skip
+                          for p in sorted(folder.glob("*.program.json"))]
         seen: set[Path] = set()
         for label, path in cands:
             key = path.resolve()
