@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
+from mcap.records import Header
+from mcap.summary import Summary
 
 from dlovr import __version__
 from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S
@@ -59,35 +61,7 @@ class Recording:
     def __init__(self, path: str | Path):
         self.path = Path(path)
         p = self.path
-        try:
-            size = p.stat().st_size
-        except OSError as e:
-            raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
-        if p.is_dir():
-            raise RecordingError(f"{p}: is a directory, not a recording")
-        if size == 0:
-            raise RecordingError(f"{p}: empty file, not an MCAP recording")
-        with open(p, "rb") as fh:
-            head = fh.read(len(MCAP_MAGIC))
-            fh.seek(max(0, size - len(MCAP_MAGIC)))
-            tail = fh.read()
-        if head != MCAP_MAGIC:
-            raise RecordingError(f"{p}: not an MCAP file (bad magic bytes)")
-        if tail != MCAP_MAGIC:
-            raise RecordingError(
-                f"{p}: truncated recording (no MCAP footer: the writer was killed?); "
-                f"try `dlovr recover {p} -o FIXED.mcap`"
-            )
-        check_checksums(p, size)
-        try:
-            with open(p, "rb") as fh:
-                reader = make_reader(fh, validate_crcs=True)
-                header = reader.get_header()
-                summary = reader.get_summary()
-                meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-                attachments = {a.name: a.data for a in reader.iter_attachments()}
-        except DECODE_ERRORS as e:
-            raise RecordingError(f"{p}: corrupt MCAP data: {one_line(e)}") from None
+        header, summary, meta, attachments = _open_mcap(p)
         if header.profile != PROFILE or "dlovr" not in meta:
             raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
         self.metadata: dict[str, str] = meta["dlovr"]
@@ -96,61 +70,16 @@ class Recording:
             raise RecordingError(
                 f"{p}: recording format {version}, this dlovr {__version__} reads format {FORMAT_VERSION}"
             )
-        if summary is None:
-            raise RecordingError(f"{p}: recording has no summary section")
-        topics = {c.topic for c in summary.channels.values()}
-        missing = [t for t in REQUIRED_TOPICS if t not in topics]
-        if missing:
-            raise RecordingError(f"{p}: recording has no channel {missing[0]}")
-        self._counts = {
-            summary.channels[cid].topic: n for cid, n in (summary.statistics.channel_message_counts.items()
-                                                         if summary.statistics else [])
-        }
-        if SCENE_TOML not in attachments:
-            raise RecordingError(f"{p}: recording has no embedded scene ({SCENE_TOML})")
-        files = []
-        for name, data in attachments.items():
-            if name.startswith(SCENE_PREFIX) and name != SCENE_TOML:
-                rel = name[len(SCENE_PREFIX) :]
-                try:
-                    safe_relpath(rel)
-                except RecordingError as e:
-                    raise RecordingError(f"{p}: {e}") from None
-                if len(data) > MAX_ATTACHMENT_BYTES:
-                    raise RecordingError(f"{p}: embedded file {rel} is too large")
-                files.append((rel, bytes(data)))
-        self.scene = SceneBundle(bytes(attachments[SCENE_TOML]), tuple(sorted(files)))
-        self.pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None
-        if PIECES_JSON in attachments:
-            if hashlib.sha256(attachments[PIECES_JSON]).hexdigest() != self.metadata.get("pieces_sha256"):
-                raise RecordingError(f"{p}: the embedded convex decomposition was modified")
-            try:
-                self.pieces = pieces_from_json(bytes(attachments[PIECES_JSON]))
-            except ValueError as e:
-                raise RecordingError(f"{p}: bad {PIECES_JSON}: {e}") from None
+        self._counts = _message_counts(p, summary)
+        self.scene = _embedded_scene(p, attachments)
+        self.pieces: dict[str, tuple[list[np.ndarray], bool]] | None = _embedded_pieces(
+            p, attachments, self.metadata
+        )
         if self.scene.digest != self.metadata.get("scene_sha256"):
             raise RecordingError(
                 f"{p}: the embedded scene was modified (its sha256 does not match the metadata)"
             )
-        try:
-            self.dt = float(self.metadata["timestep"])
-            self.t0_ns = int(self.metadata["t0_ns"])
-        except (KeyError, ValueError):
-            raise RecordingError(f"{p}: metadata lacks a valid timestep / t0_ns") from None
-        if not (0 < self.dt < 1):
-            raise RecordingError(f"{p}: implausible timestep {self.dt}")
-        try:
-            self.hold = float(self.metadata.get("hold", DEFAULT_HOLD_S))
-        except ValueError:
-            raise RecordingError(f"{p}: metadata has an invalid hold time") from None
-        if not (0 <= self.hold < 1e3):
-            raise RecordingError(f"{p}: implausible hold time {self.hold}")
-        try:  # recordings made before flights were debounced carry none: the default
-            self.flight = float(self.metadata.get("flight", DEFAULT_FLIGHT_S))
-        except ValueError:
-            raise RecordingError(f"{p}: metadata has an invalid flight time") from None
-        if not (0 <= self.flight < 1e3):
-            raise RecordingError(f"{p}: implausible flight time {self.flight}")
+        self.dt, self.t0_ns, self.hold, self.flight = _timing(p, self.metadata)
 
     def count(self, topic: str) -> int:
         return self._counts.get(topic, 0)
@@ -277,6 +206,115 @@ class Recording:
         if not out:
             raise RecordingError(f"{self.path}: recording has no checkpoints")
         return out
+
+
+def _open_mcap(p: Path) -> tuple[Header, Summary | None, dict[str, dict[str, str]], dict[str, bytes]]:
+    """The MCAP file ``p``'s header, summary, metadata records (by name) and attachments (by
+    name), after checking that it is a whole MCAP file with valid checksums."""
+    try:
+        size = p.stat().st_size
+    except OSError as e:
+        raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
+    if p.is_dir():
+        raise RecordingError(f"{p}: is a directory, not a recording")
+    if size == 0:
+        raise RecordingError(f"{p}: empty file, not an MCAP recording")
+    with open(p, "rb") as fh:
+        head = fh.read(len(MCAP_MAGIC))
+        fh.seek(max(0, size - len(MCAP_MAGIC)))
+        tail = fh.read()
+    if head != MCAP_MAGIC:
+        raise RecordingError(f"{p}: not an MCAP file (bad magic bytes)")
+    if tail != MCAP_MAGIC:
+        raise RecordingError(
+            f"{p}: truncated recording (no MCAP footer: the writer was killed?); "
+            f"try `dlovr recover {p} -o FIXED.mcap`"
+        )
+    check_checksums(p, size)
+    try:
+        with open(p, "rb") as fh:
+            reader = make_reader(fh, validate_crcs=True)
+            header = reader.get_header()
+            summary = reader.get_summary()
+            meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            attachments = {a.name: a.data for a in reader.iter_attachments()}
+    except DECODE_ERRORS as e:
+        raise RecordingError(f"{p}: corrupt MCAP data: {one_line(e)}") from None
+    return header, summary, meta, attachments
+
+
+def _message_counts(p: Path, summary: Summary | None) -> dict[str, int]:
+    """The number of messages per topic, after checking that the summary has every required
+    channel."""
+    if summary is None:
+        raise RecordingError(f"{p}: recording has no summary section")
+    topics = {c.topic for c in summary.channels.values()}
+    missing = [t for t in REQUIRED_TOPICS if t not in topics]
+    if missing:
+        raise RecordingError(f"{p}: recording has no channel {missing[0]}")
+    return {
+        summary.channels[cid].topic: n for cid, n in (summary.statistics.channel_message_counts.items()
+                                                     if summary.statistics else [])
+    }
+
+
+def _embedded_scene(p: Path, attachments: Mapping[str, bytes]) -> SceneBundle:
+    """The scene embedded in the recording: its TOML and the files beside it (safe relative paths,
+    each at most :data:`MAX_ATTACHMENT_BYTES`)."""
+    if SCENE_TOML not in attachments:
+        raise RecordingError(f"{p}: recording has no embedded scene ({SCENE_TOML})")
+    files = []
+    for name, data in attachments.items():
+        if name.startswith(SCENE_PREFIX) and name != SCENE_TOML:
+            rel = name[len(SCENE_PREFIX) :]
+            try:
+                safe_relpath(rel)
+            except RecordingError as e:
+                raise RecordingError(f"{p}: {e}") from None
+            if len(data) > MAX_ATTACHMENT_BYTES:
+                raise RecordingError(f"{p}: embedded file {rel} is too large")
+            files.append((rel, bytes(data)))
+    return SceneBundle(bytes(attachments[SCENE_TOML]), tuple(sorted(files)))
+
+
+def _embedded_pieces(
+    p: Path, attachments: Mapping[str, bytes], metadata: Mapping[str, str]
+) -> dict[str, tuple[list[np.ndarray], bool]] | None:
+    """The convex decomposition embedded in the recording (checked against its sha256 in the
+    metadata), or ``None`` for a recording without one."""
+    if PIECES_JSON not in attachments:
+        return None
+    if hashlib.sha256(attachments[PIECES_JSON]).hexdigest() != metadata.get("pieces_sha256"):
+        raise RecordingError(f"{p}: the embedded convex decomposition was modified")
+    try:
+        return pieces_from_json(bytes(attachments[PIECES_JSON]))
+    except ValueError as e:
+        raise RecordingError(f"{p}: bad {PIECES_JSON}: {e}") from None
+
+
+def _timing(p: Path, metadata: Mapping[str, str]) -> tuple[float, int, float, float]:
+    """The metadata's time step (s), log time of step 0 (ns), hold and flight times (s), each
+    checked to be plausible."""
+    try:
+        dt = float(metadata["timestep"])
+        t0_ns = int(metadata["t0_ns"])
+    except (KeyError, ValueError):
+        raise RecordingError(f"{p}: metadata lacks a valid timestep / t0_ns") from None
+    if not (0 < dt < 1):
+        raise RecordingError(f"{p}: implausible timestep {dt}")
+    try:
+        hold = float(metadata.get("hold", DEFAULT_HOLD_S))
+    except ValueError:
+        raise RecordingError(f"{p}: metadata has an invalid hold time") from None
+    if not (0 <= hold < 1e3):
+        raise RecordingError(f"{p}: implausible hold time {hold}")
+    try:  # recordings made before flights were debounced carry none: the default
+        flight = float(metadata.get("flight", DEFAULT_FLIGHT_S))
+    except ValueError:
+        raise RecordingError(f"{p}: metadata has an invalid flight time") from None
+    if not (0 <= flight < 1e3):
+        raise RecordingError(f"{p}: implausible flight time {flight}")
+    return dt, t0_ns, hold, flight
 
 
 _FIELD_ERRORS = (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError)
