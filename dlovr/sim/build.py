@@ -234,58 +234,12 @@ def build_model(
     gz = quat_rotate(gquat, np.array([0.0, 0.0, 1.0]))
     spec = _rod_spec(dlo, gpos, gz)
     spec.modelname = "dlovr"
-    opt = spec.option
-    opt.timestep = float(timestep)
-    opt.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
-    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
-    opt.tolerance = 1e-6
-    opt.gravity = list(map(float, gravity))
-    spec.compiler.degree = False
+    _set_options(spec, timestep, gravity)
     mu = float(getattr(dlo, "friction", 0.5))
-
     for ob in obstacles:
-        body = spec.worldbody.add_body(
-            name=ob.name, pos=list(map(float, ob.pos)), quat=list(map(float, ob.quat))
-        )
-        for k, verts in enumerate(ob.pieces):
-            v = np.asarray(verts, dtype=float).reshape(-1, 3)
-            mname = f"{ob.name}.P{k}"
-            spec.add_mesh(name=mname, uservert=v.ravel().tolist())
-            f = mu if ob.friction is None else float(ob.friction)
-            body.add_geom(
-                name=mname,
-                type=mujoco.mjtGeom.mjGEOM_MESH,
-                meshname=mname,
-                solref=list(CONTACT_SOLREF),
-                solimp=list(CONTACT_SOLIMP),
-                gap=CONTACT_GAP,
-                friction=[f, 0.005, 0.0001],
-                condim=3,
-                rgba=list(map(float, ob.rgba)),
-            )
-
+        _add_obstacle(spec, ob, mu)
     seg = float(dlo.length) / int(dlo.segments)
-    g = spec.worldbody.add_body(name=GRIPPER, mocap=True, pos=gpos.tolist(), quat=gquat.tolist())
-    g.add_site(name="gripper_site", size=[0.01, 0.0, 0.0], rgba=[0.2, 0.6, 0.9, 0.5])
-    for i, anchor in ((0, [0.0, 0.0, 0.0]), (1, [0.0, 0.0, -seg])):
-        eq = spec.add_equality(
-            name=f"hold_{i}",
-            type=mujoco.mjtEq.mjEQ_CONNECT,
-            objtype=mujoco.mjtObj.mjOBJ_BODY,
-            name1=GRIPPER,
-            name2=f"{ROD}_{i}",
-            solref=list(EQ_SOLREF),
-            solimp=list(edge_solimp(int(dlo.segments))),  # as stiff as the rod's edges: see edge_solimp
-        )
-        eq.data[0:3] = anchor
-    eq = spec.add_equality(
-        name="hold_twist",
-        type=mujoco.mjtEq.mjEQ_JOINT,
-        objtype=mujoco.mjtObj.mjOBJ_JOINT,
-        name1=f"{ROD}_twist_0",
-        solref=list(EQ_SOLREF),
-        solimp=list(EQ_SOLIMP),
-    )
+    _add_gripper(spec, gpos, gquat, seg, int(dlo.segments))
     model = spec.compile()
     flex_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, ROD)
     geom_piece: dict[int, tuple[str, int]] = {}
@@ -304,6 +258,68 @@ def build_model(
         seg_length=seg,
         geom_piece=geom_piece,
         twist_joints=twist,
+    )
+
+
+def _set_options(spec: mujoco.MjSpec, timestep: float, gravity: Sequence[float]) -> None:
+    """The simulation options: ``timestep``, discrete integrator, Newton solver, ``gravity``; angles
+    in radians."""
+    opt = spec.option
+    opt.timestep = float(timestep)
+    opt.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE
+    opt.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    opt.tolerance = 1e-6
+    opt.gravity = list(map(float, gravity))
+    spec.compiler.degree = False
+
+
+def _add_obstacle(spec: mujoco.MjSpec, ob: Obstacle, mu: float) -> None:
+    """Obstacle ``ob`` as a body with one mesh geom per convex piece (geom ``"<obj>.P<k>"``), its
+    friction ``mu`` unless it has its own."""
+    body = spec.worldbody.add_body(
+        name=ob.name, pos=list(map(float, ob.pos)), quat=list(map(float, ob.quat))
+    )
+    for k, verts in enumerate(ob.pieces):
+        v = np.asarray(verts, dtype=float).reshape(-1, 3)
+        mname = f"{ob.name}.P{k}"
+        spec.add_mesh(name=mname, uservert=v.ravel().tolist())
+        f = mu if ob.friction is None else float(ob.friction)
+        body.add_geom(
+            name=mname,
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mname,
+            solref=list(CONTACT_SOLREF),
+            solimp=list(CONTACT_SOLIMP),
+            gap=CONTACT_GAP,
+            friction=[f, 0.005, 0.0001],
+            condim=3,
+            rgba=list(map(float, ob.rgba)),
+        )
+
+
+def _add_gripper(spec: mujoco.MjSpec, gpos: np.ndarray, gquat: np.ndarray, seg: float, segments: int) -> None:
+    """The gripper: a mocap body at ``gpos``/``gquat`` holding the rod's first two vertices (``seg``
+    apart) and its first twist joint by equality constraints."""
+    g = spec.worldbody.add_body(name=GRIPPER, mocap=True, pos=gpos.tolist(), quat=gquat.tolist())
+    g.add_site(name="gripper_site", size=[0.01, 0.0, 0.0], rgba=[0.2, 0.6, 0.9, 0.5])
+    for i, anchor in ((0, [0.0, 0.0, 0.0]), (1, [0.0, 0.0, -seg])):
+        eq = spec.add_equality(
+            name=f"hold_{i}",
+            type=mujoco.mjtEq.mjEQ_CONNECT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            name1=GRIPPER,
+            name2=f"{ROD}_{i}",
+            solref=list(EQ_SOLREF),
+            solimp=list(edge_solimp(segments)),  # as stiff as the rod's edges: see edge_solimp
+        )
+        eq.data[0:3] = anchor
+    spec.add_equality(
+        name="hold_twist",
+        type=mujoco.mjtEq.mjEQ_JOINT,
+        objtype=mujoco.mjtObj.mjOBJ_JOINT,
+        name1=f"{ROD}_twist_0",
+        solref=list(EQ_SOLREF),
+        solimp=list(EQ_SOLIMP),
     )
 
 
