@@ -1,6 +1,6 @@
 """The package layout holds: the model is pure, dlovr's modules import each other without cycles, every
-module has its layer and imports only downwards, and no function or class outgrows a reader (docs/architecture.md,
-"Layout")."""
+module has its layer and imports only downwards, and no function or class outgrows a reader
+(docs/architecture.md, "Layout")."""
 
 from __future__ import annotations
 
@@ -299,7 +299,6 @@ LONG_FUNCTIONS = {
     "dlovr.geometry.kernels.pair_hits": "a numba kernel: one compiled loop over the packed pieces",
     "dlovr.sim.kernels.step_record": "a numba kernel: the whole per-step record in one compiled call",
     "dlovr.sim.track_kernels.track_step": "a numba kernel: the tracker's per-step path in one compiled call",
-    "dlovr.sim.track_kernels._relabel": "a numba kernel: one compiled loop over the hit buffers",
 }
 
 

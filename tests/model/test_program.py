@@ -220,7 +220,8 @@ def test_the_one_program_type_reads_back_what_it_writes():
     assert set(schema["$defs"]["class"]["enum"]) == set(DETECTORS)
     raw = json.loads(prog.dumps())
     raw["macros"][0]["risk"] = "dire"
-    with pytest.raises(ProgramError, match=r"^p\.json: macros\[0\]\.risk: must be one of none, caution, risky"):
+    must = r"^p\.json: macros\[0\]\.risk: must be one of none, caution, risky"
+    with pytest.raises(ProgramError, match=must):
         Program.from_json(raw, "p.json")
     assert issubclass(ProgramError, InputError)
 
