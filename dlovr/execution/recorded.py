@@ -17,14 +17,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import DemoTrack, Event, ExecOptions
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult
 from dlovr.execution.run import fresh_simulator, not_started
 from dlovr.execution.scoring import RunResult
-from dlovr.model.program import Runnable
+from dlovr.model.planning import NetworkProgram
+from dlovr.model.program import Program, Runnable
 
 TOPIC_EVENTS = "/dlovr/executor_events"
 EVENT_SCHEMA_NAME = "dlovr.ExecutorEvent"
@@ -95,6 +96,48 @@ def scene_bundle(scene: Any) -> Any:
             rel = Path(o.mesh_path).resolve().relative_to(base).as_posix()
             files.append((str(safe_relpath(rel)), Path(o.mesh_path).read_bytes()))
     return SceneBundle(scene_toml(scene), tuple(sorted(set(files))))
+
+
+@overload
+def record_run(
+    program: Program,
+    scene: Any,
+    path: str | Path,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    extra_metadata: dict[str, str] | None = None,
+) -> RunResult: ...
+
+
+@overload
+def record_run(
+    program: NetworkProgram,
+    scene: Any,
+    path: str | Path,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    extra_metadata: dict[str, str] | None = None,
+) -> NetworkRunResult: ...
+
+
+@overload
+def record_run(
+    program: Runnable,
+    scene: Any,
+    path: str | Path,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    extra_metadata: dict[str, str] | None = None,
+) -> RunResult | NetworkRunResult: ...
 
 
 def record_run(

@@ -20,7 +20,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -128,6 +128,48 @@ def fresh_simulator(scene: Any, pieces: Any = None) -> tuple[Any, str | None]:
         return Simulator(scene, track=True, pieces=pieces), None
     except (ValueError, SimulationDiverged) as e:
         return None, f"cannot start: {e}"
+
+
+@overload
+def run_program(
+    program: Program,
+    scene: Any,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    on_step: Any = None,
+    on_event: Any = None,
+) -> RunResult: ...
+
+
+@overload
+def run_program(
+    program: NetworkProgram,
+    scene: Any,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    on_step: Any = None,
+    on_event: Any = None,
+) -> NetworkRunResult: ...
+
+
+@overload
+def run_program(
+    program: Runnable,
+    scene: Any,
+    opts: ExecOptions | None = None,
+    *,
+    track: DemoTrack | None = None,
+    network: NetworkOptions | None = None,
+    pieces: Any = None,
+    on_step: Any = None,
+    on_event: Any = None,
+) -> RunResult | NetworkRunResult: ...
 
 
 def run_program(

@@ -81,7 +81,11 @@ def frame_box(
 
 
 def projected_extent(
-    points: np.ndarray, position: Sequence[float], wxyz: Sequence[float], fov: float, aspect: float
+    points: np.ndarray,
+    position: Sequence[float] | np.ndarray,
+    wxyz: Sequence[float] | np.ndarray,
+    fov: float,
+    aspect: float,
 ) -> tuple[float, float]:
     """Fractions (width, height) of the image that the projections of ``points`` (k, 3) span, clipped
     to the image; points behind the camera are ignored (0, 0 if none is in front)."""

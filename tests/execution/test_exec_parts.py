@@ -188,7 +188,9 @@ def test_local_twist_is_the_motion_at_the_end_of_the_stretch():
         a = max(tk - 1.0, 0.0) * 0.5  # rad: still until 1 s of push, then 0.5 rad/s
         pos[k] = [0.05 * min(tk, 1.0) + 0.1 * math.sin(a), 0.0, 0.4 - 0.1 + 0.1 * math.cos(a)]
         quat[k] = [math.cos(a / 2), 0.0, math.sin(a / 2), 0.0]
-    rot, disp = local_twist(t, pos, quat, 0.0, 2.0, span=1.0)
+    twist = local_twist(t, pos, quat, 0.0, 2.0, span=1.0)
+    assert twist is not None
+    rot, disp = twist
     np.testing.assert_allclose(rot, [0.0, 0.5, 0.0], atol=1e-9)
     # one second of that twist, applied to the pose at 2 s, lands where the turn goes on to
     end = ScrewPath(tuple(pos[-1]), tuple(quat[-1]), rot, disp, tuple(quat[-1]), "relative")
@@ -229,9 +231,11 @@ def test_vary_specs():
     v = parse_vary("objects.pos=0.005")
     assert (v.kind, v.hi) == ("offset", 0.005)
     for k in range(20):
-        assert 0.9 <= parse_vary("dlo.friction=10%").draw(3, k) <= 1.1
-        assert 0.5 <= parse_vary("dlo.young=0.5..2").draw(3, k) <= 2.0
-        assert max(map(abs, parse_vary("gripper.pos=0.005").draw(3, k))) <= 0.005
+        friction, young = parse_vary("dlo.friction=10%").draw(3, k), parse_vary("dlo.young=0.5..2").draw(3, k)
+        offset = parse_vary("gripper.pos=0.005").draw(3, k)
+        assert isinstance(friction, float) and isinstance(young, float) and isinstance(offset, tuple)
+        assert 0.9 <= friction <= 1.1 and 0.5 <= young <= 2.0
+        assert max(map(abs, offset)) <= 0.005
 
 
 @pytest.mark.parametrize(

@@ -100,7 +100,7 @@ def test_paused_takes_no_step_and_a_divergence_calls_back():
 
 def test_a_failing_publish_keeps_the_loop_alive_and_another_session_is_followed():
     first, second, target = FakeSession(), FakeSession(), TargetCommand()
-    current = [first]
+    current: list[Any] = [first]  # a FakeSession stands in for dlovr.ui.session.Session
     calls = [0]
 
     def publish() -> None:

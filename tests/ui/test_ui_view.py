@@ -327,7 +327,8 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     t = (tl.start + tl.end) / 2
     server.scrub(t)
     title = f"up to {t:.2f} s"
-    wait_for(lambda: title in server.force_panel.plot.title, timeout=10, what="the plot at the moment")
+    plot = server.force_panel.plot
+    wait_for(lambda: title in (plot.title or ""), timeout=10, what="the plot at the moment")
 
     def at_moment() -> bool:  # the browser's data: samples where the contact state changed, up to t
         x = plot_data(page)[0]
@@ -335,7 +336,7 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
 
     wait_for(at_moment, timeout=10, what="the browser's plot data at the moment")
     # then the force at every step, re-simulated from the recording in the background
-    wait_for(lambda: "re-simulated" in server.force_panel.plot.title, timeout=60, what="the re-simulation")
+    wait_for(lambda: "re-simulated" in (plot.title or ""), timeout=60, what="the re-simulation")
 
     def dense() -> bool:  # a sample every 20 ms, not one per contact-state change
         x = plot_data(page)[0]
