@@ -292,7 +292,7 @@ def test_bounces_and_weak_detections_end_by_motion():
     assert len(ms) >= 2
     a, b = ms[0], ms[1]
     back = replace(b, from_contacts=a.to_contacts, to_contacts=a.from_contacts,
-                   motion=replace(b.motion, duration=0.05))  # fmt: skip
+                   motion=replace(b.motion, duration=0.05))
     assert bounces([a, back], 0.1) == {a.index, back.index}
     assert bounces([a, replace(back, motion=replace(b.motion, duration=0.5))], 0.1) == set()
     assert _weak("E", {"force_threshold_n": 0.07, "step_n": 0.06})

@@ -84,11 +84,11 @@ def test_an_unexpected_transition_is_identified_and_planned_again(net):
     raw = copy.deepcopy(raw)
     e12 = raw["edges"][0]
     n3 = {**raw["nodes"][1], "id": "n3", "situation": "V/G & E/N & V/F[table.F3]",
-          "principal": ["V/F[table.F3]"], "vector": TILTED, "sensed": TILTED, "visits": 3}  # fmt: skip
+          "principal": ["V/F[table.F3]"], "vector": TILTED, "sensed": TILTED, "visits": 3}
     e13 = {**copy.deepcopy(e12), "target": "n3", "count": 3, "probability": 0.6,
-           "durations": [0.582] * 3, "demonstrations": [0, 1, 1]}  # fmt: skip
+           "durations": [0.582] * 3, "demonstrations": [0, 1, 1]}
     e32 = {**copy.deepcopy(e12), "source": "n3", "classes": ["C"], "label": "C", "count": 3,
-           "probability": 1.0, "durations": [0.1] * 3, "demonstrations": [0, 1, 1]}  # fmt: skip
+           "probability": 1.0, "durations": [0.1] * 3, "demonstrations": [0, 1, 1]}
     e32["motion"] = {**e32["motion"], "world_mean": [0.0, 0.0, -0.001]}
     e32["motion"]["start_mean"] = e12["motion"]["end_mean"]
     raw["nodes"].append(n3)

@@ -42,7 +42,7 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     program, scene, track, pieces = touch
     vary = (parse_vary("objects.pos=0.02"),)
     setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=vary, seed=1,
-                       opts=ExecOptions(), baseline=True)  # fmt: skip
+                       opts=ExecOptions(), baseline=True)
     trials = run_trials(setup, 3)
     t2 = trials[2]
     assert t2["values"]["objects.pos"][2] < -0.007
@@ -224,7 +224,7 @@ def test_cli_runs_a_program_and_exits_by_the_result(touch):
         (["recordings/programs/table.program.json", "--detect", "psychic"], "--detect: 'psychic' is not"),
         (["recordings/programs/table.program.json", "--workers", "two"], "--workers: 'two' is not an"),
     ],
-)  # fmt: skip
+)
 def test_cli_bad_inputs_are_one_line_and_exit_2(args, message, tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
     bad = tmp_path / "bad.program.json"

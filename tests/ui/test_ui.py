@@ -149,7 +149,7 @@ def test_dlovr_serve_on_every_interface_prints_the_warning(tmp_path: Path):
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
     cmd = [sys.executable, "-m", "dlovr", "serve", "--host", "0.0.0.0", "--port", str(port),
-           "--recordings", str(tmp_path)]  # fmt: skip
+           "--recordings", str(tmp_path)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     watchdog = threading.Timer(120, proc.kill)  # a server that never says anything
     watchdog.start()

@@ -64,7 +64,7 @@ def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServe
     path = server.start_recording()  # the run is recorded like a demonstration
     page.get_by_role("button", name="Run program").click()
     wait_for(lambda: server.run_panel.runner is not None and server.run_panel.runner.macro >= 2,
-             timeout=30, what="the run to reach its second macro")  # fmt: skip
+             timeout=30, what="the run to reach its second macro")
     server.pause(True)  # hold the run on that macro to look at it
     runner = server.run_panel.runner
     macro = runner.macro

@@ -366,7 +366,7 @@ def test_a_risky_program_says_which_macro_and_class():
            to_situation="c", risky=True),
         NS(index=4, classes=(), t=4.0, risk="none", final=True, change_from=None, change_to=spec),
         NS(index=5, classes=("C",), t=5.0, risk="risky", change_from="E/F[t.F1]", change_to="E/E^P[t.E1]"),
-    )  # fmt: skip
+    )
     prog = NS(name="demo", macros=macros)
     assert [macro_risk(m) for m in macros] == ["none", "caution", "risky", "none", "risky"]
     assert macro_change(macros[4]) == ("E/F[t.F1]", "E/E^P[t.E1]")
