@@ -126,20 +126,6 @@ def record_run(
 ) -> NetworkRunResult: ...
 
 
-@overload
-def record_run(
-    program: Runnable,
-    scene: Any,
-    path: str | Path,
-    opts: ExecOptions | None = None,
-    *,
-    track: DemoTrack | None = None,
-    network: NetworkOptions | None = None,
-    pieces: Any = None,
-    extra_metadata: dict[str, str] | None = None,
-) -> RunResult | NetworkRunResult: ...
-
-
 def record_run(
     program: Runnable,
     scene: Any,

@@ -158,20 +158,6 @@ def run_program(
 ) -> NetworkRunResult: ...
 
 
-@overload
-def run_program(
-    program: Runnable,
-    scene: Any,
-    opts: ExecOptions | None = None,
-    *,
-    track: DemoTrack | None = None,
-    network: NetworkOptions | None = None,
-    pieces: Any = None,
-    on_step: Any = None,
-    on_event: Any = None,
-) -> RunResult | NetworkRunResult: ...
-
-
 def run_program(
     program: Runnable,
     scene: Any,

@@ -28,7 +28,8 @@ from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.run import run_openloop, run_program
 from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, perturb
-from dlovr.model.program import Program, Runnable
+from dlovr.model.planning import NetworkProgram
+from dlovr.model.program import Program
 
 #: Levels per variation parameter in the summary and the plot.
 LEVELS = 3
@@ -45,7 +46,7 @@ class TrialSetup:
     ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
     """
 
-    program: Runnable
+    program: Program | NetworkProgram
     scene: Any
     pieces: Any
     track: DemoTrack | None
