@@ -29,10 +29,11 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import networkx as nx
 import numpy as np
@@ -49,6 +50,7 @@ NETWORK_VERSION = 1
 """Version of the network JSON format (``version`` field); bump on incompatible changes."""
 
 Vec3 = tuple[float, float, float]
+T = TypeVar("T")
 RISKS = ("none", "caution", "risky")
 
 
@@ -272,31 +274,16 @@ class Network:
             raise NetworkError(
                 f"transition network format {data.get('version')}, this dlovr reads {NETWORK_VERSION}"
             )
-        try:
+        nodes = tuple(_each(data, "nodes", _node_from_json))
+        edges = tuple(_each(data, "edges", _edge_from_json))
+        with _at(""):
             ref = data.get("reference")
-            nodes = tuple(
-                Node(str(n["id"]), str(n["situation"]), tuple(map(str, n["principal"])), str(n["stability"]),
-                     None if n["vector"] is None else _vec(n["vector"]), int(n["visits"]),
-                     float(n["total_time"]), float(n["mean_time"]),
-                     None if n.get("sensed") is None else _vec(n["sensed"]))
-                for n in data["nodes"]
-            )
-            edges = tuple(
-                Edge(str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
-                     int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
-                     _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])),
-                     tuple(_detection_from_json(d) for d in e.get("detection", ())),
-                     None if e.get("track") is None else EdgeTrack.from_json(e["track"]))
-                for e in data["edges"]
-            )
             net = Network(
                 str(data["scene_name"]), str(data["scene_sha256"]), tuple(map(str, data["demonstrations"])),
-                nodes, edges, tuple(map(_endpoint_from_json, data["starts"])),
-                tuple(map(_endpoint_from_json, data["ends"])), str(data["start"]), str(data["goal"]),
+                nodes, edges, tuple(_each(data, "starts", _endpoint_from_json)),
+                tuple(_each(data, "ends", _endpoint_from_json)), str(data["start"]), str(data["goal"]),
                 NETWORK_VERSION, None if ref is None else EdgeTrack.from_json(ref),
             )
-        except (KeyError, TypeError, ValueError, IndexError) as e:
-            raise NetworkError(f"bad transition network: {type(e).__name__}: {e}") from None
         _check(net)
         return net
 
@@ -322,6 +309,52 @@ def load_network(path: str | Path) -> Network:
 
 def _endpoint_json(p: Endpoint) -> dict[str, Any]:
     return {"node": p.node, "count": p.count, "position": list(p.position), "spread": p.spread}
+
+
+
+@contextmanager
+def _at(where: str) -> Iterator[None]:
+    """Turns a missing key or a value of the wrong kind met inside into one :class:`NetworkError`
+    worded like every input's (``where.key: missing``, ``where: problem``)."""
+    try:
+        yield
+    except KeyError as e:
+        key = e.args[0] if e.args else "?"
+        raise NetworkError(f"{where}.{key}: missing" if where else f"{key}: missing") from None
+    except (TypeError, ValueError, IndexError, AttributeError) as e:
+        if isinstance(e, NetworkError):
+            raise
+        raise NetworkError(f"{where or 'network'}: {type(e).__name__}: {e}") from None
+
+
+def _each(data: Mapping[str, Any], key: str, parse: Callable[[Any], T]) -> Iterator[T]:
+    """``parse`` of every item of the list ``data[key]``, a bad item named ``key[i]``."""
+    with _at(""):
+        items = data[key]
+    if not isinstance(items, list):
+        raise NetworkError(f"{key}: must be a list, got {type(items).__name__}")
+    for i, item in enumerate(items):
+        with _at(f"{key}[{i}]"):
+            yield parse(item)
+
+
+def _node_from_json(n: Mapping[str, Any]) -> Node:
+    return Node(
+        str(n["id"]), str(n["situation"]), tuple(map(str, n["principal"])), str(n["stability"]),
+        None if n["vector"] is None else _vec(n["vector"]), int(n["visits"]),
+        float(n["total_time"]), float(n["mean_time"]),
+        None if n.get("sensed") is None else _vec(n["sensed"]),
+    )
+
+
+def _edge_from_json(e: Mapping[str, Any]) -> Edge:
+    return Edge(
+        str(e["source"]), str(e["target"]), tuple(map(str, e["classes"])), str(e["risk"]),
+        int(e["count"]), float(e["probability"]), tuple(map(float, e["durations"])),
+        _motion_from_json(e["motion"]), tuple(map(int, e["demonstrations"])),
+        tuple(_detection_from_json(d) for d in e.get("detection", ())),
+        None if e.get("track") is None else EdgeTrack.from_json(e["track"]),
+    )
 
 
 def _endpoint_from_json(d: Mapping[str, Any]) -> Endpoint:

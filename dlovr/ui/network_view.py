@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from html import escape
 from pathlib import Path
 
-from dlovr.model.network import Network, NetworkError
+from dlovr.model.network import Network, NetworkError, load_network
 from dlovr.recording import RecordingError
 from dlovr.recording.network_html import CSS, network_svg
 
@@ -51,9 +51,9 @@ def scene_network(scene_name: str, folders: Sequence[Path]) -> tuple[Network | N
         path = folder / f"{scene_name}.network.json"
         if path.is_file():
             try:
-                return Network.loads(path.read_text()), f"from {path}"
-            except (NetworkError, ValueError, OSError) as e:
-                return None, f"cannot read {path}: {e}"
+                return load_network(path), f"from {path}"
+            except NetworkError as e:  # an InputError naming the file
+                return None, f"cannot read {e}"
     recs = scene_recordings(scene_name, folders)
     if not recs:
         return None, f"no network and no recording of scene {scene_name}"

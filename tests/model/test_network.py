@@ -172,6 +172,29 @@ def test_json_round_trip_is_exact_and_versioned():
         Network.from_json(bad)
 
 
+def test_a_bad_network_file_names_where_the_problem_is():
+    """Like every input: ``where: problem``, the item of a list by its index."""
+    good = json.loads(small_network().dumps())
+    cases = [
+        (("nodes", 1, "visits"), None, r"^nodes\[1\]\.visits: missing$"),
+        (("edges", 0, "count"), "many", r"^edges\[0\]: ValueError: .*many"),
+        (("starts",), {"node": "n1"}, r"^starts: must be a list, got dict$"),
+        (("goal",), None, r"^goal: missing$"),
+    ]
+    for path, value, message in cases:
+        bad = json.loads(json.dumps(good))
+        *parents, last = path
+        holder = bad
+        for key in parents:
+            holder = holder[key]
+        if value is None:
+            del holder[last]
+        else:
+            holder[last] = value
+        with pytest.raises(NetworkError, match=message):
+            Network.from_json(bad)
+
+
 def test_network_as_a_networkx_graph():
     g = small_network().graph()
     assert sorted(g.nodes) == ["n1", "n2", "n3", "n4"]
