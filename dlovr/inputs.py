@@ -90,12 +90,6 @@ class Fields:
             raise self.err(where, f"must be a list of {n} numbers, got {raw!r}")
         return tuple(self.number(x, f"{where}[{i}]", positive=positive) for i, x in enumerate(raw))
 
-    def string(self, raw: Any, where: str) -> str:
-        """A non-empty string."""
-        if not isinstance(raw, str) or not raw:
-            raise self.err(where, f"must be a non-empty string, got {raw!r}")
-        return raw
-
     def at_most(self, count: int, limit_key: str, where: str, what: str) -> None:
         """``count`` ``what`` within ``LIMITS[limit_key]``."""
         limit = LIMITS[limit_key]
