@@ -318,12 +318,12 @@ def _at(where: str) -> Iterator[None]:
     worded like every input's (``where.key: missing``, ``where: problem``)."""
     try:
         yield
+    except NetworkError:
+        raise  # already names where (an item of a list inside)
     except KeyError as e:
         key = e.args[0] if e.args else "?"
         raise NetworkError(f"{where}.{key}: missing" if where else f"{key}: missing") from None
     except (TypeError, ValueError, IndexError, AttributeError) as e:
-        if isinstance(e, NetworkError):
-            raise
         raise NetworkError(f"{where or 'network'}: {type(e).__name__}: {e}") from None
 
 
