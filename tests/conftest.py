@@ -19,10 +19,24 @@ import pytest
 SLOW_FIXTURES = frozenset({"browser", "server", "ray_instance"})
 
 
+#: The xdist group of the browser UI's tests: they run one after another on one worker, so two
+#: real-time servers and two headless browsers never compete for the CPU.
+UI_GROUP = "ui"
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark the tests that use a slow fixture ``slow``, and give every test its xdist group.
+
+    Under ``pytest -n auto`` (the README's test command; ``--dist loadgroup`` is in pyproject.toml's
+    addopts) a group runs on one worker: a test file is one group, so its module-scoped fixtures
+    (recordings, simulations, servers) are made once; every test of the browser UI is in
+    :data:`UI_GROUP`."""
     for item in items:
-        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if SLOW_FIXTURES & fixtures:
             item.add_marker(pytest.mark.slow)
+        ui = bool({"browser", "server"} & fixtures) or "tests/ui/" in item.nodeid
+        item.add_marker(pytest.mark.xdist_group(UI_GROUP if ui else item.nodeid.split("::")[0]))
 
 
 @pytest.fixture(autouse=True, scope="session")
