@@ -38,7 +38,7 @@ from typing import Any, TypeVar
 import networkx as nx
 import numpy as np
 
-from dlovr.inputs import InputError, read_json, where_msg
+from dlovr.inputs import InputError, parse_json, read_json, where_msg
 from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
 from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
@@ -288,13 +288,9 @@ class Network:
         return net
 
     @staticmethod
-    def loads(text: str) -> Network:
-        """A network from its JSON text (see :meth:`from_json`)."""
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise NetworkError(f"not valid JSON: {e.msg} at line {e.lineno}") from None
-        return Network.from_json(data)
+    def loads(text: str, source: str = "network text") -> Network:
+        """A network from its JSON text (see :meth:`from_json`); ``source`` names the text in errors."""
+        return Network.from_json(parse_json(text, source, NetworkError))
 
 
 def load_network(path: str | Path) -> Network:

@@ -43,7 +43,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from dlovr.inputs import read_json
+from dlovr.inputs import read_json, where_msg
 from dlovr.model.network import RISKS, Edge, Network, NetworkError, Vec3
 from dlovr.model.program import Detection, Program, ProgramError
 from dlovr.transforms import norm
@@ -422,4 +422,4 @@ def load_runnable(path: str | Path) -> Program | NetworkProgram:
     try:
         return NetworkProgram.from_json(raw)
     except NetworkError as e:
-        raise ProgramError(f"{path}: {e}") from None
+        raise ProgramError(where_msg(path, "", str(e))) from None
