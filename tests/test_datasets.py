@@ -263,3 +263,37 @@ def test_the_sample_recordings_export_to_both_formats(tmp_path):
         assert len(on) == len(by_step)  # every checkpoint is a frame at 30 fps
         for j in on:
             assert np.array_equal(states[j].view(np.uint64), by_step[int(steps[j])].view(np.uint64)), s.name
+
+
+@pytest.mark.slow
+def test_generate_keeps_the_runs_that_run_trials_counts_successful(tmp_path):
+    from dlovr.datasets.generate import trial_setup
+    from dlovr.execution.trials import run_trials
+
+    program = ROOT / "recordings" / "programs" / "l_block.program.json"
+    vary = ("--vary", "dlo.length=10%")
+    out = tmp_path / "gen.hdf5"
+    r = cli("generate", program, "--episodes", 2, "--seed", 1, *vary, "--format", "robomimic", "-o", out,
+            "--fps", 10)
+    assert r.exit_code == 0, r.output
+    trials = run_trials(trial_setup(str(program), vary[1::2], 1), 2)  # as `dlovr run --trials`, unrecorded
+    won = [t for t in trials if t["program"]["success"]]
+    assert f"kept {len(won)} of 2 runs" in r.output
+    assert won, "no successful trial to compare"
+    with h5py.File(out, "r") as f:
+        demos = [f[f"data/demo_{i}"] for i in range(len(f["data"]))]
+        assert [int(d.attrs["trial"]) for d in demos] == [t["trial"] for t in won]
+        assert [json.loads(d.attrs["vary"]) for d in demos] == [t["values"] for t in won]
+        assert all(d.attrs["success"] and d.attrs["seed"] == 1 for d in demos)
+        assert all(d.attrs["kind"] == "program run" for d in demos)
+    r = cli("generate", program, "--episodes", 2, "-o", out)
+    assert r.exit_code == 2 and "exists" in r.output
+
+
+def test_generate_checks_its_numbers_first(tmp_path):
+    program = ROOT / "recordings" / "programs" / "l_block.program.json"
+    for args, message in ((["--episodes", "0"], "--episodes: must be >= 1"),
+                          (["--episodes", "2", "--workers", "x"], "--workers: 'x' is not an integer"),
+                          (["--episodes", "2", "--size", "10x10"], "--size: image size 10x10")):
+        r = cli("generate", program, *args, "-o", tmp_path / "o")
+        assert r.exit_code == 2 and message in r.output, r.output
