@@ -62,7 +62,7 @@ def export_options(fmt: str, fps_raw: str, cameras_raw: str, size_raw: str, forc
     return ExportOptions(fmt=fmt, fps=fps, cameras=cameras, size=size, force=force)
 
 
-@click.command("export", short_help="Export recordings as a LeRobot or robomimic dataset.")
+@click.command("export", short_help="Recordings -> a LeRobot or robomimic dataset.")
 @click.argument("recordings", nargs=-1, required=True, metavar="RECORDING...")
 @dataset_options
 def export_cmd(recordings: tuple[str, ...], out: str, **given: Any) -> None:

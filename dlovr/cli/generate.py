@@ -22,7 +22,7 @@ def _int(name: str, raw: str, minimum: int) -> int:
     return x
 
 
-@click.command("generate", short_help="Run a program in perturbed scenes; write the successes as a dataset.")
+@click.command("generate", short_help="Program runs in perturbed scenes -> a dataset.")
 @click.argument("program_path", metavar="PROGRAM.json")
 @click.option("--episodes", "episodes_raw", metavar="N", required=True, help="Runs (perturbed scenes).")
 @click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the draws.")
