@@ -36,6 +36,7 @@ def export_options(fmt: str, fps_raw: str, cameras_raw: str, size_raw: str, forc
     """The :class:`dlovr.datasets.ExportOptions` of the options as given, each checked (one line)."""
     from dlovr.datasets import FORMATS, ExportOptions
     from dlovr.datasets.cameras import CAMERAS, CameraError, check_size
+    from dlovr.inputs import LIMITS
 
     if fmt not in FORMATS:
         raise UserError(f"--format: {fmt!r} is not one of {', '.join(FORMATS)}")
@@ -43,8 +44,9 @@ def export_options(fmt: str, fps_raw: str, cameras_raw: str, size_raw: str, forc
         fps = float(fps_raw)
     except ValueError:
         raise UserError(f"--fps: {fps_raw!r} is not a number") from None
-    if not math.isfinite(fps) or not 0 < fps <= 500:
-        raise UserError(f"--fps: must be > 0 and at most 500, got {fps_raw}")
+    top = LIMITS["dataset_fps"]
+    if not math.isfinite(fps) or not 0 < fps <= top:
+        raise UserError(f"--fps: must be > 0 and at most {top:g}, got {fps_raw}")
     cameras = tuple(c.strip() for c in cameras_raw.split(",") if c.strip())
     for c in cameras:
         if c not in CAMERAS:

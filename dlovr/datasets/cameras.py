@@ -23,11 +23,15 @@ class CameraError(ValueError):
 
 
 def check_size(size: tuple[int, int]) -> None:
-    """Raise :class:`CameraError` unless ``size`` (width, height) is 16..1920 x 16..1080, both even
-    (the videos are H.264 in yuv420p, which needs even sizes)."""
+    """Raise :class:`CameraError` unless ``size`` (width, height) is within 16 and
+    ``LIMITS["image_width"]`` x ``LIMITS["image_height"]``, both even (the videos are H.264 in
+    yuv420p, which needs even sizes)."""
+    from dlovr.inputs import LIMITS
+
     w, h = size
-    if not (16 <= w <= 1920 and 16 <= h <= 1080) or w % 2 or h % 2:
-        raise CameraError(f"image size {w}x{h}: width 16..1920, height 16..1080, both even")
+    wmax, hmax = int(LIMITS["image_width"]), int(LIMITS["image_height"])
+    if not (16 <= w <= wmax and 16 <= h <= hmax) or w % 2 or h % 2:
+        raise CameraError(f"image size {w}x{h}: width 16..{wmax}, height 16..{hmax}, both even")
 
 
 class CameraSet:
