@@ -9,6 +9,7 @@ import json
 import math
 import shutil
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -28,6 +29,11 @@ ROOT = Path(__file__).resolve().parent.parent
 TOUCH = Path(__file__).parent / "data" / "touch_table.script.toml"
 FPS = 30
 W, H = 64, 48
+
+
+def _h5(path: Path) -> Any:
+    """An HDF5 file open for reading (typed loosely: h5py's items are groups, datasets or more)."""
+    return h5py.File(path, "r")
 
 
 def cli(*args):
@@ -70,7 +76,7 @@ def test_robomimic_states_are_the_recordings_checkpoints_bit_for_bit(exported):
     path, _, rm = exported
     rec = Recording(path)
     _, steps = _expected_frames(rec)
-    with h5py.File(rm, "r") as f:
+    with _h5(rm) as f:
         demo = f["data/demo_0"]
         states = demo["states"][()]
         assert states.dtype == np.float64 and len(states) == len(steps) == demo.attrs["num_samples"]
@@ -87,7 +93,7 @@ def test_lerobot_state_is_the_robomimic_state_to_float32(exported):
     _, lr, rm = exported
     table = pq.read_table(lr / "data" / "chunk-000" / "file-000.parquet")
     state = np.array(table.column("observation.state").to_pylist(), dtype=np.float32)
-    with h5py.File(rm, "r") as f:
+    with _h5(rm) as f:
         o = f["data/demo_0/obs"]
         n = len(state)
         full = np.concatenate([o["gripper_pos"][()], o["gripper_quat"][()], o["gripper_wrench"][()],
@@ -146,7 +152,7 @@ def test_labels_are_the_recordings_situations(exported):
     table = pq.read_table(lr / "data" / "chunk-000" / "file-000.parquet")
     codes = table.column("label.situation").to_pylist()
     assert [vocab["situation"][c] for c in codes] == want
-    with h5py.File(rm, "r") as f:
+    with _h5(rm) as f:
         labels = f["data/demo_0/labels"]
         assert [s.decode() for s in labels["situation"][()]] == want
         assert set(labels) == {*LABELS, "macro_index"}
@@ -173,7 +179,7 @@ def test_robomimic_episode_holds_its_scene_and_model(exported):
 
     path, _, rm = exported
     rec = Recording(path)
-    with h5py.File(rm, "r") as f:
+    with _h5(rm) as f:
         assert json.loads(f["data"].attrs["env_args"])["env_name"] == "dlovr"
         demo = f["data/demo_0"]
         assert demo.attrs["scene_toml"] == rec.scene.toml.decode()
@@ -238,7 +244,7 @@ def test_force_replaces_a_dataset(exported, tmp_path):
     shutil.copy(rm, out)
     r = cli("export", path, "--format", "robomimic", "-o", out, "--fps", "5", "--force")
     assert r.exit_code == 0, r.output
-    with h5py.File(out, "r") as f:
+    with _h5(out) as f:
         assert f["data"].attrs["fps"] == 5
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.hdf5"]  # no temporary left
 
@@ -253,7 +259,7 @@ def test_the_sample_recordings_export_to_both_formats(tmp_path):
         write_dataset([ep], tmp_path / f"{s.stem}.hdf5", "robomimic", "task")
         rec = Recording(s)
         by_step = {c.step: c.state for c in rec.checkpoints()}
-        with h5py.File(tmp_path / f"{s.stem}.hdf5", "r") as f:
+        with _h5(tmp_path / f"{s.stem}.hdf5") as f:
             states, steps = f["data/demo_0/states"][()], _expected_frames(rec)[1]
             np.testing.assert_allclose(f["data/demo_0/obs/sim_time"][()], steps * rec.dt, rtol=0, atol=1e-9)
         table = pq.read_table(tmp_path / s.stem / "data" / "chunk-000" / "file-000.parquet")
@@ -280,7 +286,7 @@ def test_generate_keeps_the_runs_that_run_trials_counts_successful(tmp_path):
     won = [t for t in trials if t["program"]["success"]]
     assert f"kept {len(won)} of 2 runs" in r.output
     assert won, "no successful trial to compare"
-    with h5py.File(out, "r") as f:
+    with _h5(out) as f:
         demos = [f[f"data/demo_{i}"] for i in range(len(f["data"]))]
         assert [int(d.attrs["trial"]) for d in demos] == [t["trial"] for t in won]
         assert [json.loads(d.attrs["vary"]) for d in demos] == [t["values"] for t in won]
