@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from dlovr.datasets.frames import CABLE_NODES, LABELS, Episode, gather_episode
@@ -52,43 +52,61 @@ def check_output(out: str | Path, fmt: str, force: bool) -> Path:
     return p
 
 
-def write_dataset(episodes: Sequence[Episode], out: str | Path, fmt: str, task: str) -> Path:
-    """Write ``episodes`` in ``fmt`` to ``out`` through a temporary sibling, replacing what is there
-    only once the new dataset is complete."""
-    from dlovr.datasets.lerobot import write_lerobot
-    from dlovr.datasets.robomimic import write_robomimic
+def write_dataset(episodes: Iterable[Episode], out: str | Path, fmt: str, task: str | None = None) -> Path:
+    """Write ``episodes`` in ``fmt`` to ``out``, one at a time as they come (their images are encoded
+    and dropped), through a temporary sibling that replaces what is at ``out`` only once the new
+    dataset is complete. ``task``: the dataset's task text (default: from the first episode's scene)."""
+    from dlovr.datasets.lerobot import LeRobotWriter
+    from dlovr.datasets.robomimic import RobomimicWriter
 
-    if not episodes:
-        raise DatasetError(f"{out}: no episodes to write")
-    if len({ep.object_names for ep in episodes}) > 1:
-        raise DatasetError(f"{out}: the episodes' scenes have different objects: export them separately")
     p = Path(out)
     tmp = Path(tempfile.mkdtemp(prefix=f".{p.name}.", dir=p.parent))
+    writer: LeRobotWriter | RobomimicWriter | None = None
     try:
         staged = tmp / p.name
-        (write_lerobot if fmt == "lerobot" else write_robomimic)(episodes, staged, task)
+        names: tuple[str, ...] | None = None
+        for ep in episodes:
+            if writer is None:
+                cls = LeRobotWriter if fmt == "lerobot" else RobomimicWriter
+                writer, names = cls(staged, task or task_of(ep)), ep.object_names
+            elif ep.object_names != names:
+                why = "its scene's objects differ from the first episode's: export them separately"
+                raise DatasetError(f"{ep.info['source']}: {why}")
+            writer.add(ep)
+        if writer is None:
+            raise DatasetError(f"{out}: no episodes to write")
+        writer.close()
         if p.is_dir() and not p.is_symlink():
             shutil.rmtree(p)
         staged.replace(p)
     finally:
+        if writer is not None:
+            writer.abort()
         shutil.rmtree(tmp, ignore_errors=True)
     return p
 
 
 def export(recordings: Sequence[str | Path], out: str | Path, opts: ExportOptions) -> list[Episode]:
-    """Re-simulate ``recordings`` (one episode each, in order) and write them to ``out``."""
+    """Re-simulate ``recordings`` (one episode each, in order) and write them to ``out``; the episodes
+    written, without their images."""
     check_output(out, opts.fmt, opts.force)
-    episodes = [gather_episode(r, opts.fps, opts.cameras, opts.size) for r in recordings]
-    write_dataset(episodes, out, opts.fmt, task=task_of(episodes))
-    return episodes
+    done: list[Episode] = []
+
+    def episodes() -> Iterator[Episode]:
+        for r in recordings:
+            ep = gather_episode(r, opts.fps, opts.cameras, opts.size)
+            done.append(replace(ep, images={}))
+            yield ep
+
+    write_dataset(episodes(), out, opts.fmt)
+    return done
 
 
-def task_of(episodes: Sequence[Episode]) -> str:
-    """The dataset's task text: the scenes of its episodes."""
+def task_of(ep: Episode) -> str:
+    """A dataset's task text: the first episode's scene."""
     import tomllib
 
-    names = sorted({tomllib.loads(ep.info["scene_toml"]).get("name", "scene") for ep in episodes})
-    return "cable manipulation in " + ", ".join(names)
+    return "cable manipulation in " + str(tomllib.loads(ep.info["scene_toml"]).get("name", "a scene"))
 
 
 __all__ = [

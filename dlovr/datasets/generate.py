@@ -6,7 +6,7 @@ recorded; the runs that reached the goal re-simulated into episodes and written 
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -17,7 +17,6 @@ from dlovr.datasets import (
     ExportOptions,
     check_output,
     gather_episode,
-    task_of,
     write_dataset,
 )
 
@@ -79,9 +78,8 @@ def generate(
         trials = run_trials(replace(setup, record_dir=tmp), episodes, workers=workers, progress=progress)
         kept = [t["trial"] for t in trials if t["program"]["success"]]
         paths = [str(Path(tmp) / f"trial_{k:03d}.mcap") for k in kept]
-        eps = gather_episodes(paths, opts, workers=workers, progress=progress)
-        if eps:
-            write_dataset(eps, out, opts.fmt, task=task_of(eps))
+        if paths:
+            write_dataset(iter_episodes(paths, opts, workers=workers, progress=progress), out, opts.fmt)
     failures: dict[str, int] = {}
     for t in trials:
         p = t["program"]
@@ -91,18 +89,23 @@ def generate(
     return GenerateResult(trials, kept, failures)
 
 
-def gather_episodes(
+def iter_episodes(
     paths: Sequence[str], opts: ExportOptions, *, workers: int = 1, progress: bool = False
-) -> list[Episode]:
+) -> Iterator[Episode]:
     """:func:`dlovr.datasets.frames.gather_episode` of each recording, on ``workers`` processes, in order."""
     from dlovr.batch import Task, run_batch
 
     if workers <= 1 or len(paths) <= 1:
-        return [gather_episode(p, opts.fps, opts.cameras, opts.size) for p in paths]
+        for p in paths:
+            yield gather_episode(p, opts.fps, opts.cameras, opts.size)
+        return
     tasks = [Task(p, (p, opts.fps, opts.cameras, opts.size)) for p in paths]
-    out: dict[int, Episode] = {}
+    waiting: dict[int, Episode] = {}
+    nxt = 0
     for r in run_batch(gather_episode, tasks, workers=workers, progress=progress, label="episodes"):
         if not r.ok:
             raise DatasetError(f"{r.key}: cannot re-simulate: {r.error}")
-        out[r.index] = r.value
-    return [out[i] for i in range(len(paths))]
+        waiting[r.index] = r.value
+        while nxt in waiting:
+            yield waiting.pop(nxt)
+            nxt += 1

@@ -45,33 +45,71 @@ def state_vector(ep: Episode) -> np.ndarray:
 
 def write_lerobot(episodes: Sequence[Episode], out: str | Path, task: str) -> Path:
     """Write ``episodes`` (one fps, one scene layout) as a LeRobot v3.0 dataset in the new folder ``out``."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    w = LeRobotWriter(out, task)
+    for ep in episodes:
+        w.add(ep)
+    return w.close()
 
-    out = Path(out)
-    fps = episodes[0].fps
-    cams = sorted(episodes[0].images)
-    vocab = _vocabularies(episodes)
-    rows, offsets = _data_columns(episodes, vocab)
-    (out / "meta" / "episodes" / "chunk-000").mkdir(parents=True)
-    (out / "data" / "chunk-000").mkdir(parents=True)
-    pq.write_table(pa.table(rows), out / DATA_PATH.format(chunk_index=0, file_index=0))
-    video_info = {c: _write_video(episodes, c, out, fps) for c in cams}
-    pq.write_table(_episodes_table(episodes, offsets, cams, task), out / EPISODES_PATH)
-    pq.write_table(_tasks_table([task]), out / "meta" / "tasks.parquet")
-    features = _features(episodes[0], video_info)
-    info = {
-        "codebase_version": CODEBASE_VERSION, "robot_type": "dlovr_gripper",
-        "total_episodes": len(episodes), "total_frames": int(offsets[-1]), "total_tasks": 1,
-        "chunks_size": 1000, "data_files_size_in_mb": 100, "video_files_size_in_mb": 500, "fps": fps,
-        "splits": {"train": f"0:{len(episodes)}"}, "data_path": DATA_PATH,
-        "video_path": VIDEO_PATH if cams else None, "features": features,
-        "dlovr": {"cable_nodes": CABLE_NODES, "versions": episodes[0].info["versions"]},
-    }
-    _write_json(out / "meta" / "info.json", info)
-    _write_json(out / "meta" / "stats.json", _stats(rows, episodes, cams))
-    _write_json(out / "meta" / "labels.json", vocab)
-    return out
+
+class LeRobotWriter:
+    """Writes a LeRobot v3.0 dataset into the new folder ``out`` one episode at a time: the camera
+    images are encoded as each episode comes and not kept (only every 10th frame, for the stats);
+    the tables and metadata are written by :meth:`close`."""
+
+    def __init__(self, out: str | Path, task: str):
+        self.out, self.task = Path(out), task
+        self.episodes: list[Episode] = []
+        self.videos: dict[str, _Video] = {}
+        self.samples: dict[str, list[np.ndarray]] = {}
+
+    def add(self, ep: Episode) -> None:
+        """Append episode ``ep`` (its cameras those of the first episode)."""
+        from dataclasses import replace
+
+        if not self.episodes:
+            (self.out / "meta" / "episodes" / "chunk-000").mkdir(parents=True)
+            (self.out / "data" / "chunk-000").mkdir(parents=True)
+            self.videos = {c: _Video(self.out, c, ep.fps) for c in sorted(ep.images)}
+            self.samples = {c: [] for c in self.videos}
+        elif sorted(ep.images) != sorted(self.videos):
+            have, first = sorted(ep.images), sorted(self.videos)
+            raise ValueError(f"episode {ep.name}: cameras {have}, the first episode's {first}")
+        for cam, video in self.videos.items():
+            video.write(ep.images[cam])
+            self.samples[cam].append(ep.images[cam][::10])
+        self.episodes.append(replace(ep, images={}))
+
+    def abort(self) -> None:
+        """Close the videos without writing the metadata."""
+        for v in self.videos.values():
+            v.close()
+
+    def close(self) -> Path:
+        """Finish the videos and write the frame table, the episodes, tasks, info and stats."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        episodes, out, task = self.episodes, self.out, self.task
+        video_info = {c: v.close() for c, v in self.videos.items()}
+        cams = sorted(video_info)
+        vocab = _vocabularies(episodes)
+        rows, offsets = _data_columns(episodes, vocab)
+        pq.write_table(pa.table(rows), out / DATA_PATH.format(chunk_index=0, file_index=0))
+        pq.write_table(_episodes_table(episodes, offsets, cams, task), out / EPISODES_PATH)
+        pq.write_table(_tasks_table([task]), out / "meta" / "tasks.parquet")
+        fps = episodes[0].fps
+        info = {
+            "codebase_version": CODEBASE_VERSION, "robot_type": "dlovr_gripper",
+            "total_episodes": len(episodes), "total_frames": int(offsets[-1]), "total_tasks": 1,
+            "chunks_size": 1000, "data_files_size_in_mb": 100, "video_files_size_in_mb": 500, "fps": fps,
+            "splits": {"train": f"0:{len(episodes)}"}, "data_path": DATA_PATH,
+            "video_path": VIDEO_PATH if cams else None, "features": _features(episodes[0], video_info),
+            "dlovr": {"cable_nodes": CABLE_NODES, "versions": episodes[0].info["versions"]},
+        }
+        _write_json(out / "meta" / "info.json", info)
+        _write_json(out / "meta" / "stats.json", _stats(rows, self.samples))
+        _write_json(out / "meta" / "labels.json", vocab)
+        return out
 
 
 def _write_json(path: Path, obj: Any) -> None:
@@ -138,29 +176,48 @@ def _features(ep: Episode, video_info: dict[str, dict[str, Any]]) -> dict[str, A
     return f
 
 
-def _write_video(episodes: Sequence[Episode], cam: str, out: Path, fps: float) -> dict[str, Any]:
-    """Encode camera ``cam`` of every episode, one after the other, into one MP4; its video info."""
-    import av
+class _Video:
+    """One camera's MP4 (H.264, yuv420p): the episodes' frames one after the other."""
 
-    path = out / VIDEO_PATH.format(video_key=f"observation.images.{cam}", chunk_index=0, file_index=0)
-    path.parent.mkdir(parents=True)
-    rate = Fraction(fps).limit_denominator(1000)
-    h, w = episodes[0].images[cam].shape[1:3]
-    with av.open(str(path), "w") as container:
-        stream = container.add_stream("libx264", rate=rate, options={"g": "2", "crf": "23"})
-        stream.width, stream.height, stream.pix_fmt = w, h, "yuv420p"
-        stream.time_base = 1 / rate
-        k = 0
-        for ep in episodes:
-            for img in ep.images[cam]:
-                frame = av.VideoFrame.from_ndarray(img, format="rgb24")
-                frame.pts = k
-                k += 1
-                container.mux(stream.encode(frame))
-        container.mux(stream.encode())
-    return {"video.height": int(h), "video.width": int(w), "video.codec": VIDEO_CODEC,
-            "video.pix_fmt": "yuv420p", "video.is_depth_map": False, "video.fps": fps,
-            "video.channels": 3, "has_audio": False}
+    def __init__(self, out: Path, cam: str, fps: float):
+        import av
+
+        key = f"observation.images.{cam}"
+        self.path = out / VIDEO_PATH.format(video_key=key, chunk_index=0, file_index=0)
+        self.path.parent.mkdir(parents=True)
+        self.fps, self.rate = fps, Fraction(fps).limit_denominator(1000)
+        self.container: Any = av.open(str(self.path), "w")
+        self.stream: Any = None
+        self.frames = 0
+
+    def write(self, images: np.ndarray) -> None:
+        """Encode ``images`` (n, H, W, 3) uint8."""
+        import av
+
+        if self.stream is None:
+            h, w = images.shape[1:3]
+            options = {"g": "2", "crf": "23"}  # a key frame every 2 frames: quick seeks, as LeRobot's
+            self.stream = self.container.add_stream("libx264", rate=self.rate, options=options)
+            self.stream.width, self.stream.height, self.stream.pix_fmt = w, h, "yuv420p"
+            self.stream.time_base = 1 / self.rate
+        for img in images:
+            frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(img), format="rgb24")
+            frame.pts = self.frames
+            self.frames += 1
+            self.container.mux(self.stream.encode(frame))
+
+    def close(self) -> dict[str, Any]:
+        """Flush and close the file; its video info (for info.json)."""
+        if self.container is None:
+            return {}
+        if self.stream is not None:
+            self.container.mux(self.stream.encode())
+        self.container.close()
+        self.container = None
+        h, w = (self.stream.height, self.stream.width) if self.stream is not None else (0, 0)
+        return {"video.height": int(h), "video.width": int(w), "video.codec": VIDEO_CODEC,
+                "video.pix_fmt": "yuv420p", "video.is_depth_map": False, "video.fps": self.fps,
+                "video.channels": 3, "has_audio": False}
 
 
 def _episodes_table(episodes: Sequence[Episode], offsets: list[int], cams: Sequence[str], task: str) -> Any:
@@ -209,21 +266,20 @@ def _tasks_table(tasks: Sequence[str]) -> Any:
     return table.replace_schema_metadata({"pandas": json.dumps(meta)})
 
 
-def _stats(rows: dict[str, Any], episodes: Sequence[Episode], cams: Sequence[str]) -> dict[str, Any]:
+def _stats(rows: dict[str, Any], samples: dict[str, list[np.ndarray]]) -> dict[str, Any]:
     """meta/stats.json: min, max, mean, std and count of every numeric column and (per channel, in
-    0..1) of every camera."""
+    0..1, over every 10th frame) of every camera."""
     out: dict[str, Any] = {}
     for key, col in rows.items():
         x = np.asarray(col.flatten() if hasattr(col, "flatten") else col, float)
         x = x.reshape(len(col), -1).astype(np.float64)
         out[key] = {"min": x.min(0).tolist(), "max": x.max(0).tolist(), "mean": x.mean(0).tolist(),
                     "std": x.std(0).tolist(), "count": [len(x)]}
-    for cam in cams:
-        sample = np.concatenate([ep.images[cam][::10] for ep in episodes])  # every 10th frame
+    for cam, parts in samples.items():
+        sample = np.concatenate(parts)
         px = sample.reshape(-1, 3) / 255.0
-        shape = (3, 1, 1)
         out[f"observation.images.{cam}"] = {
-            k: np.asarray(v).reshape(shape).tolist()
+            k: np.asarray(v).reshape(3, 1, 1).tolist()
             for k, v in (("min", px.min(0)), ("max", px.max(0)), ("mean", px.mean(0)), ("std", px.std(0)))
         } | {"count": [len(sample)]}
     return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,24 +24,53 @@ from dlovr.datasets.frames import CABLE_NODES, LABELS, Episode
 
 def write_robomimic(episodes: Sequence[Episode], out: str | Path, task: str) -> Path:
     """Write ``episodes`` to the new HDF5 file ``out``."""
-    import h5py
+    w = RobomimicWriter(out, task)
+    for ep in episodes:
+        w.add(ep)
+    return w.close()
 
-    out = Path(out)
-    with h5py.File(out, "w-") as f:
-        data = f.create_group("data")
-        data.attrs["total"] = sum(ep.length for ep in episodes)
-        env = {"env_name": "dlovr", "type": 1000, "env_kwargs": {"task": task, "fps": episodes[0].fps,
-                                                              "cable_nodes": CABLE_NODES}}
+
+class RobomimicWriter:
+    """Writes the new HDF5 file ``out`` one episode (``demo_<i>``) at a time."""
+
+    def __init__(self, out: str | Path, task: str):
+        import h5py
+
+        self.out, self.task = Path(out), task
+        self.file: Any = h5py.File(self.out, "w-")
+        self.names: list[str] = []
+        self.frames = 0
+        self.first: Episode | None = None
+
+    def add(self, ep: Episode) -> None:
+        """Append episode ``ep`` as ``data/demo_<i>``."""
+        self.first = self.first or ep
+        name = f"demo_{len(self.names)}"
+        _write_demo(self.file.require_group("data").create_group(name), ep)
+        self.names.append(name)
+        self.frames += ep.length
+
+    def abort(self) -> None:
+        """Close the file as it is."""
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+    def close(self) -> Path:
+        """Write the dataset's attributes and the train mask; close the file."""
+        first = self.first
+        assert first is not None and self.file is not None
+        data = self.file["data"]
+        data.attrs["total"] = self.frames
+        env = {"env_name": "dlovr", "type": 1000,
+               "env_kwargs": {"task": self.task, "fps": first.fps, "cable_nodes": CABLE_NODES}}
         data.attrs["env_args"] = json.dumps(env)
-        data.attrs["fps"] = episodes[0].fps
+        data.attrs["fps"] = first.fps
         data.attrs["cable_nodes"] = CABLE_NODES
-        data.attrs["versions"] = json.dumps(episodes[0].info["versions"])
-        mask = f.create_group("mask")
-        names = [f"demo_{i}" for i in range(len(episodes))]
-        mask.create_dataset("train", data=np.array(names, dtype="S"))
-        for name, ep in zip(names, episodes, strict=True):
-            _write_demo(data.create_group(name), ep)
-    return out
+        data.attrs["versions"] = json.dumps(first.info["versions"])
+        self.file.create_group("mask").create_dataset("train", data=np.array(self.names, dtype="S"))
+        self.abort()
+        return self.out
 
 
 def _write_demo(g: object, ep: Episode) -> None:
