@@ -266,7 +266,8 @@ def test_the_sample_recordings_export_to_both_formats(tmp_path):
         state32 = np.array(table.column("observation.state").to_pylist(), dtype=np.float32)
         assert np.array_equal(state32, state_vector(ep).astype(np.float32))
         on = [j for j, k in enumerate(steps) if int(k) in by_step]
-        assert len(on) == len(by_step)  # every checkpoint is a frame at 30 fps
+        regular = [k for k in by_step if (k - steps[0]) % 500 == 0]  # one a second (+ one at the end)
+        assert len(on) >= len(regular) >= len(by_step) - 1  # every second's checkpoint is a frame
         for j in on:
             assert np.array_equal(states[j].view(np.uint64), by_step[int(steps[j])].view(np.uint64)), s.name
 
