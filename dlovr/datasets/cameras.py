@@ -14,12 +14,14 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.inputs import InputError
+
 #: The built-in cameras.
 CAMERAS = ("scene", "gripper")
 
 
-class CameraError(ValueError):
-    """A camera cannot be made (unknown name, no EGL)."""
+class CameraError(InputError):
+    """A camera cannot be made (unknown name, bad size, no EGL): one line."""
 
 
 def check_size(size: tuple[int, int]) -> None:

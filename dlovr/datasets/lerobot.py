@@ -253,7 +253,9 @@ def _tasks_table(tasks: Sequence[str]) -> Any:
     import pyarrow as pa
 
     meta = {
-        "index_columns": ["task"], "column_indexes": [],
+        "index_columns": ["task"],
+        "column_indexes": [{"name": None, "field_name": None, "pandas_type": "unicode",
+                            "numpy_type": "object", "metadata": {"encoding": "UTF-8"}}],
         "columns": [
             {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
              "metadata": None},
