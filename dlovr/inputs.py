@@ -26,6 +26,9 @@ LIMITS: dict[str, float] = {
     "scene_objects": 64,  # their pairwise overlap check grows with the square
     "script_waypoints": 10_000,
     "script_duration_s": 600.0,
+    "dataset_fps": 500,  # a dataset's frame rate: at most one frame a simulation step (2 ms)
+    "image_width": 1920,  # a dataset camera's image (dlovr export --size)
+    "image_height": 1080,
 }
 
 

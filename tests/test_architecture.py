@@ -355,6 +355,7 @@ MODULE_LAYERS = {
     "dlovr.sim": SIM,
     "dlovr.recording": RECORDING,
     "dlovr.execution": EXECUTION,
+    "dlovr.datasets": EXECUTION,  # learning datasets: replays recordings, runs trials (imports execution)
     "dlovr.ui": UI,
     "dlovr.cli": CLI,
     "dlovr.__main__": CLI,

@@ -13,6 +13,8 @@ import click
 from dlovr import __version__
 from dlovr.cli.common import Group
 from dlovr.cli.compile import compile_cmd
+from dlovr.cli.export import export_cmd
+from dlovr.cli.generate import generate_cmd
 from dlovr.cli.network import network_cmd
 from dlovr.cli.record import demo_cmd, record_cmd, recover_cmd, replay_cmd, states_cmd
 from dlovr.cli.run import run_cmd
@@ -40,6 +42,8 @@ for _command in (
     recover_cmd,
     network_cmd,
     run_cmd,
+    export_cmd,
+    generate_cmd,
 ):
     main.add_command(_command)
 

@@ -109,6 +109,10 @@ class Recording:
                 f"{self.count(topic)} (a damaged chunk?); try `dlovr recover {self.path} -o FIXED.mcap`"
             )
 
+    def messages(self, topic: str) -> list[dict[str, Any]]:
+        """The messages of any channel ``topic`` as JSON objects (none when it has no such channel)."""
+        return list(self._iter(topic)) if self.count(topic) else []
+
     def states(self) -> list[dict[str, Any]]:
         """The contact-state messages (reads only their chunks)."""
         return list(self._iter(TOPIC_STATES))

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,28 +40,25 @@ def load_embedded_scene(recording: Recording, directory: str | Path) -> Any:
         raise RecordingError(f"{recording.path}: embedded scene is invalid: {e}") from None
 
 
-def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> ReplayResult:
+def replay(
+    path: str | Path, *, verify: bool = False, progress: Any = None,
+    on_step: Callable[[Any, Any], None] | None = None,
+) -> ReplayResult:
     """Re-simulate a recording from its first checkpoint and its command stream alone.
 
     With ``verify``, the state at every checkpoint and the wrench samples (when the recording has
     them) are compared bit for bit and the contact-state sequence with the recorded one; the first
     difference is reported in ``divergence``.
     ``progress(done, total)`` is called with the number of steps done so far and in all.
+    ``on_step(sim, record)`` is called with the simulator and the step's record at the first
+    checkpoint (once restored) and after every step (how :mod:`dlovr.datasets` samples frames).
     """
     import tempfile
-
-    import mujoco
 
     from dlovr.sim import SimState, Simulator
 
     rec = Recording(path)
-    warnings = []
-    for key, have in (("mujoco_version", mujoco.__version__), ("dlovr_version", __version__)):
-        want = rec.metadata.get(key)
-        if want != have:
-            warnings.append(
-                f"recorded with {key.split('_')[0]} {want}, replaying with {have}: may not be bit-exact"
-            )
+    warnings = _version_warnings(rec)
     steps, pos, quat = rec.commands()
     cps = rec.checkpoints()
     recorded_states = rec.states()
@@ -89,13 +86,18 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
     by_step = {c.step: c for c in cps[1:]}
     divergence: str | None = None
     t0 = time.perf_counter()
-    tracker.restart(sim.record())
+    start = sim.record()
+    tracker.restart(start)
+    if on_step is not None:
+        on_step(sim, start)
     dt = rec.dt
     for i, k in enumerate(steps):
         # the recorded targets are the exact ones used (already validated and normalised when
         # recorded): set them as they are, since normalising again may change the last bit
         sim.target_pos, sim.target_quat = pos[i].copy(), quat[i].copy()
         r = sim.step()
+        if on_step is not None:
+            on_step(sim, r)
         if wrench is not None and divergence is None and int(k) in wrench_steps:
             divergence = _compare_wrench(wrench, wrench_steps.pop(int(k)), r, dt)
         if verify and divergence is None and int(k) in by_step:
@@ -116,6 +118,20 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
     if verify and divergence is None:
         divergence = _compare_states([p for p in recorded_states if not p.get("end")], replayed, dt)
     return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
+
+
+def _version_warnings(rec: Recording) -> list[str]:
+    """A warning per software version that differs from the recording's."""
+    import mujoco
+
+    warnings = []
+    for key, have in (("mujoco_version", mujoco.__version__), ("dlovr_version", __version__)):
+        want = rec.metadata.get(key)
+        if want != have:
+            warnings.append(
+                f"recorded with {key.split('_')[0]} {want}, replaying with {have}: may not be bit-exact"
+            )
+    return warnings
 
 
 def _compare_states(

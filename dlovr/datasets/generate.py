@@ -1,0 +1,111 @@
+"""Generated datasets (``dlovr generate``): a program run in perturbed scenes as robustness trials
+(:func:`dlovr.execution.trials.run_trials`, the same draws as ``dlovr run --trials``), each run
+recorded; the runs that reached the goal re-simulated into episodes and written as one dataset.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from dlovr.datasets import (
+    DatasetError,
+    Episode,
+    ExportOptions,
+    check_output,
+    gather_episode,
+    write_dataset,
+)
+
+
+@dataclass(frozen=True)
+class GenerateResult:
+    """``trials``: every trial's result (as ``dlovr run --trials`` writes them); ``kept``: the trials
+    that reached the goal, in order (the dataset's episodes); ``failures``: why the others failed
+    (reason -> count)."""
+
+    trials: list[dict[str, Any]]
+    kept: list[int]
+    failures: dict[str, int]
+
+
+def trial_setup(
+    program_path: str, varies: Sequence[str], seed: int, *, detect: str = "force", noise: float = 0.0,
+    path_mode: str = "auto",
+) -> Any:
+    """The :class:`dlovr.execution.trials.TrialSetup` that ``dlovr run PROGRAM --trials`` makes from
+    the same options (a compiled or a network program; ``path_mode``: auto, demo or program)."""
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.network_run import network_scene
+    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.execution.trials import TrialSetup
+    from dlovr.execution.variation import parse_varies
+    from dlovr.geometry import scene_pieces
+    from dlovr.model.planning import NetworkProgram, load_runnable
+
+    program = load_runnable(program_path)
+    opts = ExecOptions(detect=detect, noise=noise)
+    track = None
+    if isinstance(program, NetworkProgram):
+        if path_mode == "demo":
+            raise DatasetError(f"{program_path}: a network program has no single demonstration to follow")
+        scene = network_scene(program, None)
+    else:
+        rec = find_recording(program)
+        scene = resolve_scene(program, None, rec)
+        if rec is None and path_mode == "demo":
+            raise DatasetError(f"{program_path}: its demonstration {program.source!r} was not found")
+        track = load_track(rec) if rec is not None and path_mode != "program" else None
+    return TrialSetup(
+        program=program, scene=scene, pieces=scene_pieces(scene), track=track,
+        variations=parse_varies(varies, scene), seed=seed, opts=opts, use_track=track is not None,
+    )
+
+
+def generate(
+    setup: Any, episodes: int, out: str | Path, opts: ExportOptions, *, workers: int = 1,
+    progress: bool = False,
+) -> GenerateResult:
+    """Run ``episodes`` trials of ``setup`` on ``workers`` processes, record them in a temporary
+    folder and write those that reached the goal to ``out`` (``opts``: format, fps, cameras)."""
+    from dlovr.execution.trials import run_trials
+
+    check_output(out, opts.fmt, opts.force)
+    with tempfile.TemporaryDirectory(prefix="dlovr-generate-") as tmp:
+        trials = run_trials(replace(setup, record_dir=tmp), episodes, workers=workers, progress=progress)
+        kept = [t["trial"] for t in trials if t["program"]["success"]]
+        paths = [str(Path(tmp) / f"trial_{k:03d}.mcap") for k in kept]
+        if paths:
+            write_dataset(iter_episodes(paths, opts, workers=workers, progress=progress), out, opts.fmt)
+    failures: dict[str, int] = {}
+    for t in trials:
+        p = t["program"]
+        if not p["success"]:
+            key = f"macro {p['failed_macro']}: {p['reason']}" if p.get("failed_macro") else p["reason"]
+            failures[key] = failures.get(key, 0) + 1
+    return GenerateResult(trials, kept, failures)
+
+
+def iter_episodes(
+    paths: Sequence[str], opts: ExportOptions, *, workers: int = 1, progress: bool = False
+) -> Iterator[Episode]:
+    """:func:`dlovr.datasets.frames.gather_episode` of each recording, on ``workers`` processes, in order."""
+    from dlovr.batch import Task, run_batch
+
+    if workers <= 1 or len(paths) <= 1:
+        for p in paths:
+            yield gather_episode(p, opts.fps, opts.cameras, opts.size)
+        return
+    tasks = [Task(p, (p, opts.fps, opts.cameras, opts.size)) for p in paths]
+    waiting: dict[int, Episode] = {}
+    nxt = 0
+    for r in run_batch(gather_episode, tasks, workers=workers, progress=progress, label="episodes"):
+        if not r.ok:
+            raise DatasetError(f"{r.key}: cannot re-simulate: {r.error}")
+        waiting[r.index] = r.value
+        while nxt in waiting:
+            yield waiting.pop(nxt)
+            nxt += 1
