@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import functools
 import os
+import signal
 import sys
 from collections.abc import Callable
-from typing import Any, ParamSpec, TypeVar
+from typing import Any, NoReturn, ParamSpec, TypeVar
 
 import click
 
+from dlovr import signals
 from dlovr.inputs import InputError
 from dlovr.outputs import OutputError
 
@@ -47,13 +49,44 @@ USER_ERRORS: tuple[type[Exception], ...] = (InputError, OutputError)
 
 class Group(click.Group):
     """A click group that reports every :data:`USER_ERRORS` of its commands (their options'
-    callbacks included) as one :class:`UserError` line: the one place where that happens."""
+    callbacks included) as one :class:`UserError` line: the one place where that happens.
+
+    It also ends a command on SIGINT (Ctrl-C) or SIGTERM at any moment, start-up included, with one
+    line and exit 130 or 143 (:mod:`dlovr.signals`): a signal that a dependency swallowed on its way
+    is still pending when the command returns, and ends it then."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        with signals.installed():
+            if signals.pending() is not None:  # it came while the program started
+                interrupted(signals.pending())
+            return super().main(*args, **kwargs)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            rv = super().invoke(ctx)
         except USER_ERRORS as e:
-            raise UserError(str(e)) from None
+            if signals.pending() is None:
+                raise UserError(str(e)) from None
+            interrupted(signals.pending())
+        except KeyboardInterrupt:
+            interrupted(signals.pending() or signal.SIGINT)
+        except signals.SignalExit as e:
+            interrupted(e.signum)
+        except SystemExit:
+            if signals.pending() is None:
+                raise  # the command's own exit (after a signal: the status it chose, 130 or 143)
+            interrupted(signals.pending())
+        if signals.pending() is not None:
+            interrupted(signals.pending())
+        return rv
+
+
+def interrupted(signum: int | None) -> NoReturn:
+    """End the command after ``signum``: one line on stderr, exit 130 (SIGINT) or 143 (SIGTERM)."""
+    signum = int(signum or signal.SIGINT)
+    signals.clear()
+    click.echo(f"interrupted ({signals.name(signum)})", err=True)
+    raise SystemExit(signals.exit_code(signum))
 
 
 def plural(n: int, word: str) -> str:

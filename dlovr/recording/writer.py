@@ -15,7 +15,7 @@ from typing import Any, BinaryIO
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from dlovr import __version__
+from dlovr import __version__, signals
 from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
 from dlovr.recording import foxglove
 from dlovr.recording.bundle import SceneBundle, pieces_to_json
@@ -56,17 +56,10 @@ def schemas() -> dict[str, bytes]:
 
 @contextmanager
 def finish_on_sigterm() -> Iterator[None]:
-    """Turn SIGTERM into ``SystemExit`` while inside, so ``with Recorder(...)`` finishes the file."""
-    try:
-        previous = signal.getsignal(signal.SIGTERM)
-        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(143)))
-    except ValueError:  # not the main thread: nothing to install
+    """Turn SIGTERM into ``SystemExit`` (:class:`dlovr.signals.SignalExit`, exit 143) while inside, so
+    ``with Recorder(...)`` finishes the file."""
+    with signals.installed((signal.SIGTERM,)):
         yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 class StopSignals:
@@ -74,11 +67,12 @@ class StopSignals:
     set ``stop.signum``, so that a recording loop ends between two steps (check ``stop.signum`` after
     each) and finishes its file with the last step's command, contact states and checkpoint all
     written (such a file replays and verifies). ``stop.exit_code`` is the conventional exit status
-    (128 + signal number: 130 for SIGINT, 143 for SIGTERM). Outside the main thread nothing is
-    installed.
+    (128 + signal number: 130 for SIGINT, 143 for SIGTERM). A signal that came before (and that a
+    dependency swallowed, :mod:`dlovr.signals`) is taken as the first request: the loop stops at
+    once. Outside the main thread nothing is installed.
     """
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = signals.SIGNALS
 
     def __init__(self) -> None:
         self.signum: int | None = None
@@ -86,11 +80,11 @@ class StopSignals:
 
     @property
     def exit_code(self) -> int:
-        return 128 + int(self.signum or 0)
+        return signals.exit_code(self.signum or 0)
 
     @property
     def name(self) -> str:
-        return signal.Signals(self.signum).name if self.signum else ""
+        return signals.name(self.signum) if self.signum else ""
 
     def _handle(self, signum: int, _frame: object) -> None:
         if self.signum is None:
@@ -102,6 +96,8 @@ class StopSignals:
                 self._previous[sig] = signal.signal(sig, self._handle)
         except ValueError:  # not the main thread
             pass
+        if self._previous and self.signum is None:
+            self.signum = signals.clear()  # one that came before: handled here
         return self
 
     def __exit__(self, *exc: object) -> None:
