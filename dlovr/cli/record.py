@@ -25,12 +25,16 @@ from dlovr.cli.common import (
 )
 
 
-def demonstrate(scene_ref: str | None, script_path: str | None, out: str | None, label: str) -> Any:
+def demonstrate(
+    scene_ref: str | None, script_path: str | None, out: str | None, label: str, force: bool = False
+) -> Any:
     """Run a scripted demonstration headless (optionally recording it to ``out``); return its tracker.
 
     Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
     relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
-    it cannot be written, the partial file is removed and the run stops with one line.
+    it cannot be written, the partial file is removed and the run stops with one line. An existing
+    ``out`` is replaced only with ``force`` (and only once the new one is finished); without it, one
+    that another writer created meanwhile is refused, not shared.
     """
     from dlovr.outputs import output_error, prepare_output, remove_partial
     from dlovr.recording import StopSignals, finish_on_sigterm
@@ -46,7 +50,7 @@ def demonstrate(scene_ref: str | None, script_path: str | None, out: str | None,
     rec = None
     try:
         with finish_on_sigterm(), stop or nullcontext():
-            rec = _recorder(out, scene, sim)
+            rec = _recorder(out, scene, sim, force)
             with rec or nullcontext(), progress_bar(nsteps, label) as bar:
                 diverged = play_script(sim, script, rec, progress=bar.update, stop=stop)
                 if diverged is not None:  # the end marker says so; compile warns
@@ -86,11 +90,11 @@ def _simulator(scene: Any) -> Any:
         raise UserError(f"{scene.path}: {e}") from None
 
 
-def _recorder(out: str | None, scene: Any, sim: Any) -> Any:
+def _recorder(out: str | None, scene: Any, sim: Any, force: bool) -> Any:
     """A recorder of the demonstration to ``out``, or None."""
     from dlovr.recording import DemoRecorder
 
-    return DemoRecorder(out, scene, sim, sim.tracker) if out else None
+    return DemoRecorder(out, scene, sim, sim.tracker, overwrite=force) if out else None
 
 
 def _states_table(rows: list[dict]) -> str:
@@ -146,7 +150,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
     warm_up()
-    tracker = demonstrate(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
+    tracker = demonstrate(scene_ref, script_path, out, f"demo {scene_ref or script_path}", force)
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
@@ -201,7 +205,7 @@ def record_cmd(
         if os.path.isdir(out):
             raise UserError(f"{out}: is a directory (a directory of recordings needs --trials N)")
         refuse_existing(out, force)
-        tracker = demonstrate(scene_ref, script_path, out, "recording")
+        tracker = demonstrate(scene_ref, script_path, out, "recording", force)
         click.echo(f"wrote {out}: {plural(len(tracker.kept), 'contact situation')}")
         return
     _record_trials(scene_ref, script_path, out, force, trials, seed, varies, workers, cluster)
@@ -366,7 +370,7 @@ def recover_cmd(broken: str, out: str, force: bool) -> None:
     if Path(broken).resolve() == Path(out).resolve():
         raise RecordingError(f"{out}: recover writes a new file; choose another output path")
     refuse_existing(out, force)
-    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+    with atomic_output(out, force=force) as tmp:  # no partial file at ``out`` if writing fails
         rep = recover(broken, tmp)
     click.echo(
         f"wrote {out}: {plural(rep.messages, 'message')}, {plural(rep.attachments, 'attachment')}, "

@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing
 
 
 def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
@@ -79,6 +79,7 @@ _VARY_HELP = (
     help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
 )
 @click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
+@click.option("-f", "--force", is_flag=True, help="Overwrite the -o run.mcap if it exists.")
 @cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(**given: Any) -> None:
@@ -98,10 +99,11 @@ def run_cmd(**given: Any) -> None:
     (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
     the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
 
-    Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
-    events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
-    `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
-    writes each trial's run as DIR/trial_KKK.mcap.
+    Without --trials, -o run.mcap records the run like a demonstration (an existing file is refused
+    unless --force) plus a channel of executor events (/dlovr/executor_events: macro start,
+    detection, failure, result), which `dlovr states`, `dlovr replay --verify`, Foxglove and the
+    browser timeline open. With --trials, --record also writes each trial's run as
+    DIR/trial_KKK.mcap.
     """
     a = RunArgs(**given)
     _check_choices(a)
@@ -146,6 +148,7 @@ class RunArgs:
     workers_raw: str
     out: str | None
     record: bool
+    force: bool
     cluster: str | None
     as_json: bool
 
@@ -212,6 +215,8 @@ def _check_combinations(a: RunArgs, n: Numbers) -> None:
         raise UserError(f"-o {a.out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if n.trials is not None and not a.out:
         raise UserError("--trials needs -o DIR for its results")
+    if n.trials is None and a.out:
+        refuse_existing(a.out, a.force)
 
 
 def _exec_options(a: RunArgs, n: Numbers) -> Any:

@@ -17,6 +17,7 @@ from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__, signals
 from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
+from dlovr.outputs import StreamOutput
 from dlovr.recording import foxglove
 from dlovr.recording.bundle import SceneBundle, pieces_to_json
 from dlovr.recording.format import (
@@ -110,10 +111,12 @@ class Recorder:
     """Writes one demonstration to an MCAP file (see :mod:`dlovr.recording.format` for its contents).
 
     Use as a context manager: the file is finished on normal exit and on exceptions (and on SIGTERM
-    inside :func:`finish_on_sigterm`). Each :meth:`checkpoint` ends the chunks in progress, so that a
-    killed writer's file is recovered up to its last checkpoint (``dlovr recover``); the file is also
-    flushed and synced to disk every ``flush_interval`` seconds of wall time. The data section carries
-    a CRC, so readers detect any changed byte.
+    inside :func:`finish_on_sigterm`). A new file is created exclusively (two writers never share
+    one); an existing one is refused without ``overwrite``, else written beside it and renamed over
+    it when finished (:class:`dlovr.outputs.StreamOutput`). Each :meth:`checkpoint` ends the chunks
+    in progress, so that a killed writer's file is recovered up to its last checkpoint (``dlovr
+    recover``); the file is also flushed and synced to disk every ``flush_interval`` seconds of wall
+    time. The data section carries a CRC, so readers detect any changed byte.
     """
 
     def __init__(
@@ -128,16 +131,34 @@ class Recorder:
         frame_rate: float = 30.0,
         t0_ns: int | None = None,
         pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None = None,
+        overwrite: bool = True,
     ):
-        import mujoco
-
         self.path = Path(path)
         self.dt = float(dt)
         self.dt_ns = round(self.dt * 1e9)
         self.t0_ns = time.time_ns() if t0_ns is None else int(t0_ns)
         self.flush_interval = float(flush_interval)
         self.frame_every = max(1, round(1.0 / (frame_rate * self.dt)))
-        self._fh: BinaryIO = open(self.path, "wb")
+        self._out = StreamOutput(self.path, overwrite=overwrite)  # exclusive; beside an existing file
+        self._fh: BinaryIO = self._out.fh
+        self._closed = False
+        try:
+            self._start(scene, scene_name, extra_metadata, pieces)
+        except BaseException:
+            self._closed = True
+            self._out.abandon()
+            raise
+
+    def _start(
+        self,
+        scene: SceneBundle,
+        scene_name: str,
+        extra_metadata: Mapping[str, str] | None,
+        pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None,
+    ) -> None:
+        """The file's header: metadata, the embedded scene, schemas and channels."""
+        import mujoco
+
         self._w = Writer(
             self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD, enable_data_crcs=True
         )
@@ -170,7 +191,6 @@ class Recorder:
         self._commands: list[tuple[int, list[float], list[float]]] = []
         self._seq = 0
         self._last_flush = time.monotonic()
-        self._closed = False
         self._w.flush()
 
     # -- messages -----------------------------------------------------------------------------------
@@ -322,8 +342,10 @@ class Recorder:
             self._write_commands()
             self._write_states()
             self._w.finish()
-        finally:
-            self._fh.close()
+        except BaseException:
+            self._out.abandon()  # a file written beside an existing one is removed, that one kept
+            raise
+        self._out.commit()
 
     def __enter__(self) -> Recorder:
         return self
