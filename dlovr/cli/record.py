@@ -224,10 +224,10 @@ def _record_trials(
 ) -> None:
     from pathlib import Path
 
-    from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
+    from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
-    from dlovr.outputs import prepare_output_dir
+    from dlovr.outputs import check_writable_dir
     from dlovr.recording.bundle import SceneBundle
     from dlovr.script import load_script
 
@@ -248,20 +248,70 @@ def _record_trials(
     existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
     if existing and not force:
         raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")
-    prepare_output_dir(out)
-    demos = record_demos(setup, n, workers=workers, cluster=cluster, progress=True)
-    write_index(setup, demos)
+    check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
+    try:
+        demos = record_demos(setup, n, workers=workers, cluster=cluster, progress=True)
+    except (KeyboardInterrupt, SystemExit) as e:
+        _interrupted_demos(e, setup, n, out)
+        raise
+    _write_index(setup, demos, out)
     bad = [d for d in demos if d["error"]]
     for d in bad:
         click.echo(f"demo {d['trial']}: {d['error']}", err=True)
     retried = sum(d["attempts"] > 1 for d in demos)
     wrote = sum(d["path"] is not None for d in demos)
     click.echo(
-        f"wrote {wrote} recordings of {scene.name} to {out}/ (demos.json): {len(bad)} diverged or failed, "
-        f"{retried} retried"
+        f"wrote {wrote} recordings of {scene.name} to {_folder(out)} (demos.json): {len(bad)} diverged or "
+        f"failed, {retried} retried"
     )
     if bad:
         raise SystemExit(EXIT_FAILED)
+
+
+def _folder(out: str) -> str:
+    """An output folder as printed: ``DIR/`` (one slash, whatever -o ended with)."""
+    return out.rstrip("/") + "/" if out.rstrip("/") else out
+
+
+def _write_index(setup: Any, demos: list[dict[str, Any]], out: str) -> None:
+    """``DIR/demos.json`` (:func:`dlovr.execution.demo_sets.write_index`); a failed write is one line
+    (the recordings themselves are on disk already)."""
+    from dlovr.execution.demo_sets import write_index
+    from dlovr.outputs import describe_os_error
+
+    try:
+        write_index(setup, demos)
+    except OSError as e:
+        where = e.filename or os.path.join(out, "demos.json")
+        kept = sum(d["path"] is not None for d in demos)
+        why = describe_os_error(e)
+        raise UserError(f"{where}: cannot write: {why} ({kept} recordings kept in {_folder(out)})") from None
+
+
+def _interrupted_demos(e: BaseException, setup: Any, n: int, out: str) -> None:
+    """A signal ended ``record --trials``: the finished demonstrations go into demos.json (the one
+    in progress was finished by its worker, shorter), one line, exit 130 or 143. (Another
+    ``SystemExit`` returns: the caller re-raises it.)"""
+    import signal
+
+    from dlovr import signals
+    from dlovr.batch import finished
+
+    if isinstance(e, SystemExit) and not isinstance(e, signals.SignalExit) and signals.pending() is None:
+        return
+    demos = [
+        {**r.value, "attempts": r.attempts} if r.ok else
+        {"trial": r.index, "seed": setup.seed, "path": None, "error": str(r.error), "situations": 0,
+         "attempts": r.attempts}
+        for r in sorted(finished(e), key=lambda r: r.index)
+    ]
+    if demos:
+        _write_index(setup, demos, out)
+    signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
+    click.echo(f"\ninterrupted ({signals.name(signum)}): {len(demos)} of {n} demonstrations finished, "
+               f"listed in {os.path.join(out, 'demos.json')}", err=True)
+    signals.clear()
+    raise SystemExit(signals.exit_code(signum))
 
 
 @click.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import signal
 import sys
 from dataclasses import dataclass
 from typing import Any
@@ -315,9 +316,10 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
     """``--trials N -o DIR``: the trials run, their results written, a summary printed."""
     from pathlib import Path
 
-    from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
+    from dlovr.execution.trials import TrialSetup, run_trials, summarize
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
+    from dlovr.outputs import check_writable_dir
 
     out, trials = a.out or "", n.trials or 0  # both given (see _check_combinations)
     variations = parse_varies(a.varies, t.scene)
@@ -337,10 +339,49 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         use_track=t.use_track,
         record_dir=record_dir,
     )
-    results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
+    check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
+    try:
+        results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
+    except (KeyboardInterrupt, SystemExit) as e:
+        _interrupted_trials(e, setup, trials, out)
+        raise
     summary = summarize(results, setup)
-    write_outputs(out, results, summary)
+    _write_trials(out, results, summary)
     _print_summary(summary, trials, out)
+
+
+def _write_trials(out: str, results: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    """The trials' files (:func:`dlovr.execution.trials.write_outputs`); a failed write is one line."""
+    from dlovr.execution.trials import write_outputs
+    from dlovr.outputs import describe_os_error
+
+    try:
+        write_outputs(out, results, summary)
+    except OSError as e:
+        where = e.filename or out
+        why = describe_os_error(e)
+        raise UserError(f"{where}: cannot write: {why} (the results of {len(results)} trials)") from None
+
+
+def _interrupted_trials(e: BaseException, setup: Any, n: int, out: str) -> None:
+    """A signal ended the trials: write the finished ones' results (as after a whole batch) and say
+    so in one line, exit 130 or 143. (Another ``SystemExit`` returns: the caller re-raises it.)"""
+    from dlovr import signals
+    from dlovr.batch import finished
+    from dlovr.execution.trials import lost_trial, summarize
+
+    if isinstance(e, SystemExit) and not isinstance(e, signals.SignalExit) and signals.pending() is None:
+        return
+    done = sorted(finished(e), key=lambda r: r.index)
+    results = [{**(r.value if r.ok else lost_trial(setup, r.index, str(r.error))), "attempts": r.attempts}
+               for r in done]
+    if results:
+        _write_trials(out, results, summarize(results, setup))
+    signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
+    click.echo(f"\ninterrupted ({signals.name(signum)}): {len(results)} of {n} trials finished, "
+               f"their results in {out.rstrip('/') or out}/", err=True)
+    signals.clear()
+    raise SystemExit(signals.exit_code(signum))
 
 
 def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
@@ -359,4 +400,4 @@ def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
     if summary["retried_trials"] or summary["lost_trials"]:
         lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
         click.echo(lost)
-    click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
+    click.echo(f"results in {out.rstrip('/') or out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
