@@ -4,7 +4,7 @@ dlovr (scene, script, facts, program, network).
 Every problem with a user's input is an :class:`InputError` (or a subclass naming the format, such
 as ``SceneError``): one line, ``<file>: <where>: <problem>``, which the CLI prints and exits with
 code 2. :class:`Fields` checks the values of a parsed TOML or JSON document with that wording;
-:func:`read_text`, :func:`read_toml` and :func:`read_json` read a file with it.
+:func:`read_bytes`, :func:`read_text`, :func:`read_toml` and :func:`read_json` read a file with it.
 
 This module is pure (standard library only), so the model's readers use it too.
 """
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from typing import Any
 LIMITS: dict[str, float] = {
     "file_bytes": 64 * 1024 * 1024,  # any scene, script, facts, program or network file
     "mesh_bytes": 20 * 1024 * 1024,  # one mesh file of a scene
+    "recording_bytes": 2048 * 1024 * 1024,  # a recording read whole (recover, the tolerant scan)
     "dlo_segments": 200,  # at 200 a simulation step with contact extraction takes about real time
     "dlo_length_m": 10.0,
     "scene_objects": 64,  # their pairwise overlap check grows with the square
@@ -97,21 +99,47 @@ class Fields:
             raise self.err(where, f"{count:g} {what}, at most {limit:g} allowed")
 
 
-def read_text(path: str | Path, error_type: type[InputError] = InputError, what: str = "file") -> str:
-    """A UTF-8 text file's contents; a missing, unreadable, oversized or binary file is an error."""
+def read_bytes(
+    path: str | Path,
+    error_type: type[InputError] = InputError,
+    what: str = "file",
+    limit_key: str = "file_bytes",
+) -> bytes:
+    """A regular file's bytes, at most ``LIMITS[limit_key]`` of them: a missing, unreadable or oversized
+    file is an error, and so is one that is not a regular file (``/dev/zero``, a FIFO: reading it
+    would never end)."""
+    import stat
+
     p = Path(path)
+    limit = int(LIMITS[limit_key])
+    allowed = f"at most {limit >> 20} MiB allowed for a {what}"
     try:
-        if p.is_dir():
-            raise error_type(f"{p}: is a directory, not a {what}")
-        size = p.stat().st_size
-        if size > LIMITS["file_bytes"]:
-            limit = int(LIMITS["file_bytes"]) >> 20
-            raise error_type(f"{p}: {size >> 20} MiB, at most {limit} MiB allowed for a {what}")
-        return p.read_text(encoding="utf-8")
+        with open(p, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if stat.S_ISDIR(st.st_mode):
+                raise error_type(f"{p}: is a directory, not a {what}")
+            if not stat.S_ISREG(st.st_mode):
+                raise error_type(f"{p}: not a regular file (a device or a pipe), not a {what}")
+            if st.st_size > limit:
+                raise error_type(f"{p}: {st.st_size >> 20} MiB, {allowed}")
+            data = fh.read(limit + 1)  # bounded even if the file grows meanwhile
+    except IsADirectoryError:
+        raise error_type(f"{p}: is a directory, not a {what}") from None
     except FileNotFoundError:
         raise error_type(f"{p}: no such {what}") from None
     except OSError as e:
         raise error_type(f"{p}: cannot read: {e.strerror or e}") from None
+    if len(data) > limit:
+        raise error_type(f"{p}: more than {limit >> 20} MiB, {allowed}")
+    return data
+
+
+def read_text(path: str | Path, error_type: type[InputError] = InputError, what: str = "file") -> str:
+    """A UTF-8 text file's contents; a missing, unreadable, oversized or binary file is an error."""
+    p = Path(path)
+    data = read_bytes(p, error_type, what)
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise error_type(f"{p}: not a UTF-8 text file") from None
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import stat
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ from mcap.summary import Summary
 
 from dlovr import __version__
 from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S
+from dlovr.outputs import being_written
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
 from dlovr.recording.format import (
     DECODE_ERRORS,
@@ -212,11 +214,16 @@ def _open_mcap(p: Path) -> tuple[Header, Summary | None, dict[str, dict[str, str
     """The MCAP file ``p``'s header, summary, metadata records (by name) and attachments (by
     name), after checking that it is a whole MCAP file with valid checksums."""
     try:
-        size = p.stat().st_size
+        st = p.stat()
     except OSError as e:
         raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
+    size = st.st_size
     if p.is_dir():
         raise RecordingError(f"{p}: is a directory, not a recording")
+    if not stat.S_ISREG(st.st_mode):
+        raise RecordingError(f"{p}: not a regular file (a device or a pipe), not a recording")
+    if being_written(p):
+        raise RecordingError(f"{p}: still being written (a recording in progress); open it once finished")
     if size == 0:
         raise RecordingError(f"{p}: empty file, not an MCAP recording")
     with open(p, "rb") as fh:

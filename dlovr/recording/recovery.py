@@ -21,6 +21,8 @@ from typing import Any
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
+from dlovr.inputs import read_bytes
+from dlovr.outputs import being_written
 from dlovr.recording.format import (
     CHANNELS,
     DECODE_ERRORS,
@@ -51,10 +53,9 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise RecordingError(f"{dst}: recover writes a new file; choose another output path")
-    try:
-        raw = src.read_bytes()
-    except OSError as e:
-        raise RecordingError(f"{src}: cannot read: {e.strerror}") from None
+    if being_written(src):
+        raise RecordingError(f"{src}: still being written (a recording in progress); recover it once ended")
+    raw = read_bytes(src, RecordingError, "recording", "recording_bytes")  # bounded: not /dev/zero
     res = scan(raw)
     if not raw.startswith(MCAP_MAGIC) and not res.chunks:
         raise RecordingError(f"{src}: not an MCAP file (bad magic bytes)")
