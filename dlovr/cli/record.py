@@ -343,8 +343,18 @@ def replay_cmd(recording: str, verify: bool) -> None:
     )
     if verify:
         if res.divergence:
+            note = _recovery_note(recording)
+            if note:  # the damage, not the simulation: bad input
+                raise UserError(f"{recording}: replay diverged: {res.divergence}{note}")
             raise click.ClickException(f"{recording}: replay diverged: {res.divergence}")
         click.echo("verified: every checkpoint bit-identical, contact states identical")
+
+
+def _recovery_note(recording: str) -> str:
+    """What ``dlovr recover`` skipped when it wrote ``recording`` (see ``Recording.recovery_note``)."""
+    from dlovr.recording import Recording
+
+    return Recording(recording).recovery_note
 
 
 @click.command("states", short_help="Print a recording's contact situations and transitions.")

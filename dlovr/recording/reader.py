@@ -67,6 +67,9 @@ class Recording:
         if header.profile != PROFILE or "dlovr" not in meta:
             raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
         self.metadata: dict[str, str] = meta["dlovr"]
+        #: What ``dlovr recover`` skipped when it wrote this file (one line each; "" if not recovered
+        #: or nothing was skipped).
+        self.recovery_skipped: str = meta.get("dlovr_recovery", {}).get("skipped", "")
         version = self.metadata.get("format_version")
         if version != FORMAT_VERSION:
             raise RecordingError(
@@ -83,6 +86,16 @@ class Recording:
             )
         self.dt, self.t0_ns, self.hold, self.flight = _timing(p, self.metadata)
 
+
+    @property
+    def recovery_note(self) -> str:
+        """`` (recovered from a damaged recording with parts missing: ...)`` when ``dlovr recover``
+        wrote this file and skipped something (the reason its replay may fail), else ``""``."""
+        missing = self.recovery_skipped.splitlines()
+        if not missing:
+            return ""
+        more = f"; and {len(missing) - 1} more" if len(missing) > 1 else ""
+        return f" (recovered from a damaged recording with parts missing: {missing[0]}{more})"
     def count(self, topic: str) -> int:
         return self._counts.get(topic, 0)
 
@@ -134,7 +147,8 @@ class Recording:
             raise RecordingError(f"{self.path}: recording has no gripper commands")
         s = np.concatenate(steps)
         if np.any(np.diff(s) != 1):
-            raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
+            why = "gripper command stream has gaps or is out of order"
+            raise RecordingError(f"{self.path}: {why}{self.recovery_note}")
         return s, np.concatenate(pos), np.concatenate(quat)
 
     def frames(self) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
