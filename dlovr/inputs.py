@@ -25,6 +25,7 @@ LIMITS: dict[str, float] = {
     "recording_bytes": 2048 * 1024 * 1024,  # a recording read whole (recover, the tolerant scan)
     "dlo_segments": 200,  # at 200 a simulation step with contact extraction takes about real time
     "dlo_length_m": 10.0,
+    "dlo_young_pa": 1e12,  # Young's modulus of the cable (steel is 2e11 Pa); 1e308 overflowed the solver
     "scene_objects": 64,  # their pairwise overlap check grows with the square
     "script_waypoints": 10_000,
     "script_duration_s": 600.0,
@@ -33,6 +34,24 @@ LIMITS: dict[str, float] = {
 
 class InputError(ValueError):
     """A problem with a user's input: one line naming the file, where in it, and the problem."""
+
+
+def _finite(x: int | float) -> bool:
+    """A finite number (an integer too large for a float is not one)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def shown(raw: Any, width: int = 60) -> str:
+    """A user's value as a message shows it: its repr, a huge integer in scientific form (not 180
+    digits), anything longer than ``width`` characters cut."""
+    if isinstance(raw, int) and not isinstance(raw, bool) and abs(raw) >= 10**15:
+        digits = int(abs(raw).bit_length() * math.log10(2)) + 1  # str() fails beyond 4300 digits
+        return f"an integer of about {digits} digits"
+    text = repr(raw)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def where_msg(source: str | Path, where: str, msg: str) -> str:
@@ -72,24 +91,24 @@ class Fields:
 
     def number(self, raw: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
         """A finite number (bool is not one), optionally > 0 or >= 0."""
-        if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw):
-            raise self.err(where, f"must be a finite number, got {raw!r}")
+        if isinstance(raw, bool) or not isinstance(raw, int | float) or not _finite(raw):
+            raise self.err(where, f"must be a finite number, got {shown(raw)}")
         if positive and raw <= 0:
-            raise self.err(where, f"must be positive, got {raw!r}")
+            raise self.err(where, f"must be positive, got {shown(raw)}")
         if nonneg and raw < 0:
-            raise self.err(where, f"must not be negative, got {raw!r}")
+            raise self.err(where, f"must not be negative, got {shown(raw)}")
         return float(raw)
 
     def integer(self, raw: Any, where: str, lo: int, hi: int) -> int:
         """An integer from ``lo`` to ``hi`` inclusive."""
         if isinstance(raw, bool) or not isinstance(raw, int) or not lo <= raw <= hi:
-            raise self.err(where, f"must be an integer from {lo} to {hi}, got {raw!r}")
+            raise self.err(where, f"must be an integer from {lo} to {hi}, got {shown(raw)}")
         return raw
 
     def vec(self, raw: Any, where: str, n: int, *, positive: bool = False) -> tuple[float, ...]:
         """A list of ``n`` finite numbers."""
         if not isinstance(raw, list) or len(raw) != n:
-            raise self.err(where, f"must be a list of {n} numbers, got {raw!r}")
+            raise self.err(where, f"must be a list of {n} numbers, got {shown(raw)}")
         return tuple(self.number(x, f"{where}[{i}]", positive=positive) for i, x in enumerate(raw))
 
     def at_most(self, count: int, limit_key: str, where: str, what: str) -> None:

@@ -250,6 +250,16 @@ class StreamOutput:
                 raise output_error(self.path, e) from None
         return self.path
 
+    def discard(self) -> None:
+        """Close the file and remove what was written (the file made here, or the one beside the
+        target); an existing target stays as it was. For a writer that failed before writing
+        anything worth keeping."""
+        created = self.path if self.tmp is None and not _is_special(self.path) else None
+        self.abandon()
+        if created is not None:
+            with contextlib.suppress(OSError):
+                created.unlink()
+
     def abandon(self) -> None:
         """Close the file; one written beside the target is removed (the target stays as it was)."""
         with contextlib.suppress(OSError):

@@ -67,3 +67,67 @@ def test_a_recording_still_being_written_is_named_so(tmp_path):
     finally:
         rec.close()
     assert not (tmp_path / "fixed.mcap").exists()
+
+
+ROOT = Path(__file__).resolve().parent.parent
+TABLE = ROOT / "scenes" / "table.toml"
+L_BLOCK = ROOT / "scenes" / "l_block.toml"
+
+
+def test_a_mesh_symlink_loop_is_one_line(tmp_path):
+    text = L_BLOCK.read_text()
+    mesh = next(line.split('"')[1] for line in text.splitlines() if line.strip().startswith("mesh"))
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "a.obj").symlink_to("b.obj")
+    (tmp_path / "meshes" / "b.obj").symlink_to("a.obj")
+    scene = tmp_path / "loop.toml"
+    scene.write_text(text.replace(mesh, "meshes/a.obj"))
+    one_line_exit_2(cli("scene", "show", scene), f"Error: {scene}: ", "cannot be resolved")
+
+
+def with_dlo(key: str, value: str) -> str:
+    """The table scene with ``[dlo] key = value``."""
+    lines = TABLE.read_text().splitlines()
+    return "\n".join(f"{key} = {value}" if line.strip().startswith(f"{key} ") else line for line in lines)
+
+
+def test_an_overflowing_young_modulus_is_refused_and_leaves_no_file(tmp_path):
+    scene = tmp_path / "young.toml"
+    scene.write_text(with_dlo("young", "1e308"))
+    assert "young = 1e308" in scene.read_text()
+    script = tmp_path / "y.script.toml"
+    script.write_text(f'scene = "{scene}"\n[[waypoints]]\npos = [0.0, 0.0, 0.6]\nduration = 0.1\n')
+    r = cli("record", "--script", script, "-o", tmp_path / "y.mcap")
+    one_line_exit_2(r, "dlo.young: ", "must be at most 1e+12 Pa")
+    assert not (tmp_path / "y.mcap").exists()
+
+
+def test_a_huge_number_is_shown_short(tmp_path):
+    scene = tmp_path / "seg.toml"
+    scene.write_text(with_dlo("segments", "1" + "0" * 180))
+    assert "0" * 180 in scene.read_text()
+    r = cli("scene", "show", scene)
+    one_line_exit_2(r, "dlo.segments: ", "an integer of about 181 digits")
+    assert len(r.output.strip().splitlines()[-1]) < 200
+
+
+@pytest.mark.parametrize(("opt", "value"), [("--hold", "nan"), ("--flight", "inf"), ("--hold", "-1")])
+def test_timed_options_must_be_finite(tmp_path, opt, value):
+    f = tmp_path / "t.txt"
+    f.write_text("0.0 V/G & E/N & V/N\n0.5 V/G & E/N & V/F\n")
+    r = cli("transitions", f, opt, value)
+    assert r.exit_code == 2 and f"Invalid value for '{opt}'" in r.output and "finite" in r.output, r.output
+
+
+def test_a_program_whose_demonstration_is_missing_says_how_it_runs(tmp_path, monkeypatch):
+    import dlovr.cli.run as run_cli
+
+    (tmp_path / "a").mkdir()
+    prog = tmp_path / "a" / "table.program.json"
+    prog.write_bytes((ROOT / "recordings" / "programs" / "table.program.json").read_bytes())
+    monkeypatch.chdir(tmp_path)  # the working directory is searched too
+    monkeypatch.setattr(run_cli, "_single", lambda *a, **k: None)  # only what is said before it runs
+    r = CliRunner().invoke(main, ["run", str(prog)])
+    assert r.exit_code == 0, r.output
+    said = "its demonstration 'table.mcap' was not found, so the macros move along the program's poses"
+    assert said in r.output

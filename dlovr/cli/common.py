@@ -5,6 +5,7 @@ scenes and scripts, progress bars, and the decorators for SIGTERM and unwritable
 from __future__ import annotations
 
 import functools
+import math
 import os
 import signal
 import sys
@@ -87,6 +88,25 @@ def interrupted(signum: int | None) -> NoReturn:
     signals.clear()
     click.echo(f"interrupted ({signals.name(signum)})", err=True)
     raise SystemExit(signals.exit_code(signum))
+
+
+class FiniteFloat(click.ParamType):
+    """A finite number of at least ``minimum`` (``nan`` and ``inf`` are refused: one line, exit 2)."""
+
+    name = "number"
+
+    def __init__(self, minimum: float | None = None) -> None:
+        self.minimum = minimum
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(x) or (self.minimum is not None and x < self.minimum):
+            bound = f"a finite number >= {self.minimum:g}" if self.minimum is not None else "a finite number"
+            self.fail(f"must be {bound}, got {value}", param, ctx)
+        return x
 
 
 def plural(n: int, word: str) -> str:

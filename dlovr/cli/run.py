@@ -248,6 +248,12 @@ def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
                 if a.path_mode == "demo" or a.baseline:
                     why = f"its demonstration {program.source!r} was not found: give --recording"
                     raise UserError(f"{a.program_path}: {why}")
+                click.echo(  # another way, another result: say so
+                    f"note: {a.program_path}: its demonstration {program.source!r} was not found, so the "
+                    "macros move along the program's poses (--path program); give --recording FILE to "
+                    "follow the demonstration",
+                    err=True,
+                )
             else:
                 track = load_track(rec_path)
     except ValueError as e:

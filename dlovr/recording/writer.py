@@ -145,8 +145,7 @@ class Recorder:
         try:
             self._start(scene, scene_name, extra_metadata, pieces)
         except BaseException:
-            self._closed = True
-            self._out.abandon()
+            self.discard()
             raise
 
     def _start(
@@ -333,6 +332,13 @@ class Recorder:
     def closed(self) -> bool:
         return self._closed
 
+    def discard(self) -> None:
+        """Give the file up unfinished and remove it (a recording that failed as it started: nothing
+        was recorded); a file it was to replace stays as it was."""
+        if not self._closed:
+            self._closed = True
+            self._out.discard()
+
     def close(self) -> None:
         """Finish the file (summary and footer). Safe to call twice."""
         if self._closed:
@@ -386,11 +392,15 @@ class DemoRecorder:
         self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
         self._radius = float(scene.dlo.radius)
         self._obstacles = [(o.name, np.asarray(o.mesh.triangles)) for o in tracker.geometry.objects]
-        self._checkpoint()
-        start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
-        self._prev = start.discrete
-        self._n_changes = len(tracker.changes)
-        self.rec.contact_state(self.start_step, start.payload())
+        try:
+            self._checkpoint()
+            start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
+            self._prev = start.discrete
+            self._n_changes = len(tracker.changes)
+            self.rec.contact_state(self.start_step, start.payload())
+        except BaseException:
+            self.rec.discard()  # no unfinished file left behind (e.g. a state that is not finite)
+            raise
 
     @property
     def duration(self) -> float:
