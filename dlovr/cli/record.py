@@ -308,8 +308,9 @@ def _interrupted_demos(e: BaseException, setup: Any, n: int, out: str) -> None:
     if demos:
         _write_index(setup, demos, out)
     signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
+    listed = f"listed in {os.path.join(out, 'demos.json')}" if demos else "none listed"
     click.echo(f"\ninterrupted ({signals.name(signum)}): {len(demos)} of {n} demonstrations finished, "
-               f"listed in {os.path.join(out, 'demos.json')}", err=True)
+               f"{listed} (a recording in progress is kept, finished where it stopped)", err=True)
     signals.clear()
     raise SystemExit(signals.exit_code(signum))
 

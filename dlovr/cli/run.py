@@ -384,8 +384,9 @@ def _interrupted_trials(e: BaseException, setup: Any, n: int, out: str) -> None:
     if results:
         _write_trials(out, results, summarize(results, setup))
     signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
-    click.echo(f"\ninterrupted ({signals.name(signum)}): {len(results)} of {n} trials finished, "
-               f"their results in {out.rstrip('/') or out}/", err=True)
+    where = f"their results in {out.rstrip('/') or out}/" if results else "no results written"
+    name = signals.name(signum)
+    click.echo(f"\ninterrupted ({name}): {len(results)} of {n} trials finished, {where}", err=True)
     signals.clear()
     raise SystemExit(signals.exit_code(signum))
 

@@ -114,7 +114,8 @@ def test_record_trials_interrupted_lists_the_finished_demonstrations(tmp_path, m
     assert r.exit_code == 130, r.output
     assert "Aborted" not in r.output and "Traceback" not in r.output
     assert r.output.strip().splitlines()[-1] == (
-        f"interrupted (SIGINT): 1 of 3 demonstrations finished, listed in {out}/demos.json"
+        f"interrupted (SIGINT): 1 of 3 demonstrations finished, listed in {out}/demos.json "
+        "(a recording in progress is kept, finished where it stopped)"
     )
     index = json.loads((out / "demos.json").read_text())
     assert [d["trial"] for d in index["demonstrations"]] == [0]
