@@ -119,3 +119,25 @@ def test_record_trials_interrupted_lists_the_finished_demonstrations(tmp_path, m
     )
     index = json.loads((out / "demos.json").read_text())
     assert [d["trial"] for d in index["demonstrations"]] == [0]
+
+
+def test_run_trials_interrupted_is_one_line_and_130(tmp_path, monkeypatch):
+    """Ctrl-C on `run --trials`: one line, exit 130 (before: `Aborted!`, exit 1); a folder checked
+    before the batch."""
+    import dlovr.execution.trials as trials
+    from dlovr.batch import FINISHED
+    from dlovr.cli import main
+
+    def interrupted(setup, n, **kw):
+        e = KeyboardInterrupt()
+        setattr(e, FINISHED, [])
+        raise e
+
+    monkeypatch.setattr(trials, "run_trials", interrupted)
+    prog = ROOT / "recordings" / "programs" / "table.program.json"
+    out = tmp_path / "t"
+    r = CliRunner().invoke(main, ["run", str(prog), "--trials", "3", "-o", str(out)])
+    assert r.exit_code == 130, r.output
+    last = r.output.strip().splitlines()[-1]
+    assert last == "interrupted (SIGINT): 0 of 3 trials finished, no results written"
+    assert "Aborted" not in r.output and out.is_dir() and list(out.iterdir()) == []
