@@ -1,3 +1,7 @@
-from dlovr.cli import main
+from dlovr import signals
+
+signals.defer()  # a signal while the command line is imported ends the command once it is ready
+
+from dlovr.cli import main  # noqa: E402
 
 main()

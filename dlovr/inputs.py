@@ -4,7 +4,7 @@ dlovr (scene, script, facts, program, network).
 Every problem with a user's input is an :class:`InputError` (or a subclass naming the format, such
 as ``SceneError``): one line, ``<file>: <where>: <problem>``, which the CLI prints and exits with
 code 2. :class:`Fields` checks the values of a parsed TOML or JSON document with that wording;
-:func:`read_text`, :func:`read_toml` and :func:`read_json` read a file with it.
+:func:`read_bytes`, :func:`read_text`, :func:`read_toml` and :func:`read_json` read a file with it.
 
 This module is pure (standard library only), so the model's readers use it too.
 """
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -21,8 +22,10 @@ from typing import Any
 LIMITS: dict[str, float] = {
     "file_bytes": 64 * 1024 * 1024,  # any scene, script, facts, program or network file
     "mesh_bytes": 20 * 1024 * 1024,  # one mesh file of a scene
+    "recording_bytes": 2048 * 1024 * 1024,  # a recording read whole (recover, the tolerant scan)
     "dlo_segments": 200,  # at 200 a simulation step with contact extraction takes about real time
     "dlo_length_m": 10.0,
+    "dlo_young_pa": 1e12,  # Young's modulus of the cable (steel is 2e11 Pa); 1e308 overflowed the solver
     "scene_objects": 64,  # their pairwise overlap check grows with the square
     "script_waypoints": 10_000,
     "script_duration_s": 600.0,
@@ -34,6 +37,24 @@ LIMITS: dict[str, float] = {
 
 class InputError(ValueError):
     """A problem with a user's input: one line naming the file, where in it, and the problem."""
+
+
+def _finite(x: int | float) -> bool:
+    """A finite number (an integer too large for a float is not one)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def shown(raw: Any, width: int = 60) -> str:
+    """A user's value as a message shows it: its repr, a huge integer in scientific form (not 180
+    digits), anything longer than ``width`` characters cut."""
+    if isinstance(raw, int) and not isinstance(raw, bool) and abs(raw) >= 10**15:
+        digits = int(abs(raw).bit_length() * math.log10(2)) + 1  # str() fails beyond 4300 digits
+        return f"an integer of about {digits} digits"
+    text = repr(raw)
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def where_msg(source: str | Path, where: str, msg: str) -> str:
@@ -73,24 +94,24 @@ class Fields:
 
     def number(self, raw: Any, where: str, *, positive: bool = False, nonneg: bool = False) -> float:
         """A finite number (bool is not one), optionally > 0 or >= 0."""
-        if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw):
-            raise self.err(where, f"must be a finite number, got {raw!r}")
+        if isinstance(raw, bool) or not isinstance(raw, int | float) or not _finite(raw):
+            raise self.err(where, f"must be a finite number, got {shown(raw)}")
         if positive and raw <= 0:
-            raise self.err(where, f"must be positive, got {raw!r}")
+            raise self.err(where, f"must be positive, got {shown(raw)}")
         if nonneg and raw < 0:
-            raise self.err(where, f"must not be negative, got {raw!r}")
+            raise self.err(where, f"must not be negative, got {shown(raw)}")
         return float(raw)
 
     def integer(self, raw: Any, where: str, lo: int, hi: int) -> int:
         """An integer from ``lo`` to ``hi`` inclusive."""
         if isinstance(raw, bool) or not isinstance(raw, int) or not lo <= raw <= hi:
-            raise self.err(where, f"must be an integer from {lo} to {hi}, got {raw!r}")
+            raise self.err(where, f"must be an integer from {lo} to {hi}, got {shown(raw)}")
         return raw
 
     def vec(self, raw: Any, where: str, n: int, *, positive: bool = False) -> tuple[float, ...]:
         """A list of ``n`` finite numbers."""
         if not isinstance(raw, list) or len(raw) != n:
-            raise self.err(where, f"must be a list of {n} numbers, got {raw!r}")
+            raise self.err(where, f"must be a list of {n} numbers, got {shown(raw)}")
         return tuple(self.number(x, f"{where}[{i}]", positive=positive) for i, x in enumerate(raw))
 
     def at_most(self, count: int, limit_key: str, where: str, what: str) -> None:
@@ -100,21 +121,47 @@ class Fields:
             raise self.err(where, f"{count:g} {what}, at most {limit:g} allowed")
 
 
-def read_text(path: str | Path, error_type: type[InputError] = InputError, what: str = "file") -> str:
-    """A UTF-8 text file's contents; a missing, unreadable, oversized or binary file is an error."""
+def read_bytes(
+    path: str | Path,
+    error_type: type[InputError] = InputError,
+    what: str = "file",
+    limit_key: str = "file_bytes",
+) -> bytes:
+    """A regular file's bytes, at most ``LIMITS[limit_key]`` of them: a missing, unreadable or oversized
+    file is an error, and so is one that is not a regular file (``/dev/zero``, a FIFO: reading it
+    would never end)."""
+    import stat
+
     p = Path(path)
+    limit = int(LIMITS[limit_key])
+    allowed = f"at most {limit >> 20} MiB allowed for a {what}"
     try:
-        if p.is_dir():
-            raise error_type(f"{p}: is a directory, not a {what}")
-        size = p.stat().st_size
-        if size > LIMITS["file_bytes"]:
-            limit = int(LIMITS["file_bytes"]) >> 20
-            raise error_type(f"{p}: {size >> 20} MiB, at most {limit} MiB allowed for a {what}")
-        return p.read_text(encoding="utf-8")
+        with open(p, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if stat.S_ISDIR(st.st_mode):
+                raise error_type(f"{p}: is a directory, not a {what}")
+            if not stat.S_ISREG(st.st_mode):
+                raise error_type(f"{p}: not a regular file (a device or a pipe), not a {what}")
+            if st.st_size > limit:
+                raise error_type(f"{p}: {st.st_size >> 20} MiB, {allowed}")
+            data = fh.read(limit + 1)  # bounded even if the file grows meanwhile
+    except IsADirectoryError:
+        raise error_type(f"{p}: is a directory, not a {what}") from None
     except FileNotFoundError:
         raise error_type(f"{p}: no such {what}") from None
     except OSError as e:
         raise error_type(f"{p}: cannot read: {e.strerror or e}") from None
+    if len(data) > limit:
+        raise error_type(f"{p}: more than {limit >> 20} MiB, {allowed}")
+    return data
+
+
+def read_text(path: str | Path, error_type: type[InputError] = InputError, what: str = "file") -> str:
+    """A UTF-8 text file's contents; a missing, unreadable, oversized or binary file is an error."""
+    p = Path(path)
+    data = read_bytes(p, error_type, what)
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise error_type(f"{p}: not a UTF-8 text file") from None
 

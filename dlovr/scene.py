@@ -213,6 +213,8 @@ def _dlo(f: Fields, raw: Any) -> DloSpec:
                 raise f.err("dlo.poisson", f"must be in (-1, 0.5), got {v!r}")
         else:
             vals[k] = f.number(v, f"dlo.{k}", positive=True)
+    if vals["young"] > LIMITS["dlo_young_pa"]:
+        raise f.err("dlo.young", f"must be at most {LIMITS['dlo_young_pa']:g} Pa, got {vals['young']:g}")
     if vals["length"] > LIMITS["dlo_length_m"]:
         raise f.err("dlo.length", f"must be at most {LIMITS['dlo_length_m']:g} m, got {vals['length']:g}")
     if vals["radius"] >= vals["length"] / 2:
@@ -289,7 +291,10 @@ def _mesh(f: Fields, where: str, ro: dict, path: Path, obj: SceneObject) -> Scen
     if mp.is_absolute():
         raise f.err(f"{where}.mesh", f"{mesh!r}: must be relative to the scene file")
     base = path.resolve().parent
-    full = (base / mp).resolve()
+    try:
+        full = (base / mp).resolve()
+    except (RuntimeError, OSError) as e:  # a symlink loop (RuntimeError before Python 3.13)
+        raise f.err(f"{where}.mesh", f"{mesh!r}: cannot be resolved: {e}") from None
     if base not in full.parents:
         raise f.err(f"{where}.mesh", f"{mesh!r}: must lie inside the scene file's directory")
     if full.suffix.lower() not in MESH_SUFFIXES:

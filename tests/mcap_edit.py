@@ -21,7 +21,7 @@ def rewrite_mcap(
     messages of topics that ``keep`` refuses left out)."""
     with open(src, "rb") as fh, open(dst, "wb") as oh:
         rd = make_reader(fh)
-        w = Writer(oh)
+        w = Writer(oh, enable_data_crcs=True)  # as dlovr writes (a zero data CRC is damage)
         w.start(profile=rd.get_header().profile)
         for m in rd.iter_metadata():
             w.add_metadata(m.name, metadata(m.name, dict(m.metadata)))

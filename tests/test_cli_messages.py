@@ -210,7 +210,7 @@ def test_replay_removes_its_temporary_folder_when_interrupted(tmp_path, sig):
         proc.kill()
     assert list(tmp.iterdir()) == [], "the temporary folder was left behind"
     assert "Traceback" not in err
-    assert proc.returncode == (143 if sig == signal.SIGTERM else 1)
+    assert proc.returncode == (143 if sig == signal.SIGTERM else 130)
 
 
 def test_a_replay_divergence_names_plain_numbers(touch, tmp_path):

@@ -50,7 +50,7 @@ def test_unwritable_outputs_give_one_line_and_exit_2(short_script, tmp_path):
         (("recover", SAMPLE, "-o", "/dev/full", "--force"), "/dev/full", "No space left"),
         (("compile", SAMPLE, "-o", "/proc/xx"), "/proc/xx", "cannot create directory"),
         (("scene", "export", "table", "-o", "/proc/m.xml"), "/proc/m.xml", "No such file"),
-        (("scene", "export", "table", "-o", "/dev/full"), "/dev/full", "No space left"),
+        (("scene", "export", "table", "-o", "/dev/full", "--force"), "/dev/full", "No space left"),
     ):
         one_line_exit_2(cli(*args), path, why)
     assert not Path("/proc/x.mcap").exists() and Path("/dev/full").is_char_device()

@@ -10,6 +10,10 @@
 - ``cluster="HOST:PORT"`` (or ``"auto"``, ``"ray://HOST:PORT"``): joins a running Ray cluster
   (``ray start --head`` elsewhere); ``workers`` then caps the tasks in flight.
 
+A signal (SIGINT, SIGTERM) ends the batch: the workers are stopped (SIGTERM first, so that a task
+writing a recording finishes it), and the exception carries the results finished so far
+(:func:`finished`), for the caller to write. Workers also end when this process dies.
+
 If this process is already connected to Ray (``ray.is_initialized()``), any ``cluster`` uses that
 connection and leaves it open. Ray is imported only when a cluster is asked for.
 
@@ -53,6 +57,7 @@ __all__ = [
     "TaskResult",
     "check_cluster",
     "cluster_option",
+    "finished",
     "ray_installed",
     "run_batch",
     "summarize",
@@ -98,16 +103,33 @@ def run_batch(
         inner = run_here(fn, tasks)
     else:
         inner = run_on_processes(fn, tasks, min(workers or 1, len(tasks)), retries, note)
+    done: list[TaskResult] = []
     try:
         if not progress:
-            yield from inner
+            for r in inner:
+                done.append(r)
+                yield r
             return
         with click.progressbar(length=len(tasks), label=label, file=sys.stderr, show_eta=True) as bar:
             for r in inner:
                 bar.update(1)
+                done.append(r)
                 yield r
+    except (KeyboardInterrupt, SystemExit) as e:  # a signal: the results so far go with it
+        setattr(e, FINISHED, list(done))
+        raise
     finally:
         inner.close()
+
+
+#: The attribute of the ``KeyboardInterrupt`` or ``SystemExit`` (a signal) that ends a batch: the
+#: :class:`TaskResult` of every task finished before it, in order of completion (:func:`finished`).
+FINISHED = "dlovr_batch_finished"
+
+
+def finished(e: BaseException) -> list[TaskResult]:
+    """The results a batch had yielded when ``e`` (a signal's exception) ended it; [] if none."""
+    return list(getattr(e, FINISHED, []))
 
 
 def _cluster_callback(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:

@@ -9,6 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from dlovr import signals
 from dlovr.inputs import InputError
 
 INSTALL_HINT = "pip install 'dlovr[ray]'"
@@ -89,6 +90,8 @@ def call_task(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: Mapping[str
     except Exception as e:
         return False, one_line(e), here()
     except SystemExit as e:
+        if isinstance(e, signals.SignalExit) or signals.pending() is not None:
+            raise  # a signal ends the batch, not just this task
         return False, f"SystemExit: {e.code}", here()
 
 

@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import multiprocessing
 import multiprocessing.connection
+import os
 import signal
 import socket
+import threading
+import time
 from collections import deque
 from collections.abc import Callable, Generator, Sequence
 from typing import Any
 
+from dlovr import signals
 from dlovr.batch.core import Attempts, Task, TaskResult, call_task, one_line
 
 
@@ -27,9 +31,30 @@ def run_here(fn: Callable[..., Any], tasks: Sequence[Task]) -> Generator[TaskRes
         yield book.result(i, *call_task(fn, t.args, t.kwargs))
 
 
-def _worker_loop(conn: multiprocessing.connection.Connection) -> None:
-    """A worker process: run the tasks sent over ``conn`` until it closes or sends None."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+#: Seconds between two looks of a worker at its parent; the grace a worker has to finish its task's
+#: files after SIGTERM before it is killed.
+PARENT_POLL_S, STOP_GRACE_S = 0.5, 10.0
+
+
+def _watch_parent(parent: int) -> None:
+    """In a worker: when the parent process is gone (killed), end this worker as on SIGTERM (its task
+    finishes its files), killed after :data:`STOP_GRACE_S`: an orphan never lives on holding the
+    caller's pipes."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(STOP_GRACE_S)
+    os._exit(128 + signal.SIGTERM)
+
+
+def _worker_loop(conn: multiprocessing.connection.Connection, parent: int) -> None:
+    """A worker process: run the tasks sent over ``conn`` until it closes or sends None. SIGTERM ends
+    it (a :class:`dlovr.signals.SignalExit` through its task, so a recording in progress is
+    finished); Ctrl-C is the parent's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signals.handler)
+    signals.clear()  # the parent's, if it had one when this process was forked
+    threading.Thread(target=_watch_parent, args=(parent,), name="dlovr-parent-watch", daemon=True).start()
     while True:
         try:
             msg = conn.recv()
@@ -49,7 +74,7 @@ class _Worker:
 
     def __init__(self, ctx: Any):
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker_loop, args=(child,), name="dlovr-batch-worker")
+        self.proc = ctx.Process(target=_worker_loop, args=(child, os.getpid()), name="dlovr-batch-worker")
         self.proc.start()
         child.close()
         self.task: int | None = None
@@ -79,6 +104,20 @@ class _Worker:
             self.proc.kill()
             self.proc.join(2.0)
         self.conn.close()
+
+
+def _stop_all(workers: list[_Worker], clean: bool) -> None:
+    """Stop every worker: idle ones asked to finish (``clean``), else each sent SIGTERM (a task
+    writing a recording finishes it) and given :data:`STOP_GRACE_S` in all, then killed."""
+    if not clean:
+        for w in workers:
+            if w.proc.is_alive():
+                w.proc.terminate()
+        end = time.monotonic() + STOP_GRACE_S
+        for w in workers:
+            w.proc.join(max(0.0, end - time.monotonic()))
+    for w in workers:
+        w.stop(wait=clean)
 
 
 def run_on_processes(
@@ -140,5 +179,4 @@ def run_on_processes(
                     yield failed
         clean = True
     finally:
-        for w in [*idle, *{id(w): w for w in running.values()}.values()]:
-            w.stop(wait=clean)
+        _stop_all([*idle, *{id(w): w for w in running.values()}.values()], clean)

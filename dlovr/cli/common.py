@@ -5,13 +5,16 @@ scenes and scripts, progress bars, and the decorators for SIGTERM and unwritable
 from __future__ import annotations
 
 import functools
+import math
 import os
+import signal
 import sys
 from collections.abc import Callable
-from typing import Any, ParamSpec, TypeVar
+from typing import Any, NoReturn, ParamSpec, TypeVar
 
 import click
 
+from dlovr import signals
 from dlovr.inputs import InputError
 from dlovr.outputs import OutputError
 
@@ -47,13 +50,63 @@ USER_ERRORS: tuple[type[Exception], ...] = (InputError, OutputError)
 
 class Group(click.Group):
     """A click group that reports every :data:`USER_ERRORS` of its commands (their options'
-    callbacks included) as one :class:`UserError` line: the one place where that happens."""
+    callbacks included) as one :class:`UserError` line: the one place where that happens.
+
+    It also ends a command on SIGINT (Ctrl-C) or SIGTERM at any moment, start-up included, with one
+    line and exit 130 or 143 (:mod:`dlovr.signals`): a signal that a dependency swallowed on its way
+    is still pending when the command returns, and ends it then."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        with signals.installed():
+            if signals.pending() is not None:  # it came while the program started
+                interrupted(signals.pending())
+            return super().main(*args, **kwargs)
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
-            return super().invoke(ctx)
+            rv = super().invoke(ctx)
         except USER_ERRORS as e:
-            raise UserError(str(e)) from None
+            if signals.pending() is None:
+                raise UserError(str(e)) from None
+            interrupted(signals.pending())
+        except KeyboardInterrupt:
+            interrupted(signals.pending() or signal.SIGINT)
+        except signals.SignalExit as e:
+            interrupted(e.signum)
+        except SystemExit:
+            if signals.pending() is None:
+                raise  # the command's own exit (after a signal: the status it chose, 130 or 143)
+            interrupted(signals.pending())
+        if signals.pending() is not None:
+            interrupted(signals.pending())
+        return rv
+
+
+def interrupted(signum: int | None) -> NoReturn:
+    """End the command after ``signum``: one line on stderr, exit 130 (SIGINT) or 143 (SIGTERM)."""
+    signum = int(signum or signal.SIGINT)
+    signals.clear()
+    click.echo(f"interrupted ({signals.name(signum)})", err=True)
+    raise SystemExit(signals.exit_code(signum))
+
+
+class FiniteFloat(click.ParamType):
+    """A finite number of at least ``minimum`` (``nan`` and ``inf`` are refused: one line, exit 2)."""
+
+    name = "number"
+
+    def __init__(self, minimum: float | None = None) -> None:
+        self.minimum = minimum
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(x) or (self.minimum is not None and x < self.minimum):
+            bound = f"a finite number >= {self.minimum:g}" if self.minimum is not None else "a finite number"
+            self.fail(f"must be {bound}, got {value}", param, ctx)
+        return x
 
 
 def plural(n: int, word: str) -> str:

@@ -24,7 +24,9 @@ from dlovr.cli.common import EXIT_BAD_INPUT, UserError, finishes_on_sigterm, os_
     type=click.IntRange(1, 64),
     help="Worker processes (default 1); with --cluster, tasks in flight (default: every CPU).",
 )
-@click.option("--force", is_flag=True, help="Recompile unchanged recordings too.")
+@click.option(
+    "--force", is_flag=True, help="Recompile unchanged recordings too; with --network, overwrite -o FILE."
+)
 @click.option(
     "--network",
     "network_path",
@@ -66,7 +68,7 @@ def compile_cmd(
     if network_path is not None:
         from dlovr.cli.network import compile_network
 
-        compile_network(network_path, inputs, output_dir)
+        compile_network(network_path, inputs, output_dir, force)
         return
     if not inputs:
         raise UserError("give recordings (files or directories of *.mcap), or --network NET.json")

@@ -11,15 +11,15 @@ from pathlib import Path
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli.common import UserError
+from dlovr.cli.common import UserError, refuse_existing
 
 
-def _write_text(path: str, text: str) -> None:
-    try:
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(text)
-    except OSError as e:
-        raise UserError(f"{path}: cannot write: {e.strerror}") from None
+def _write_text(path: str, text: str, force: bool) -> None:
+    """Write ``text`` to ``path`` atomically (a full disk leaves the previous file whole); an existing
+    file is replaced only with ``force``."""
+    from dlovr.outputs import write_output
+
+    write_output(path, text, force=force)  # an OutputError: one line, exit 2
 
 
 @click.command("network", short_help="Merge recordings of one scene into a transition network.")
@@ -35,17 +35,28 @@ def _write_text(path: str, text: str) -> None:
     type=click.IntRange(1, 64),
     help="Read the recordings on this many worker processes (default: one after the other here).",
 )
+@click.option("-f", "--force", is_flag=True, help="Overwrite the output files if they exist.")
 @cluster_option
 def network_cmd(
-    recordings: tuple[str, ...], out: str, html_out: str | None, workers: int | None, cluster: str | None
+    recordings: tuple[str, ...],
+    out: str,
+    html_out: str | None,
+    workers: int | None,
+    force: bool,
+    cluster: str | None,
 ) -> None:
     """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
-    situations, transitions with class, count, probability, durations, gripper motions and risk."""
+    situations, transitions with class, count, probability, durations, gripper motions and risk.
+
+    Existing output files are refused unless --force."""
     from dlovr.model.planning import NetworkProgram
     from dlovr.recording import find_recordings
     from dlovr.recording.demonstrations import network_from_recordings
     from dlovr.recording.network_html import network_html
 
+    for path in (out, html_out):
+        if path is not None:
+            refuse_existing(path, force)
     paths = find_recordings(recordings, in_order=True)  # the first is the reference if it reached the goal
     if not paths:
         raise UserError(f"no recordings found in {', '.join(recordings)}")
@@ -62,9 +73,9 @@ def network_cmd(
             done[0] = k
 
         net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
-    _write_text(out, net.dumps())
+    _write_text(out, net.dumps(), force)
     if html_out:
-        _write_text(html_out, network_html(net, NetworkProgram(net)))
+        _write_text(html_out, network_html(net, NetworkProgram(net)), force)
     risky = sum(e.risk == "risky" for e in net.edges)
     click.echo(
         f"wrote {out}: {len(net.nodes)} situations, {len(net.edges)} transitions ({risky} risky) "
@@ -73,8 +84,9 @@ def network_cmd(
     )
 
 
-def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None) -> None:
-    """``dlovr compile --network NET.json -o PROGRAM.json``: write the network program."""
+def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None, force: bool = False) -> None:
+    """``dlovr compile --network NET.json -o PROGRAM.json``: write the network program (an existing
+    file only with ``force``)."""
     from dlovr.model.network import load_network
     from dlovr.model.planning import NetworkProgram
 
@@ -82,8 +94,9 @@ def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None)
         raise UserError("--network compiles a network file; give no recordings with it")
     if out is None:
         raise UserError("--network needs -o PROGRAM.json")
+    refuse_existing(out, force)
     prog = NetworkProgram(load_network(network_path), name=Path(out).stem, source=Path(network_path).name)
-    _write_text(out, prog.dumps())
+    _write_text(out, prog.dumps(), force)
     plan = prog.plan_from_start()
     reach = plan[0].reach_probability if plan else 0.0
     click.echo(

@@ -25,12 +25,16 @@ from dlovr.cli.common import (
 )
 
 
-def demonstrate(scene_ref: str | None, script_path: str | None, out: str | None, label: str) -> Any:
+def demonstrate(
+    scene_ref: str | None, script_path: str | None, out: str | None, label: str, force: bool = False
+) -> Any:
     """Run a scripted demonstration headless (optionally recording it to ``out``); return its tracker.
 
     Without a script, the scene's built-in one; without a scene, the script's (a path in a script is
     relative to the script's folder), else ``table``. ``out``'s parent directories are created; when
-    it cannot be written, the partial file is removed and the run stops with one line.
+    it cannot be written, the partial file is removed and the run stops with one line. An existing
+    ``out`` is replaced only with ``force`` (and only once the new one is finished); without it, one
+    that another writer created meanwhile is refused, not shared.
     """
     from dlovr.outputs import output_error, prepare_output, remove_partial
     from dlovr.recording import StopSignals, finish_on_sigterm
@@ -46,7 +50,7 @@ def demonstrate(scene_ref: str | None, script_path: str | None, out: str | None,
     rec = None
     try:
         with finish_on_sigterm(), stop or nullcontext():
-            rec = _recorder(out, scene, sim)
+            rec = _recorder(out, scene, sim, force)
             with rec or nullcontext(), progress_bar(nsteps, label) as bar:
                 diverged = play_script(sim, script, rec, progress=bar.update, stop=stop)
                 if diverged is not None:  # the end marker says so; compile warns
@@ -86,11 +90,11 @@ def _simulator(scene: Any) -> Any:
         raise UserError(f"{scene.path}: {e}") from None
 
 
-def _recorder(out: str | None, scene: Any, sim: Any) -> Any:
+def _recorder(out: str | None, scene: Any, sim: Any, force: bool) -> Any:
     """A recorder of the demonstration to ``out``, or None."""
     from dlovr.recording import DemoRecorder
 
-    return DemoRecorder(out, scene, sim, sim.tracker) if out else None
+    return DemoRecorder(out, scene, sim, sim.tracker, overwrite=force) if out else None
 
 
 def _states_table(rows: list[dict]) -> str:
@@ -146,7 +150,7 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
     if scene_ref is None and script_path is None:
         scene_ref = "peg_in_hole"
     warm_up()
-    tracker = demonstrate(scene_ref, script_path, out, f"demo {scene_ref or script_path}")
+    tracker = demonstrate(scene_ref, script_path, out, f"demo {scene_ref or script_path}", force)
     rows = _kept_rows(tracker)
     click.echo(json.dumps(rows, indent=2) if as_json else _states_table(rows))
 
@@ -201,7 +205,7 @@ def record_cmd(
         if os.path.isdir(out):
             raise UserError(f"{out}: is a directory (a directory of recordings needs --trials N)")
         refuse_existing(out, force)
-        tracker = demonstrate(scene_ref, script_path, out, "recording")
+        tracker = demonstrate(scene_ref, script_path, out, "recording", force)
         click.echo(f"wrote {out}: {plural(len(tracker.kept), 'contact situation')}")
         return
     _record_trials(scene_ref, script_path, out, force, trials, seed, varies, workers, cluster)
@@ -220,10 +224,10 @@ def _record_trials(
 ) -> None:
     from pathlib import Path
 
-    from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos, write_index
+    from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
-    from dlovr.outputs import prepare_output_dir
+    from dlovr.outputs import check_writable_dir
     from dlovr.recording.bundle import SceneBundle
     from dlovr.script import load_script
 
@@ -244,20 +248,71 @@ def _record_trials(
     existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
     if existing and not force:
         raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")
-    prepare_output_dir(out)
-    demos = record_demos(setup, n, workers=workers, cluster=cluster, progress=True)
-    write_index(setup, demos)
+    check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
+    try:
+        demos = record_demos(setup, n, workers=workers, cluster=cluster, progress=True)
+    except (KeyboardInterrupt, SystemExit) as e:
+        _interrupted_demos(e, setup, n, out)
+        raise
+    _write_index(setup, demos, out)
     bad = [d for d in demos if d["error"]]
     for d in bad:
         click.echo(f"demo {d['trial']}: {d['error']}", err=True)
     retried = sum(d["attempts"] > 1 for d in demos)
     wrote = sum(d["path"] is not None for d in demos)
     click.echo(
-        f"wrote {wrote} recordings of {scene.name} to {out}/ (demos.json): {len(bad)} diverged or failed, "
-        f"{retried} retried"
+        f"wrote {wrote} recordings of {scene.name} to {_folder(out)} (demos.json): {len(bad)} diverged or "
+        f"failed, {retried} retried"
     )
     if bad:
         raise SystemExit(EXIT_FAILED)
+
+
+def _folder(out: str) -> str:
+    """An output folder as printed: ``DIR/`` (one slash, whatever -o ended with)."""
+    return out.rstrip("/") + "/" if out.rstrip("/") else out
+
+
+def _write_index(setup: Any, demos: list[dict[str, Any]], out: str) -> None:
+    """``DIR/demos.json`` (:func:`dlovr.execution.demo_sets.write_index`); a failed write is one line
+    (the recordings themselves are on disk already)."""
+    from dlovr.execution.demo_sets import write_index
+    from dlovr.outputs import describe_os_error
+
+    try:
+        write_index(setup, demos)
+    except OSError as e:
+        where = e.filename or os.path.join(out, "demos.json")
+        kept = sum(d["path"] is not None for d in demos)
+        why = describe_os_error(e)
+        raise UserError(f"{where}: cannot write: {why} ({kept} recordings kept in {_folder(out)})") from None
+
+
+def _interrupted_demos(e: BaseException, setup: Any, n: int, out: str) -> None:
+    """A signal ended ``record --trials``: the finished demonstrations go into demos.json (the one
+    in progress was finished by its worker, shorter), one line, exit 130 or 143. (Another
+    ``SystemExit`` returns: the caller re-raises it.)"""
+    import signal
+
+    from dlovr import signals
+    from dlovr.batch import finished
+
+    if isinstance(e, SystemExit) and not isinstance(e, signals.SignalExit) and signals.pending() is None:
+        return
+    demos = [
+        {**r.value, "attempts": r.attempts} if r.ok else
+        {"trial": r.index, "seed": setup.seed, "path": None, "error": str(r.error), "situations": 0,
+         "attempts": r.attempts}
+        for r in sorted(finished(e), key=lambda r: r.index)
+    ]
+    if demos:
+        _write_index(setup, demos, out)
+    signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
+    listed = f"listed in {os.path.join(out, 'demos.json')}" if demos else "none listed"
+    click.echo(f"\ninterrupted ({signals.name(signum)}): {len(demos)} of {n} demonstrations finished, "
+               f"{listed} (a recording in progress is kept, finished where it stopped)", err=True)
+    signals.clear()
+    raise SystemExit(signals.exit_code(signum))
 
 
 @click.command("replay", short_help="Re-simulate a recording, or verify it bit for bit.")
@@ -289,8 +344,18 @@ def replay_cmd(recording: str, verify: bool) -> None:
     )
     if verify:
         if res.divergence:
+            note = _recovery_note(recording)
+            if note:  # the damage, not the simulation: bad input
+                raise UserError(f"{recording}: replay diverged: {res.divergence}{note}")
             raise click.ClickException(f"{recording}: replay diverged: {res.divergence}")
         click.echo("verified: every checkpoint bit-identical, contact states identical")
+
+
+def _recovery_note(recording: str) -> str:
+    """What ``dlovr recover`` skipped when it wrote ``recording`` (see ``Recording.recovery_note``)."""
+    from dlovr.recording import Recording
+
+    return Recording(recording).recovery_note
 
 
 @click.command("states", short_help="Print a recording's contact situations and transitions.")
@@ -366,7 +431,7 @@ def recover_cmd(broken: str, out: str, force: bool) -> None:
     if Path(broken).resolve() == Path(out).resolve():
         raise RecordingError(f"{out}: recover writes a new file; choose another output path")
     refuse_existing(out, force)
-    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+    with atomic_output(out, force=force) as tmp:  # no partial file at ``out`` if writing fails
         rep = recover(broken, tmp)
     click.echo(
         f"wrote {out}: {plural(rep.messages, 'message')}, {plural(rep.attachments, 'attachment')}, "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import signal
 import sys
 from dataclasses import dataclass
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing
 
 
 def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
@@ -79,6 +80,7 @@ _VARY_HELP = (
     help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
 )
 @click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
+@click.option("-f", "--force", is_flag=True, help="Overwrite the -o run.mcap if it exists.")
 @cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(**given: Any) -> None:
@@ -98,10 +100,11 @@ def run_cmd(**given: Any) -> None:
     (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
     the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
 
-    Without --trials, -o run.mcap records the run like a demonstration plus a channel of executor
-    events (/dlovr/executor_events: macro start, detection, failure, result), which `dlovr states`,
-    `dlovr replay --verify`, Foxglove and the browser timeline open. With --trials, --record also
-    writes each trial's run as DIR/trial_KKK.mcap.
+    Without --trials, -o run.mcap records the run like a demonstration (an existing file is refused
+    unless --force) plus a channel of executor events (/dlovr/executor_events: macro start,
+    detection, failure, result), which `dlovr states`, `dlovr replay --verify`, Foxglove and the
+    browser timeline open. With --trials, --record also writes each trial's run as
+    DIR/trial_KKK.mcap.
     """
     a = RunArgs(**given)
     _check_choices(a)
@@ -146,6 +149,7 @@ class RunArgs:
     workers_raw: str
     out: str | None
     record: bool
+    force: bool
     cluster: str | None
     as_json: bool
 
@@ -212,6 +216,8 @@ def _check_combinations(a: RunArgs, n: Numbers) -> None:
         raise UserError(f"-o {a.out}: a single run is recorded to an .mcap file (a directory needs --trials)")
     if n.trials is not None and not a.out:
         raise UserError("--trials needs -o DIR for its results")
+    if n.trials is None and a.out:
+        refuse_existing(a.out, a.force)
 
 
 def _exec_options(a: RunArgs, n: Numbers) -> Any:
@@ -242,6 +248,12 @@ def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
                 if a.path_mode == "demo" or a.baseline:
                     why = f"its demonstration {program.source!r} was not found: give --recording"
                     raise UserError(f"{a.program_path}: {why}")
+                click.echo(  # another way, another result: say so
+                    f"note: {a.program_path}: its demonstration {program.source!r} was not found, so the "
+                    "macros move along the program's poses (--path program); give --recording FILE to "
+                    "follow the demonstration",
+                    err=True,
+                )
             else:
                 track = load_track(rec_path)
     except ValueError as e:
@@ -310,9 +322,10 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
     """``--trials N -o DIR``: the trials run, their results written, a summary printed."""
     from pathlib import Path
 
-    from dlovr.execution.trials import TrialSetup, run_trials, summarize, write_outputs
+    from dlovr.execution.trials import TrialSetup, run_trials, summarize
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
+    from dlovr.outputs import check_writable_dir
 
     out, trials = a.out or "", n.trials or 0  # both given (see _check_combinations)
     variations = parse_varies(a.varies, t.scene)
@@ -332,10 +345,50 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         use_track=t.use_track,
         record_dir=record_dir,
     )
-    results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
+    check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
+    try:
+        results = run_trials(setup, trials, workers=n.workers, cluster=a.cluster, progress=True)
+    except (KeyboardInterrupt, SystemExit) as e:
+        _interrupted_trials(e, setup, trials, out)
+        raise
     summary = summarize(results, setup)
-    write_outputs(out, results, summary)
+    _write_trials(out, results, summary)
     _print_summary(summary, trials, out)
+
+
+def _write_trials(out: str, results: list[dict[str, Any]], summary: dict[str, Any]) -> None:
+    """The trials' files (:func:`dlovr.execution.trials.write_outputs`); a failed write is one line."""
+    from dlovr.execution.trials import write_outputs
+    from dlovr.outputs import describe_os_error
+
+    try:
+        write_outputs(out, results, summary)
+    except OSError as e:
+        where = e.filename or out
+        why = describe_os_error(e)
+        raise UserError(f"{where}: cannot write: {why} (the results of {len(results)} trials)") from None
+
+
+def _interrupted_trials(e: BaseException, setup: Any, n: int, out: str) -> None:
+    """A signal ended the trials: write the finished ones' results (as after a whole batch) and say
+    so in one line, exit 130 or 143. (Another ``SystemExit`` returns: the caller re-raises it.)"""
+    from dlovr import signals
+    from dlovr.batch import finished
+    from dlovr.execution.trials import lost_trial, summarize
+
+    if isinstance(e, SystemExit) and not isinstance(e, signals.SignalExit) and signals.pending() is None:
+        return
+    done = sorted(finished(e), key=lambda r: r.index)
+    results = [{**(r.value if r.ok else lost_trial(setup, r.index, str(r.error))), "attempts": r.attempts}
+               for r in done]
+    if results:
+        _write_trials(out, results, summarize(results, setup))
+    signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
+    where = f"their results in {out.rstrip('/') or out}/" if results else "no results written"
+    name = signals.name(signum)
+    click.echo(f"\ninterrupted ({name}): {len(results)} of {n} trials finished, {where}", err=True)
+    signals.clear()
+    raise SystemExit(signals.exit_code(signum))
 
 
 def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
@@ -354,4 +407,4 @@ def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
     if summary["retried_trials"] or summary["lost_trials"]:
         lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
         click.echo(lost)
-    click.echo(f"results in {out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
+    click.echo(f"results in {out.rstrip('/') or out}/ (summary.json, trials.csv, plot.png, trial_*.json)")

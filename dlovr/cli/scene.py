@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from dlovr.cli.common import UserError, finishes_on_sigterm, load_scene_arg
+from dlovr.cli.common import UserError, finishes_on_sigterm, load_scene_arg, refuse_existing
 from dlovr.scene import Scene
 
 
@@ -43,18 +43,22 @@ def scene_show_cmd(ref: str, as_json: bool) -> None:
 @click.option(
     "-o", "--output", "out", required=True, type=click.Path(dir_okay=False), help="MJCF file to write."
 )
+@click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @finishes_on_sigterm
-def scene_export_cmd(ref: str, out: str) -> None:
-    """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo."""
+def scene_export_cmd(ref: str, out: str, force: bool) -> None:
+    """Write the scene's compiled MuJoCo model (MJCF, meshes inline), loadable by plain MuJoCo.
+
+    An existing output file is refused unless --force."""
     from dlovr.outputs import atomic_output
     from dlovr.sim import Simulator, export_xml
 
+    refuse_existing(out, force)
     scene = load_scene_arg(ref)
     try:
         sim = Simulator(scene)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
-    with atomic_output(out) as tmp:  # no partial file at ``out`` if writing fails
+    with atomic_output(out, force=force) as tmp:  # no partial file at ``out`` if writing fails
         export_xml(sim.built, tmp)
     click.echo(f"wrote {out}")
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import errno
+import socket
+
 import click
 
 from dlovr.cli.common import UserError, load_scene_arg, warm_up
@@ -27,6 +30,7 @@ from dlovr.cli.common import UserError, load_scene_arg, warm_up
 )
 def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None:
     """Serve the browser teleoperation UI (viser) with the simulation running in real time."""
+    check_address(host, port)
     scene = load_scene_arg(scene_ref)
     warm_up()
     from dlovr.ui import serve
@@ -37,3 +41,22 @@ def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None
         raise UserError(f"{scene.path}: {e}") from None
     except OSError as e:
         raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
+
+
+def check_address(host: str, port: int) -> None:
+    """That the server can listen on ``host``: a name that does not resolve, or an address that is not
+    this machine's (``192.0.2.1``), is one line, exit 2 (viser would wait silently). A taken port is
+    fine: the server takes the next free one."""
+    try:
+        infos = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (OSError, UnicodeError) as e:
+        why = getattr(e, "strerror", None) or str(e)
+        raise UserError(f"--host {host}: not an address of this machine: {why}") from None
+    for family, kind, proto, _, addr in infos[:1]:
+        with socket.socket(family, kind, proto) as s:
+            try:
+                s.bind(addr)
+            except OSError as e:
+                if e.errno != errno.EADDRINUSE:
+                    why = e.strerror or str(e)
+                    raise UserError(f"--host {host}: cannot serve on {host}:{port}: {why}") from None

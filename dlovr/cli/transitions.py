@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from dlovr.cli.common import UserError
+from dlovr.cli.common import FiniteFloat, UserError
 
 
 @click.command("transitions", short_help="Classify a hand-written sequence of situations.")
@@ -19,8 +19,8 @@ from dlovr.cli.common import UserError
     type=click.Path(dir_okay=False),
     help="JSON with face normals, face-pair relations and DLO vectors, needed for topological lines.",
 )
-@click.option("--hold", type=click.FloatRange(min=0.0), help="Timed input: hold time, s (default 0.01).")
-@click.option("--flight", type=click.FloatRange(min=0.0), help="Timed input: flight time, s (default 0.3).")
+@click.option("--hold", type=FiniteFloat(0.0), help="Timed input: hold time, s (default 0.01).")
+@click.option("--flight", type=FiniteFloat(0.0), help="Timed input: flight time, s (default 0.3).")
 def transitions_cmd(
     file: str, as_json: bool, unicode: bool, facts: str | None, hold: float | None, flight: float | None
 ) -> None:

@@ -64,16 +64,18 @@ def _hull_planes(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.
     scale = float(np.ptp(pts, axis=0).max()) or 1.0
     normals: list[np.ndarray] = []
     offsets: list[float] = []
-    for eq in hull.equations:
+    kept_n = np.empty((len(hull.equations), 3))  # the normals and offsets kept so far, as arrays:
+    kept_d = np.empty(len(hull.equations))  # one comparison per facet, not a loop (a mesh's hull
+    for eq in hull.equations:  # has thousands of facets)
         n, d = eq[:3], -eq[3]
         nn = float(np.linalg.norm(n))
         n, d = n / nn, d / nn
-        for k, m in enumerate(normals):
-            if float(n @ m) > 1 - 1e-12 and abs(d - offsets[k]) < 1e-9 * scale:
-                break
-        else:
-            normals.append(n)
-            offsets.append(d)
+        k = len(normals)
+        if k and np.any(((kept_n[:k] * n).sum(axis=1) > 1 - 1e-12) & (np.abs(d - kept_d[:k]) < 1e-9 * scale)):
+            continue
+        kept_n[k], kept_d[k] = n, d
+        normals.append(n)
+        offsets.append(d)
     polys = []
     for n, d in zip(normals, offsets, strict=True):
         on = pts[np.abs(pts @ n - d) < 1e-9 * scale]
@@ -99,12 +101,14 @@ def _build_piece(
     normals, offsets, polys, pts = _hull_planes(vertices)
     scale = float(np.ptp(pts, axis=0).max()) or 1.0
     faces: list[PieceFace] = []
+    obj_n = np.array([f[1] for f in obj_faces], dtype=float).reshape(-1, 3)
+    obj_d = np.array([f[2] for f in obj_faces], dtype=float)
     for n, d, poly in zip(normals, offsets, polys, strict=True):
         area = _polygon_area(poly)
         best_name, best_overlap, best_tris = None, 0.0, np.zeros((0, 3, 3))
-        for name, on, od, tris in obj_faces:
-            if float(n @ on) < 1 - 1e-9 or abs(d - od) > 1e-7 * scale:
-                continue
+        coplanar = ((obj_n * n).sum(axis=1) >= 1 - 1e-9) & (np.abs(d - obj_d) <= 1e-7 * scale)
+        for k in np.flatnonzero(coplanar):
+            name, _, _, tris = obj_faces[k]
             ov = sum(_polygon_area(_clip_polygon(poly, t, n)) for t in tris)
             if ov > best_overlap:
                 best_name, best_overlap, best_tris = name, ov, tris
@@ -121,16 +125,16 @@ def _build_piece(
     # edges: pairs of faces sharing two hull vertices
     ea, eb, ef = [], [], []
     on_face = [np.abs(pts @ n - d) < 1e-9 * scale for n, d in zip(normals, offsets, strict=True)]
-    for i in range(len(faces)):
-        for j in range(i + 1, len(faces)):
-            shared = pts[on_face[i] & on_face[j]]
-            if len(shared) < 2:
-                continue
+    incidence = np.array(on_face, dtype=float).reshape(len(faces), len(pts))  # float: a BLAS product
+    together = np.triu(incidence @ incidence.T, k=1) >= 1.5  # face pairs sharing two vertices or more
+    for i, j in zip(*np.nonzero(together), strict=True):  # in the order of a loop over i < j
+        shared = pts[on_face[i] & on_face[j]]
+        if len(shared) >= 2:
             e = units(np.cross(normals[i], normals[j]))
             s = shared @ e
             ea.append(shared[int(np.argmin(s))])
             eb.append(shared[int(np.argmax(s))])
-            ef.append((i, j))
+            ef.append((int(i), int(j)))
     return Piece(
         obj,
         index,

@@ -114,6 +114,9 @@ def check_unique_outputs(paths: Sequence[Path], out_dir: str | Path | None) -> l
 def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileResult:
     """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job)."""
     p = Path(path)
+    if p.exists() and not p.is_file():  # a device (/dev/zero) or a pipe: hashing it would never end
+        why = "not a regular file (a device or a pipe), not a recording"
+        return CompileResult(str(p), None, error=f"{p}: {why}")
     try:
         digest = _sha256(p)
     except OSError as e:

@@ -4,7 +4,8 @@ every record (:func:`scan`) that skips damaged ones, for ``dlovr recover``.
 An MCAP file is ``magic, records..., magic``; a record is an opcode (1 byte), a length (uint64 LE)
 and that many bytes. Chunks hold compressed records (schemas, channels, messages) with a CRC of the
 uncompressed bytes; the data section ends with a ``DataEnd`` record holding a CRC of everything
-before it (0 when the writer did not compute one); the summary section after it repeats the schemas
+before it (0 when the writer did not compute one: damage in a dlovr recording, whose writer always
+does); the summary section after it repeats the schemas
 and channels, and the footer holds a CRC of the summary.
 """
 
@@ -19,7 +20,7 @@ from typing import Any
 
 from mcap.opcode import Opcode
 
-from dlovr.recording.format import DECODE_ERRORS, MCAP_MAGIC, RecordingError, one_line
+from dlovr.recording.format import DECODE_ERRORS, MCAP_MAGIC, PROFILE, RecordingError, one_line
 
 FOOTER_LEN = 1 + 8 + 8 + 8 + 4
 DATA_END_LEN = 1 + 8 + 4
@@ -59,10 +60,31 @@ def check_checksums(path: Path, size: int) -> None:
         if data_end[0] != Opcode.DATA_END or _U64.unpack_from(data_end, 1)[0] != 4:
             raise RecordingError(f"{path}: corrupt MCAP data: no data-end record ({hint})")
         data_crc = _U32.unpack_from(data_end, 9)[0]
+        if not data_crc and DATA_CRC_REQUIRED and _profile(fh) == PROFILE:
+            why = "the data checksum is zero, and a dlovr recording always carries one"
+            raise RecordingError(f"{path}: corrupt MCAP data: {why} ({hint})")
         if data_crc:
             fh.seek(0)
             if _crc_of(fh, end - DATA_END_LEN) != data_crc:
                 raise RecordingError(f"{path}: corrupt MCAP data: data checksum mismatch ({hint})")
+
+
+#: Whether a zero data-section CRC in a dlovr recording is damage (it is: the writer always computes
+#: it, and with it switched off an edited metadata value would go unnoticed). Tests of the checks
+#: below it turn it off.
+DATA_CRC_REQUIRED = True
+
+
+def _profile(fh: io.BufferedReader | Any) -> str | None:
+    """The profile of the header record right after the magic (None if it is not there)."""
+    fh.seek(len(MCAP_MAGIC))
+    head = fh.read(9 + 4)
+    if len(head) < 13 or head[0] != Opcode.HEADER:
+        return None
+    n = _U32.unpack_from(head, 9)[0]
+    if n > 256:
+        return None
+    return fh.read(n).decode("utf-8", "replace")
 
 
 def _crc_of(fh: io.BufferedReader | Any, n: int, crc: int = 0) -> int:
@@ -103,6 +125,8 @@ class ScanResult:
     summary_channels: dict[int, Any] = field(default_factory=dict)
     chunks: list[list[Any]] = field(default_factory=list)
     """Messages of each intact chunk (a message outside chunks counts as a chunk of its own)."""
+    chunk_at: list[int] = field(default_factory=list)
+    """Byte offset of each of :attr:`chunks` in the file."""
     attachments: list[Any] = field(default_factory=list)
     metadata: list[Any] = field(default_factory=list)
     damage: list[Damage] = field(default_factory=list)
@@ -120,6 +144,9 @@ def scan(raw: bytes) -> ScanResult:
     """
     out = ScanResult()
     pos = len(MCAP_MAGIC) if raw.startswith(MCAP_MAGIC) else 0
+    if pos == 0 and len(raw) > 9 + len(MCAP_MAGIC) and raw[len(MCAP_MAGIC)] == Opcode.HEADER:
+        pos = len(MCAP_MAGIC)  # damaged magic bytes, intact header: keep the header and what follows
+        out.damage.append(Damage(0, pos, "magic bytes", "damaged (the records after them are intact)"))
     n = len(raw)
     tail = n - len(MCAP_MAGIC) if raw.endswith(MCAP_MAGIC) else n
     in_summary = False
@@ -145,10 +172,20 @@ def scan(raw: bytes) -> ScanResult:
             if op == Opcode.DATA_END:
                 in_summary = out.data_end = True
             else:
-                _take(out, op, body, in_summary)
+                before = len(out.chunks)
+                used = _take(out, op, body, in_summary)
+                out.chunk_at.extend([pos] * (len(out.chunks) - before))
+                if op == Opcode.CHUNK and used < length:  # a damaged length reaching over what follows
+                    why = f"damaged ({length} bytes for a chunk of {used}); the chunk itself is intact"
+                    times = _chunk_times(body)
+                    out.damage.append(Damage(pos, pos + 9 + used, "chunk length field", why, times))
+                    end = pos + 9 + used
         except DECODE_ERRORS as e:
             what = Opcode(op).name.lower().replace("_", " ")
             time_ns = _chunk_times(body) if op == Opcode.CHUNK else None
+            nxt = _next_chunk(raw, pos + 1, tail)  # a damaged length may reach over intact chunks
+            if nxt is not None and nxt < end:
+                end = nxt
             out.damage.append(Damage(pos, end, what, one_line(e), time_ns))
         pos = end
     if not in_summary:
@@ -156,7 +193,8 @@ def scan(raw: bytes) -> ScanResult:
     return out
 
 
-def _take(out: ScanResult, op: int, body: bytes, in_summary: bool) -> None:
+def _take(out: ScanResult, op: int, body: bytes, in_summary: bool) -> int:
+    """Take one record's contents into ``out``; the bytes of ``body`` it used."""
     from mcap.data_stream import ReadDataStream
     from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
     from mcap.stream_reader import breakup_chunk
@@ -192,6 +230,7 @@ def _take(out: ScanResult, op: int, body: bytes, in_summary: bool) -> None:
         out.metadata.append(Metadata.read(stream))
     if stream.count > len(body):
         raise ValueError("record longer than its length field")
+    return stream.count
 
 
 def _chunk_times(body: bytes) -> tuple[int, int] | None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import stat
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,7 @@ from mcap.summary import Summary
 
 from dlovr import __version__
 from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S
+from dlovr.outputs import being_written
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
 from dlovr.recording.format import (
     DECODE_ERRORS,
@@ -65,6 +67,9 @@ class Recording:
         if header.profile != PROFILE or "dlovr" not in meta:
             raise RecordingError(f"{p}: an MCAP file but not a dlovr recording (profile {header.profile!r})")
         self.metadata: dict[str, str] = meta["dlovr"]
+        #: What ``dlovr recover`` skipped when it wrote this file (one line each; "" if not recovered
+        #: or nothing was skipped).
+        self.recovery_skipped: str = meta.get("dlovr_recovery", {}).get("skipped", "")
         version = self.metadata.get("format_version")
         if version != FORMAT_VERSION:
             raise RecordingError(
@@ -81,6 +86,16 @@ class Recording:
             )
         self.dt, self.t0_ns, self.hold, self.flight = _timing(p, self.metadata)
 
+
+    @property
+    def recovery_note(self) -> str:
+        """`` (recovered from a damaged recording with parts missing: ...)`` when ``dlovr recover``
+        wrote this file and skipped something (the reason its replay may fail), else ``""``."""
+        missing = self.recovery_skipped.splitlines()
+        if not missing:
+            return ""
+        more = f"; and {len(missing) - 1} more" if len(missing) > 1 else ""
+        return f" (recovered from a damaged recording with parts missing: {missing[0]}{more})"
     def count(self, topic: str) -> int:
         return self._counts.get(topic, 0)
 
@@ -136,7 +151,8 @@ class Recording:
             raise RecordingError(f"{self.path}: recording has no gripper commands")
         s = np.concatenate(steps)
         if np.any(np.diff(s) != 1):
-            raise RecordingError(f"{self.path}: gripper command stream has gaps or is out of order")
+            why = "gripper command stream has gaps or is out of order"
+            raise RecordingError(f"{self.path}: {why}{self.recovery_note}")
         return s, np.concatenate(pos), np.concatenate(quat)
 
     def frames(self) -> Iterator[tuple[float, np.ndarray, np.ndarray, np.ndarray]]:
@@ -216,11 +232,16 @@ def _open_mcap(p: Path) -> tuple[Header, Summary | None, dict[str, dict[str, str
     """The MCAP file ``p``'s header, summary, metadata records (by name) and attachments (by
     name), after checking that it is a whole MCAP file with valid checksums."""
     try:
-        size = p.stat().st_size
+        st = p.stat()
     except OSError as e:
         raise RecordingError(f"{p}: cannot read: {e.strerror}") from None
+    size = st.st_size
     if p.is_dir():
         raise RecordingError(f"{p}: is a directory, not a recording")
+    if not stat.S_ISREG(st.st_mode):
+        raise RecordingError(f"{p}: not a regular file (a device or a pipe), not a recording")
+    if being_written(p):
+        raise RecordingError(f"{p}: still being written (a recording in progress); open it once finished")
     if size == 0:
         raise RecordingError(f"{p}: empty file, not an MCAP recording")
     with open(p, "rb") as fh:

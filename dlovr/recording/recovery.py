@@ -12,6 +12,7 @@ What was skipped is reported as byte and time ranges.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ from typing import Any
 from mcap.writer import CompressionType, Writer
 
 from dlovr import __version__
+from dlovr.inputs import read_bytes
+from dlovr.outputs import being_written
 from dlovr.recording.format import (
     CHANNELS,
     DECODE_ERRORS,
@@ -33,6 +36,9 @@ from dlovr.recording.format import (
     dumps,
 )
 from dlovr.recording.integrity import ScanResult, scan
+
+#: The metadata record of a recovered file that lists what was skipped (one line each).
+RECOVERY_METADATA = "dlovr_recovery"
 
 
 @dataclass(frozen=True)
@@ -51,16 +57,16 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise RecordingError(f"{dst}: recover writes a new file; choose another output path")
-    try:
-        raw = src.read_bytes()
-    except OSError as e:
-        raise RecordingError(f"{src}: cannot read: {e.strerror}") from None
+    if being_written(src):
+        raise RecordingError(f"{src}: still being written (a recording in progress); recover it once ended")
+    raw = read_bytes(src, RecordingError, "recording", "recording_bytes")  # bounded: not /dev/zero
     res = scan(raw)
     if not raw.startswith(MCAP_MAGIC) and not res.chunks:
         raise RecordingError(f"{src}: not an MCAP file (bad magic bytes)")
     meta = next((dict(m.metadata) for m in res.metadata if m.name == "dlovr"), {})
     clock = _Clock.of(meta, res)
-    skipped = [_describe(d, clock) for d in res.damage]
+    skipped = [_describe(d, clock, res) for d in res.damage]
+    skipped += _profile_damage(res, meta)
     schemas = {**res.summary_schemas, **res.schemas}
     channels = {**res.summary_channels, **res.channels}
     if not channels and (res.profile == PROFILE or meta.get("format_version")):
@@ -82,8 +88,9 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
             + (" (the writer was stopped within its first second?)" if not res.data_end else "")
         )
     skipped += _command_gaps(messages, topic, clock)
+    skipped += _sequence_gaps(messages, clock)
     try:
-        _write(dst, res, schemas, channels, chunks)
+        _write(dst, res, schemas, channels, chunks, skipped)
     except OSError as e:
         raise RecordingError(f"{dst}: cannot write: {e.strerror or e}") from None
     first, last = min(m.log_time for m in messages), max(m.log_time for m in messages)
@@ -123,9 +130,39 @@ class _Clock:
         return f"t={a:.3f}-{b:.3f} s"
 
 
-def _describe(d: Any, clock: _Clock) -> str:
-    when = f", {clock.span(*d.time_ns)}" if d.time_ns else ""
-    return f"{d.what} at bytes {d.start}-{d.end}{when}: {d.reason}"
+def _describe(d: Any, clock: _Clock, res: ScanResult) -> str:
+    """One line for a damaged part: where (bytes), when (the chunk header's times, else the times of
+    the intact chunks around it), why."""
+    span = clock.span(*d.time_ns) if d.time_ns else "time unknown"
+    if span == "time unknown":
+        placed = list(zip(res.chunks, res.chunk_at, strict=False))
+        before = [m.log_time for c, at in placed if at < d.start for m in c]
+        after = [m.log_time for c, at in placed if at >= d.end for m in c]
+        if before and after and (d.what in ("chunk", "record")):
+            span = f"between {clock.span(max(before), min(after))}"
+    when = f", {span}" if d.time_ns or span != "time unknown" else ""
+    return f"{d.what} at bytes {d.start}-{d.end} ({d.end - d.start} bytes){when}: {d.reason}"
+
+
+def _profile_damage(res: ScanResult, meta: dict[str, str]) -> list[str]:
+    """A dlovr recording (its metadata says so) whose header profile is damaged or lost: said, and
+    the recovered file gets the right one (:func:`_write`)."""
+    if res.profile == PROFILE or not meta.get("format_version"):
+        return []
+    was = "lost" if res.profile is None else f"damaged ({res.profile!r})"
+    return [f"header: profile {was}; written as {PROFILE!r}"]
+
+
+def _sequence_gaps(messages: list[Any], clock: _Clock) -> list[str]:
+    """Messages missing between recovered ones, by the writer's sequence numbers (1, 2, 3, ...): a
+    chunk cut out of the file leaves no damaged bytes, but a gap here."""
+    seq = sorted((m.sequence, m.log_time) for m in messages if m.sequence > 0)
+    out = []
+    for (a, ta), (b, tb) in itertools.pairwise(seq):
+        if b > a + 1:
+            when = clock.span(min(ta, tb), max(ta, tb))  # states are written after the steps they cover
+            out.append(f"{b - a - 1} messages missing (a chunk cut out?), around {when}")
+    return out
 
 
 def _dlovr_layout() -> tuple[dict[int, Any], dict[int, Any]]:
@@ -247,14 +284,20 @@ def _write(
     schemas: dict[int, Any],
     channels: dict[int, Any],
     chunks: list[list[Any]],
+    skipped: list[str],
 ) -> None:
-    """Write the recovered file (one output chunk per input chunk, so contact states stay apart)."""
+    """Write the recovered file (one output chunk per input chunk, so contact states stay apart); what
+    was skipped goes into its ``dlovr_recovery`` metadata (a replay that diverges names it)."""
     dst.parent.mkdir(parents=True, exist_ok=True)
+    dlovr = any(m.name == "dlovr" for m in res.metadata)
     with open(dst, "wb") as fh:
         w = Writer(fh, compression=CompressionType.ZSTD, enable_data_crcs=True)
-        w.start(profile=res.profile or PROFILE, library=f"dlovr {__version__} recover")
+        w.start(profile=PROFILE if dlovr else res.profile or PROFILE, library=f"dlovr {__version__} recover")
         for m in res.metadata:
-            w.add_metadata(m.name, dict(m.metadata))
+            if m.name != RECOVERY_METADATA:
+                w.add_metadata(m.name, dict(m.metadata))
+        if skipped:
+            w.add_metadata(RECOVERY_METADATA, {"skipped": "\n".join(skipped)})
         for a in res.attachments:
             w.add_attachment(a.create_time, a.log_time, a.name, a.media_type, a.data)
         sid_map = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in sorted(schemas.items())}

@@ -15,8 +15,9 @@ from typing import Any, BinaryIO
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from dlovr import __version__
+from dlovr import __version__, signals
 from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
+from dlovr.outputs import StreamOutput
 from dlovr.recording import foxglove
 from dlovr.recording.bundle import SceneBundle, pieces_to_json
 from dlovr.recording.format import (
@@ -56,17 +57,10 @@ def schemas() -> dict[str, bytes]:
 
 @contextmanager
 def finish_on_sigterm() -> Iterator[None]:
-    """Turn SIGTERM into ``SystemExit`` while inside, so ``with Recorder(...)`` finishes the file."""
-    try:
-        previous = signal.getsignal(signal.SIGTERM)
-        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(143)))
-    except ValueError:  # not the main thread: nothing to install
+    """Turn SIGTERM into ``SystemExit`` (:class:`dlovr.signals.SignalExit`, exit 143) while inside, so
+    ``with Recorder(...)`` finishes the file."""
+    with signals.installed((signal.SIGTERM,)):
         yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 class StopSignals:
@@ -74,11 +68,12 @@ class StopSignals:
     set ``stop.signum``, so that a recording loop ends between two steps (check ``stop.signum`` after
     each) and finishes its file with the last step's command, contact states and checkpoint all
     written (such a file replays and verifies). ``stop.exit_code`` is the conventional exit status
-    (128 + signal number: 130 for SIGINT, 143 for SIGTERM). Outside the main thread nothing is
-    installed.
+    (128 + signal number: 130 for SIGINT, 143 for SIGTERM). A signal that came before (and that a
+    dependency swallowed, :mod:`dlovr.signals`) is taken as the first request: the loop stops at
+    once. Outside the main thread nothing is installed.
     """
 
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    SIGNALS = signals.SIGNALS
 
     def __init__(self) -> None:
         self.signum: int | None = None
@@ -86,11 +81,11 @@ class StopSignals:
 
     @property
     def exit_code(self) -> int:
-        return 128 + int(self.signum or 0)
+        return signals.exit_code(self.signum or 0)
 
     @property
     def name(self) -> str:
-        return signal.Signals(self.signum).name if self.signum else ""
+        return signals.name(self.signum) if self.signum else ""
 
     def _handle(self, signum: int, _frame: object) -> None:
         if self.signum is None:
@@ -102,6 +97,8 @@ class StopSignals:
                 self._previous[sig] = signal.signal(sig, self._handle)
         except ValueError:  # not the main thread
             pass
+        if self._previous and self.signum is None:
+            self.signum = signals.clear()  # one that came before: handled here
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -114,10 +111,12 @@ class Recorder:
     """Writes one demonstration to an MCAP file (see :mod:`dlovr.recording.format` for its contents).
 
     Use as a context manager: the file is finished on normal exit and on exceptions (and on SIGTERM
-    inside :func:`finish_on_sigterm`). Each :meth:`checkpoint` ends the chunks in progress, so that a
-    killed writer's file is recovered up to its last checkpoint (``dlovr recover``); the file is also
-    flushed and synced to disk every ``flush_interval`` seconds of wall time. The data section carries
-    a CRC, so readers detect any changed byte.
+    inside :func:`finish_on_sigterm`). A new file is created exclusively (two writers never share
+    one); an existing one is refused without ``overwrite``, else written beside it and renamed over
+    it when finished (:class:`dlovr.outputs.StreamOutput`). Each :meth:`checkpoint` ends the chunks
+    in progress, so that a killed writer's file is recovered up to its last checkpoint (``dlovr
+    recover``); the file is also flushed and synced to disk every ``flush_interval`` seconds of wall
+    time. The data section carries a CRC, so readers detect any changed byte.
     """
 
     def __init__(
@@ -132,16 +131,33 @@ class Recorder:
         frame_rate: float = 30.0,
         t0_ns: int | None = None,
         pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None = None,
+        overwrite: bool = True,
     ):
-        import mujoco
-
         self.path = Path(path)
         self.dt = float(dt)
         self.dt_ns = round(self.dt * 1e9)
         self.t0_ns = time.time_ns() if t0_ns is None else int(t0_ns)
         self.flush_interval = float(flush_interval)
         self.frame_every = max(1, round(1.0 / (frame_rate * self.dt)))
-        self._fh: BinaryIO = open(self.path, "wb")
+        self._out = StreamOutput(self.path, overwrite=overwrite)  # exclusive; beside an existing file
+        self._fh: BinaryIO = self._out.fh
+        self._closed = False
+        try:
+            self._start(scene, scene_name, extra_metadata, pieces)
+        except BaseException:
+            self.discard()
+            raise
+
+    def _start(
+        self,
+        scene: SceneBundle,
+        scene_name: str,
+        extra_metadata: Mapping[str, str] | None,
+        pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None,
+    ) -> None:
+        """The file's header: metadata, the embedded scene, schemas and channels."""
+        import mujoco
+
         self._w = Writer(
             self._fh, chunk_size=1 << 20, compression=CompressionType.ZSTD, enable_data_crcs=True
         )
@@ -174,7 +190,6 @@ class Recorder:
         self._commands: list[tuple[int, list[float], list[float]]] = []
         self._seq = 0
         self._last_flush = time.monotonic()
-        self._closed = False
         self._w.flush()
 
     # -- messages -----------------------------------------------------------------------------------
@@ -317,6 +332,13 @@ class Recorder:
     def closed(self) -> bool:
         return self._closed
 
+    def discard(self) -> None:
+        """Give the file up unfinished and remove it (a recording that failed as it started: nothing
+        was recorded); a file it was to replace stays as it was."""
+        if not self._closed:
+            self._closed = True
+            self._out.discard()
+
     def close(self) -> None:
         """Finish the file (summary and footer). Safe to call twice."""
         if self._closed:
@@ -326,8 +348,10 @@ class Recorder:
             self._write_commands()
             self._write_states()
             self._w.finish()
-        finally:
-            self._fh.close()
+        except BaseException:
+            self._out.abandon()  # a file written beside an existing one is removed, that one kept
+            raise
+        self._out.commit()
 
     def __enter__(self) -> Recorder:
         return self
@@ -368,11 +392,15 @@ class DemoRecorder:
         self._cp_every = max(1, round(CHECKPOINT_EVERY_S / dt))
         self._radius = float(scene.dlo.radius)
         self._obstacles = [(o.name, np.asarray(o.mesh.triangles)) for o in tracker.geometry.objects]
-        self._checkpoint()
-        start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
-        self._prev = start.discrete
-        self._n_changes = len(tracker.changes)
-        self.rec.contact_state(self.start_step, start.payload())
+        try:
+            self._checkpoint()
+            start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
+            self._prev = start.discrete
+            self._n_changes = len(tracker.changes)
+            self.rec.contact_state(self.start_step, start.payload())
+        except BaseException:
+            self.rec.discard()  # no unfinished file left behind (e.g. a state that is not finite)
+            raise
 
     @property
     def duration(self) -> float:

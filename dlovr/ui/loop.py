@@ -80,12 +80,14 @@ class RealtimeLoop:
         diverged: Callable[[], None],
         publish_hz: float,
         verbose: bool = False,
+        failed: Callable[[Exception], None] | None = None,
     ) -> None:
         self.session = session
         self.target = target
         self.paused = paused
         self.publish = publish
         self.diverged = diverged
+        self.failed = failed
         self.publish_hz = publish_hz
         self.verbose = verbose
         self.rtf = 1.0
@@ -122,15 +124,25 @@ class RealtimeLoop:
         self._session = self.session()
         self._kicked = False  # a new target was applied and has not been published yet
         while not self._stop.is_set():
-            now = time.perf_counter()
-            self._follow_session(now)
-            pub_at = self._publish_at()
-            if not self.paused():
-                pub_at = self._step(now, pub_at)
-            now = time.perf_counter()
-            if now >= pub_at:
-                self._publish(now)
-            self._sleep()
+            try:
+                self._iterate()
+            except Exception as e:  # the thread lives on: reported (the server pauses), then onwards
+                if self.failed is None:
+                    raise
+                self.failed(e)
+                self._stop.wait(0.05)
+
+    def _iterate(self) -> None:
+        """One turn of the loop: the steps due, a publish when due, a sleep until the next."""
+        now = time.perf_counter()
+        self._follow_session(now)
+        pub_at = self._publish_at()
+        if not self.paused():
+            pub_at = self._step(now, pub_at)
+        now = time.perf_counter()
+        if now >= pub_at:
+            self._publish(now)
+        self._sleep()
 
     def _follow_session(self, now: float) -> None:
         """Restart the pacing on another session (and its clock) or while paused."""

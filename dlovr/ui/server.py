@@ -36,6 +36,7 @@ from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
+from dlovr.ui.guard import Reporter, checked_pose, guard_incoming
 from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
     ForcePanel,
@@ -116,6 +117,7 @@ class DemoServer:
         self.last_recording: Path | None = None
         self.publish_count = 0
         self._panels_at = 0.0
+        self.reporter = Reporter(lambda: self.server)  # problems shown on stderr and on every tab
         self.loop = RealtimeLoop(
             lambda: self.session,
             self._target,
@@ -124,6 +126,7 @@ class DemoServer:
             diverged=self._diverged,
             publish_hz=self.publish_hz,
             verbose=verbose,
+            failed=self._failed,
         )
         self.viewport = Viewport(self, face_labels=lambda: self.simulation_panel.face_labels)
         self.state_panel = StatePanel()
@@ -158,6 +161,7 @@ class DemoServer:
         self._build_scene()
         srv.on_client_connect(self.on_client_connect)
         srv.on_client_disconnect(self.on_client_disconnect)
+        guard_incoming(srv, self.reporter)  # every client message is checked before its handlers
         self.loop.start()
         return self
 
@@ -187,9 +191,15 @@ class DemoServer:
     # -- commands (GUI callbacks and tests) --------------------------------------------------------
 
     def set_target(self, pos: Any, quat: Any | None = None, *, move_gizmo: bool = True) -> None:
-        """Command the gripper pose (what the gizmo does); the sim follows with bounded speed."""
-        p = np.asarray(pos, dtype=float)
-        q = np.asarray(quat, dtype=float) if quat is not None else self.target()[1]
+        """Command the gripper pose (what the gizmo does); the sim follows with bounded speed. A pose
+        that is not one (NaN, a zero quaternion: :func:`dlovr.ui.guard.checked_pose`) is refused and
+        reported, the gizmo put back on the last target."""
+        try:
+            p, q = checked_pose(pos, quat if quat is not None else self.target()[1])
+        except ValueError as e:
+            self.reporter("target", f"refused: {e}")
+            self.move_gizmo(*self.target())
+            return
         self._target.set(p, q)
         if move_gizmo:
             self.move_gizmo(p, q)
@@ -344,6 +354,11 @@ class DemoServer:
         self.network_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
+
+    def _failed(self, e: Exception) -> None:
+        """The simulation thread met an error: reported, the simulation paused, the gripper held."""
+        self.reporter("simulation", f"the simulation stopped on an error and is paused: {e!r}")
+        self._diverged()
 
     def _diverged(self) -> None:
         """A step diverged (the session restored the state before it): pause, the gripper held."""

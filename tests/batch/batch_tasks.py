@@ -60,3 +60,12 @@ def call_or_die(fn, mode: str, marker: str, *args):
         Path(marker).write_text(str(os.getpid()))
         os.kill(os.getpid(), signal.SIGKILL)
     return fn(*args)
+
+
+def pid_then_sleep(seed: int, folder: str, seconds: float = 60.0) -> int:
+    """Write this worker's pid to ``folder/<seed>.pid``, then sleep (task 0 returns at once): a task
+    that is still running when the batch is interrupted or its parent killed."""
+    Path(folder, f"{seed}.pid").write_text(str(os.getpid()))
+    if seed > 0:
+        time.sleep(seconds)
+    return seed

@@ -126,7 +126,7 @@ def test_missing_channel_is_named(tmp_path):
 
     p = tmp_path / "x.mcap"
     with open(p, "wb") as fh:
-        w = Writer(fh)
+        w = Writer(fh, enable_data_crcs=True)
         w.start(profile="dlovr")
         w.add_metadata(
             "dlovr",

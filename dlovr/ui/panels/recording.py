@@ -34,7 +34,7 @@ class RecordingPanel:
 
         @self.rec_btn.on_click
         def _(_e: Any) -> None:
-            app.start_recording()
+            self.start_safely()
 
         @self.stop_btn.on_click
         def _(_e: Any) -> None:
@@ -55,6 +55,23 @@ class RecordingPanel:
             self.rec_btn.disabled = True
             self.stop_btn.disabled = False
         return out
+
+    def start_safely(self) -> Path | None:
+        """:meth:`start` for the button: a recording that cannot start (its folder not writable, the
+        disk full) is said on the page and on stderr (``app.reporter``); None then."""
+        app = self.app
+        try:
+            return app.start_recording()
+        except (OSError, ValueError) as e:
+            reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+            where = getattr(e, "filename", None) or app.recordings_dir
+            line = f"cannot record to {where}: {reason}"
+            report = getattr(app, "reporter", None)
+            if report is not None:
+                report("recording", line)
+            if app.server is not None:
+                self.rec_md.content = f"**Cannot record**: `{where}`: {reason}"
+            return None
 
     def stop(self, *, wait: bool = True) -> Path | None:
         with self.app.lock:
