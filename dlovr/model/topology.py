@@ -380,7 +380,9 @@ def situation_from_points(
 
     ``vectors[i]`` is D_i = p_{i+1} - p_i for i < n (len n or n+1); ``face_normal`` gives a face's
     outward unit normal. A cable end is in contact itself only when :func:`tip_touches` says the tip
-    is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``.
+    is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``, and what
+    point 0 touches besides is a contact of the first segment, written at ``E_1`` with what that
+    point touches itself (docs/model.md: every contact that carries force appears).
 
     A contact that the rule takes away from a tip is never dropped: the last segment touches at a
     shallow angle, so it is an ``E`` contact of that segment, written at the last interior point
@@ -402,7 +404,9 @@ def situation_from_points(
         if names and n >= 2 and not tip_touches(d, [face_normal(f) for f in names], tip_angle_deg):
             env[inner] = _merge_primitives(env[inner], env[i])
             env[i] = []
-    if gripped:
+    if gripped:  # the held vertex is V_S/G; what it touches is a contact of the first segment, at E_1
+        if n >= 2 and any(e.kind == "faces" for e in env[0]):
+            env[1] = _merge_primitives(env[1], env[0])
         env[0] = [EnvPrimitive("G", (), gripper_z)]
     full = vecs if len(vecs) == n + 1 else [*vecs, vecs[-1]]
     return contract(env, full)

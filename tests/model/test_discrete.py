@@ -297,8 +297,9 @@ def test_given_crease_direction_is_used():
 
 
 def test_internal_faces_are_dropped_from_a_situation_before_contraction():
-    """docs/model.md 1 and 3.2: internal faces are never contact faces. A contact of internal faces alone is N and
-    contracts with a free neighbour; an edge of a real and an internal face is the real face."""
+    """docs/model.md 1 and 3.2: internal faces are never contact faces. A contact of internal faces
+    alone is N and contracts with a free neighbour; an edge of a real and an internal face is the real
+    face."""
     book = FactBook({
         "box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X), "box.F9": ff("box.F9", X, internal=True)
     })  # fmt: skip

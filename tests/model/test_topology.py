@@ -222,11 +222,12 @@ def test_situation_from_points_applies_gripper_and_end_vertex_rule():
     env = [[floor], [], [floor], [floor], [floor]]
     flat = [(1.0, 0.0, 0.0)] * 4
     s = situation_from_points(env, flat, normals.__getitem__, gripper_z=(0.0, 0.0, 1.0))
-    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/N"  # last segment lies on the face: V_E free
+    # last segment lies on the face: V_E free; the held V_S touches G, and its face is E_1's
+    assert s.format() == "VS/G & E2/t.F1 & VE/N"
     assert s.contacts[0].env[0].z == (0.0, 0.0, 1.0)
     down = [*flat[:3], (0.7, 0.0, -0.7)]
     s = situation_from_points(env, down, normals.__getitem__)
-    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/t.F1"  # the tip points into the face
+    assert s.format() == "VS/G & E2/t.F1 & VE/t.F1"  # the tip points into the face
     s = situation_from_points(env, flat, normals.__getitem__, gripped=False)
     assert s.contacts[0].is_free  # V_S lying flat, not gripped: not a tip contact
     with pytest.raises(ValueError, match="DLO vectors"):
@@ -271,3 +272,20 @@ def test_leaning_past_the_tip_angle_makes_the_tip_the_contact_on_the_side_face()
     leaning = [*down[:3], (-math.sin(math.radians(20)), 0.0, -math.cos(math.radians(20)))]
     s = situation_from_points([[], [], [], [], [side]], leaning, normals.__getitem__)
     assert s.format() == "VS/G & E2/N & VE/block.F3"
+
+
+def test_the_gripped_vertex_is_VG_and_what_it_touches_is_a_contact_of_the_first_segment():
+    """docs/model.md, section 2 (issue 27, item 4): point 0 pressed into a face is not replaced by the
+    gripper: its contact is an E contact at E_1, merged with what point 1 touches itself."""
+    flank, other = faces("v.F1"), faces("v.F2")
+    normals = {"v.F1": (0.5, 0.0, 0.866), "v.F2": (-0.5, 0.0, 0.866)}
+    flat = [(1.0, 0.0, 0.0)] * 5
+    s = situation_from_points([[flank], [], [], [other], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 & E2/N & E3/v.F2 & E4/N & VE/N"
+    assert s.contacts[0].env == (G,) and s.contacts[1].dlo.span == (1, 1)
+    s = situation_from_points([[flank], [flank], [flank], [], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 & E3/N & VE/N"  # one run with the points that touch too
+    s = situation_from_points([[flank], [other], [], [], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 + E1/v.F2 & E3/N & VE/N"
+    s = situation_from_points([[flank], [], [], [], [], []], flat, normals.__getitem__, gripped=False)
+    assert s.format() == "VS/v.F1 & E2/N & VE/N"  # not gripped, pointing into the flank: V_S's own
