@@ -348,6 +348,7 @@ MODULE_LAYERS = {
     "dlovr.outputs": BASE,  # safe output files
     "dlovr.signals": BASE,  # SIGINT/SIGTERM at any moment: the pending signal
     "dlovr.batch": BASE,  # batch work: imports no other dlovr module but inputs (its error type)
+    "dlovr.plausibility": BASE,  # numpy: penetration and point speed of simulation steps, bounds
     "dlovr.model": MODEL,
     "dlovr.scene": FORMATS,  # scene files
     "dlovr.script": FORMATS,  # scripted demonstrations

@@ -61,6 +61,9 @@ def demonstrate(
             raise
         removed = not existed and remove_partial(out)
         raise UserError(str(output_error(out, e)) + (" (partial file removed)" if removed else "")) from None
+    if rec is not None:  # the simulation's plausibility (docs/recordings.md)
+        for ep in rec.plausibility.episodes:
+            click.echo(f"warning: implausible simulation: {ep.text()}", err=True)
     if stop is not None and stop.signum is not None and rec is not None:
         kept = f"recording kept: {out}, {rec.duration:.3f} s of simulated time"
         click.echo(f"interrupted ({stop.name}): {kept}", err=True)
@@ -398,6 +401,8 @@ def states_cmd(recording: str, fmt: str, raw: bool) -> None:
             }
             for k, classes in zip(kept, kept_classes(kept), strict=True)
         ]
+    for ep in rec.warnings():  # on stderr: the table, JSON or CSV on stdout stays as it is
+        click.echo(f"warning: implausible simulation: {ep.text()}", err=True)
     if fmt == "json":
         click.echo(json.dumps(rows, indent=2))
     elif fmt == "csv":

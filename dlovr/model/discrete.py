@@ -26,10 +26,14 @@ import numpy as np
 from dlovr.model.facts import ContactFacts, FaceFact, FactBook, ModelParams, PairFact
 from dlovr.model.topology import (
     Contact,
+    EnvPrimitive,
+    N,
     NotationError,
     Situation,
     Vec3,
     check_face_name,
+    contract_contacts,
+    distinct_primitives,
     face_object,
     normalise_notation,
     parse_situation,
@@ -499,8 +503,33 @@ def discretize_contact(
 def discretize(
     situation: Situation, book: FactBook, params: ModelParams = ModelParams()
 ) -> DiscreteSituation:
-    """Discrete situation of a topological one (docs/model.md, 3.2, for every contact)."""
-    return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in situation.contacts))
+    """Discrete situation of a topological one (docs/model.md, 3.2, for every contact), after
+    :func:`without_internal` (internal faces dropped, neighbours that became equal contracted)."""
+    real = without_internal(situation, book)
+    return DiscreteSituation(tuple(discretize_contact(c, book, params) for c in real.contacts))
+
+
+def without_internal(situation: Situation, book: FactBook) -> Situation:
+    """``situation`` without the faces that ``book`` marks internal (§II: never contact faces), then
+    contracted again (:func:`dlovr.model.topology.contract_contacts`): a primitive keeps its real
+    faces (an edge of a real and an internal face is that face), a contact with none left is ``N``,
+    and neighbouring interior contacts that became equal are one. ``situation`` itself when it names
+    no internal face (faces unknown to ``book`` are left for the classifier to report)."""
+    internal = {f for c in situation.contacts for f in c.faces if f in book.faces and book.faces[f].internal}
+    if not internal:
+        return situation
+    contacts = []
+    for c in situation.contacts:
+        if not internal.intersection(c.faces):
+            contacts.append(c)
+            continue
+        env = [e for e in c.env if e.kind != "faces"]
+        for e in c.env:
+            real = tuple(f for f in e.faces if f not in internal)
+            if real:
+                env.append(EnvPrimitive("faces", real))
+        contacts.append(Contact(c.dlo, tuple(distinct_primitives(env)) or (N,)))
+    return contract_contacts(contacts)
 
 
 class Discretizer:

@@ -13,19 +13,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from dlovr.inputs import InputError
 from dlovr.model.discrete import (
-    CONTACT_KIND,
     DiscreteSituation,
     FactBook,
     ModelParams,
     Vec3,
     discretize,
-    face_object,
     parse_any,
 )
 from dlovr.model.topology import NotationError, Situation
@@ -70,29 +67,6 @@ class KeptLine:
     classes: tuple[str, ...]
 
 
-#: Most faces a written contact names of one object: a face contact one, an edge two (the faces that
-#: meet there), a vertex four. A simulation may name more in all (a vertex of one object on another's
-#: edge: 3 + 2), so recordings are read without this check; sequences typed by hand are checked.
-FACES_PER_OBJECT = {"F": 1, "E^P": 2, "E^L": 2, "V": 4}
-
-
-def check_faces_per_object(sit: DiscreteSituation) -> None:
-    """Raise :class:`NotationError` for a contact naming more faces of one object than
-    :data:`FACES_PER_OBJECT` allows (``V/VS[a.F1,a.F2,a.F3,a.F4,a.F5]``)."""
-    for k, c in enumerate(sit.contacts, 1):
-        limit = FACES_PER_OBJECT.get(c.state.env)
-        if limit is None:
-            continue
-        per = Counter(face_object(f) for f in c.faces)
-        for obj, n in sorted(per.items()):
-            if n > limit:
-                raise NotationError(
-                    f"contact {k}: {c.format()} names {n} faces of {obj}; {CONTACT_KIND[c.state.env]} "
-                    "contact touches at most "
-                    f"{limit} of one object"
-                )
-
-
 def split_time(text: str) -> tuple[float | None, str]:
     """``"0.012  V/G & E/N & V/N"`` -> ``(0.012, "V/G & E/N & V/N")``; untimed -> ``(None, text)``."""
     m = _TIMED_RE.match(text)
@@ -132,8 +106,6 @@ def parse_sequence(
                 raise SequenceError(lineno, f"time {t:g} s is before the previous line's {before:g} s")
         try:
             sit = parse_any(text)
-            if isinstance(sit, DiscreteSituation):
-                check_faces_per_object(sit)
         except NotationError as e:
             raise SequenceError(lineno, str(e)) from None
         if isinstance(sit, DiscreteSituation):

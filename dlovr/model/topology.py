@@ -312,6 +312,34 @@ def contract(
     return Situation(tuple(out))
 
 
+def contract_contacts(contacts: Sequence[Contact]) -> Situation:
+    """The situation of ``contacts`` (``V_S`` first, ``V_E`` last) with neighbouring interior contacts
+    that touch the same primitives contracted into one (§III), as :func:`contract` does for points.
+
+    For contacts that became equal after they were made (e.g. once internal faces are dropped from a
+    typed situation: ``E3/N & E8/box.F9`` with ``box.F9`` internal is one ``E/N``). A contracted run
+    keeps the DLO primitive (index and vector) of its middle contact and covers the union of the
+    runs' spans when all are known.
+    """
+    out = [contacts[0]]
+    inner = list(contacts[1:-1])
+    k = 0
+    for env, group in groupby(inner, key=lambda c: c.env):
+        run = list(group)
+        k += len(run)
+        if len(run) == 1:
+            out.append(run[0])
+            continue
+        mid = run[(len(run) - 1) // 2].dlo
+        spans = [c.dlo.span for c in run]
+        span = None if any(x is None for x in spans) else (
+            min(x[0] for x in spans if x is not None), max(x[1] for x in spans if x is not None)
+        )
+        out.append(Contact(DloPrimitive("E", mid.index, span, mid.vector), env))
+    out.append(contacts[-1])
+    return Situation(tuple(out))
+
+
 def tip_touches(
     last_vector: Iterable[float], normals: Iterable[Iterable[float]], tip_angle_deg: float = 15.0
 ) -> bool:
@@ -352,7 +380,9 @@ def situation_from_points(
 
     ``vectors[i]`` is D_i = p_{i+1} - p_i for i < n (len n or n+1); ``face_normal`` gives a face's
     outward unit normal. A cable end is in contact itself only when :func:`tip_touches` says the tip
-    is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``.
+    is the contact (``V_S`` too when not ``gripped``); a gripped ``V_S`` touches ``G_z``, and what
+    point 0 touches besides is a contact of the first segment, written at ``E_1`` with what that
+    point touches itself (docs/model.md: every contact that carries force appears).
 
     A contact that the rule takes away from a tip is never dropped: the last segment touches at a
     shallow angle, so it is an ``E`` contact of that segment, written at the last interior point
@@ -374,16 +404,23 @@ def situation_from_points(
         if names and n >= 2 and not tip_touches(d, [face_normal(f) for f in names], tip_angle_deg):
             env[inner] = _merge_primitives(env[inner], env[i])
             env[i] = []
-    if gripped:
+    if gripped:  # the held vertex is V_S/G; what it touches is a contact of the first segment, at E_1
+        if n >= 2 and any(e.kind == "faces" for e in env[0]):
+            env[1] = _merge_primitives(env[1], env[0])
         env[0] = [EnvPrimitive("G", (), gripper_z)]
     full = vecs if len(vecs) == n + 1 else [*vecs, vecs[-1]]
     return contract(env, full)
 
 
 def _merge_primitives(a: Iterable[EnvPrimitive], b: Iterable[EnvPrimitive]) -> list[EnvPrimitive]:
-    """The primitives of ``a`` and ``b``, once each; a primitive whose faces are a proper subset of
-    another's adds nothing and is left out (as for the contacts of one point)."""
-    s = {e for e in (*a, *b) if e.kind != "N"}
+    """The primitives of ``a`` and ``b``, once each (:func:`distinct_primitives`)."""
+    return distinct_primitives((*a, *b))
+
+
+def distinct_primitives(env: Iterable[EnvPrimitive]) -> list[EnvPrimitive]:
+    """The primitives of ``env`` but ``N``, once each and sorted; a primitive whose faces are a proper
+    subset of another's adds nothing and is left out (as for the contacts of one point)."""
+    s = {e for e in env if e.kind != "N"}
     return sorted(
         e for e in s if not (e.kind == "faces" and any(o != e and set(e.faces) < set(o.faces) for o in s))
     )

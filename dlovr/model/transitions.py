@@ -18,7 +18,7 @@ intermediate states, flights.
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Generic, Protocol, TypeVar, cast
 
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
@@ -231,7 +231,10 @@ class Change:
 
     ``x``/``y`` are the principal contacts before/after (empty: free space ``N``); a step's changes
     (:func:`changes`) hold one contact on each side at most. ``x_run``/``y_run`` are the whole
-    successional contacts. ``through_free``: the DLO passed through ``N`` on the way (a flight).
+    successional contacts. ``through_free``: this successional contact passed through ``N`` on the
+    way (it flew; :func:`changes` gives the flag of a step to the changes that flew). ``after``: all
+    contacts of the new situation (the fallback of :func:`new_obstacle` looks at all of them; empty:
+    not known, ``y_run`` stands for it).
     """
 
     x: tuple[DiscreteContact, ...]
@@ -239,6 +242,7 @@ class Change:
     x_run: tuple[DiscreteContact, ...] = ()
     y_run: tuple[DiscreteContact, ...] = ()
     through_free: bool = False
+    after: tuple[DiscreteContact, ...] = ()
 
     @property
     def changed(self) -> bool:
@@ -264,7 +268,8 @@ def new_obstacle(ch: Change) -> bool:
     """``Y`` touches an object ``X`` does not, or the reverse (Fig. 10b).
 
     Without face names (discrete-only input) the paper's own rule resolves ``E/F -> E/VS``: a new
-    obstacle was hit when the new successional contact holds lower-card ``E/E^LI`` contacts.
+    obstacle was hit when the new situation (any of its successional contacts, ``ch.after``; the new
+    successional contact when the situation is not known) holds lower-card ``E/E^LI`` contacts.
     """
     ox, oy = _objects(ch.x), _objects(ch.y)
     if ox is not None and oy is not None:
@@ -272,7 +277,7 @@ def new_obstacle(ch: Change) -> bool:
     xs = {c.state.name for c in ch.x}
     ys = {c.state.name for c in ch.y}
     if xs == {"E/F"} and "E/VS" in ys:
-        return any(c.state.name == "E/E^LI" for c in ch.y_run)
+        return any(c.state.name == "E/E^LI" for c in (ch.after or ch.y_run))
     return False
 
 
@@ -336,7 +341,10 @@ def changes(before: DiscreteSituation, after: DiscreteSituation, through_free: b
 
     Successional contacts are matched (:func:`match`), then their principal contacts paired
     (:func:`pair_principals`); each changed pair is one :class:`Change` (``X -> N`` and ``N -> Y``
-    included). An empty list: no principal contact changed.
+    included). A successional contact left without a partner pairs each of its principal contacts
+    with ``N``, whatever the rest of the other situation holds (a run that splits, merges, appears
+    or leaves). ``through_free`` (the step is a flight) goes to the changes that flew
+    (:func:`_flown`). An empty list: no principal contact changed.
     """
     pos_a, pos_b = contact_positions(before, after)
     runs_a, runs_b = before.successional(), after.successional()
@@ -364,11 +372,31 @@ def changes(before: DiscreteSituation, after: DiscreteSituation, through_free: b
         rb = runs_b[j] if j is not None else ()
         ka, kb = principal_at(ra, ca), principal_at(rb, cb)
         xr, yr = tuple(ca[k] for k in ra), tuple(cb[k] for k in rb)
+        # an unmatched run: its principal contacts pair with N, not with contacts of other runs
+        whole = (ca, cb) if i is not None and j is not None else ((), ())
         for x, y in pair_principals(
-            [ca[k] for k in ka], [cb[k] for k in kb], ca, cb, [pos_a[k] for k in ka], [pos_b[k] for k in kb]
+            [ca[k] for k in ka], [cb[k] for k in kb], *whole, [pos_a[k] for k in ka], [pos_b[k] for k in kb]
         ):
-            out.append(Change((x,) if x else (), (y,) if y else (), xr, yr, through_free))
+            out.append(Change((x,) if x else (), (y,) if y else (), xr, yr, False, cb))
+    if through_free:
+        flown = _flown(out)
+        out = [replace(c, through_free=True) if k in flown else c for k, c in enumerate(out)]
     return out
+
+
+def _flown(chs: Sequence[Change]) -> set[int]:
+    """Which changes of a flight step flew (docs/model.md, 4.1): the flight belongs to the
+    successional contact that left an instable contact and landed, not to the others of the step.
+
+    Where an instable contact is released to ``N`` and another contact appears from ``N``, the flight
+    is that pair (``S`` and ``E`` already): no matched change flew. Else the changes whose instable
+    ``X`` became a contact that is not instable flew; where none did (the cable landed on a ridge or
+    a corner), those whose instable ``X`` became another instable contact."""
+    if any(not c.y and is_instable(c.x) for c in chs) and any(not c.x and c.y for c in chs):
+        return set()
+    landed = [k for k, c in enumerate(chs) if c.y and is_instable(c.x)]
+    calm = {k for k in landed if not is_instable(chs[k].y)}
+    return calm or set(landed)
 
 
 def classify_step(

@@ -13,6 +13,9 @@ A recording is an MCAP file that holds everything needed to replay a demonstrati
   states: the compiler derives the detection thresholds from it. Optional: files recorded before it
   existed lack it and the compiler then uses its defaults (marked as such), so the format version
   stays 2 (a reader needs to know nothing new to read either kind);
+- ``/dlovr/warnings``: a message per stretch of steps where the simulation was physically implausible
+  (a cable point deeper in an obstacle or faster than :mod:`dlovr.plausibility`'s bounds).
+  Optional like the wrench: files recorded before it existed have none;
 - ``/foxglove/scene`` (``foxglove.SceneUpdate``) and ``/tf`` (``foxglove.FrameTransforms``) at ~30 Hz
   so that Foxglove can show the cable, the gripper and the obstacles.
 
@@ -38,6 +41,7 @@ TOPIC_STATES = "/dlovr/contact_states"
 TOPIC_SCENE = "/foxglove/scene"
 TOPIC_TF = "/tf"
 TOPIC_WRENCH = "/dlovr/wrench"
+TOPIC_WARNINGS = "/dlovr/warnings"
 REQUIRED_TOPICS = (TOPIC_COMMAND, TOPIC_CHECKPOINT, TOPIC_STATES)
 CHANNELS = (
     (TOPIC_COMMAND, "dlovr.Commands"),
@@ -46,6 +50,7 @@ CHANNELS = (
     (TOPIC_SCENE, "foxglove.SceneUpdate"),
     (TOPIC_TF, "foxglove.FrameTransforms"),
     (TOPIC_WRENCH, "dlovr.Wrench"),
+    (TOPIC_WARNINGS, "dlovr.Warning"),
 )
 """Topics and schema names in the order the writer registers them: channel and schema ids 1, 2, ...
 (``dlovr recover`` relies on it when a file's channel definitions were lost)."""
@@ -142,6 +147,24 @@ WRENCH_SCHEMA = {
         "force": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
         "torque": {"type": "array", "items": {"type": "array", "items": {"type": "number"}}},
     },
+}
+WARNING_SCHEMA = {
+    "title": "dlovr.Warning",
+    "description": "A stretch of steps where the simulation was physically implausible "
+    "(dlovr.plausibility): kind (penetration or speed), from t to end (s), the step it began, "
+    "its peak (m of penetration, m/s of a cable point's speed), the bound it passed (same unit) and "
+    "where (the obstacle, or the cable point).",
+    "type": "object",
+    "properties": {
+        "kind": {"type": "string"},
+        "t": {"type": "number"},
+        "end": {"type": "number"},
+        "step": {"type": "integer"},
+        "peak": {"type": "number"},
+        "bound": {"type": "number"},
+        "where": {"type": "string"},
+    },
+    "required": ["kind", "t", "end", "step", "peak", "bound", "where"],
 }
 WRENCH_EVERY = 5
 """Steps between two wrench samples (10 ms at 2 ms): enough for the force steps of transitions."""

@@ -20,6 +20,7 @@ from mcap.summary import Summary
 from dlovr import __version__
 from dlovr.model.transitions import DEFAULT_FLIGHT_S, DEFAULT_HOLD_S
 from dlovr.outputs import being_written
+from dlovr.plausibility import Implausible, implausible_from_payload
 from dlovr.recording.bundle import SceneBundle, pieces_from_json, safe_relpath
 from dlovr.recording.format import (
     DECODE_ERRORS,
@@ -36,6 +37,7 @@ from dlovr.recording.format import (
     TOPIC_SCENE,
     TOPIC_STATES,
     TOPIC_TF,
+    TOPIC_WARNINGS,
     TOPIC_WRENCH,
     RecordingError,
     one_line,
@@ -184,6 +186,18 @@ class Recording:
         for ns, pts in frames:
             gp, gq = poses.get(ns, (pts[0], np.array([1.0, 0.0, 0.0, 0.0])))
             yield (ns - self.t0_ns) / 1e9, pts, gp, gq
+
+    def warnings(self) -> list[Implausible]:
+        """The plausibility warnings (docs/recordings.md): stretches of steps where a cable point went
+        deeper into an obstacle or faster than the bounds; none in files recorded before they existed."""
+        if self._counts and self.count(TOPIC_WARNINGS) == 0:
+            return []
+        try:
+            return [implausible_from_payload(m) for m in self._iter(TOPIC_WARNINGS)]
+        except RecordingError:  # already names the file and the problem
+            raise
+        except _FIELD_ERRORS as e:
+            raise RecordingError(f"{self.path}: bad warning message: {one_line(e)}") from None
 
     def wrench(self) -> Any:
         """The sensed gripper wrench as a ``WrenchSeries`` (times s, force N, torque N m, world frame),

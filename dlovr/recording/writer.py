@@ -18,6 +18,7 @@ from mcap.writer import CompressionType, Writer
 from dlovr import __version__, signals
 from dlovr.model.transitions import DEFAULT_HOLD_S, classify_step
 from dlovr.outputs import StreamOutput
+from dlovr.plausibility import monitor_of
 from dlovr.recording import foxglove
 from dlovr.recording.bundle import SceneBundle, pieces_to_json
 from dlovr.recording.format import (
@@ -36,7 +37,9 @@ from dlovr.recording.format import (
     TOPIC_SCENE,
     TOPIC_STATES,
     TOPIC_TF,
+    TOPIC_WARNINGS,
     TOPIC_WRENCH,
+    WARNING_SCHEMA,
     WRENCH_EVERY,
     WRENCH_SCHEMA,
     dumps,
@@ -51,6 +54,7 @@ def schemas() -> dict[str, bytes]:
         "dlovr.Checkpoint": CHECKPOINT_SCHEMA,
         "dlovr.ContactState": STATES_SCHEMA,
         "dlovr.Wrench": WRENCH_SCHEMA,
+        "dlovr.Warning": WARNING_SCHEMA,
     }
     return {name: dumps(own[name]) if name in own else foxglove.schema(name) for _, name in CHANNELS}
 
@@ -281,6 +285,10 @@ class Recorder:
             self._add(TOPIC_WRENCH, w[0][0], dumps(payload))
             w.clear()
 
+    def warning(self, step: int, payload: Mapping[str, Any]) -> None:
+        """A plausibility warning (:class:`dlovr.plausibility.Implausible`) that began at ``step``."""
+        self._add(TOPIC_WARNINGS, step, dumps(dict(payload)))
+
     def frame(
         self,
         step: int,
@@ -394,6 +402,8 @@ class DemoRecorder:
         self._obstacles = [(o.name, np.asarray(o.mesh.triangles)) for o in tracker.geometry.objects]
         try:
             self._checkpoint()
+            #: The simulation's plausibility (docs/recordings.md): its episodes are written as warnings.
+            self.plausibility = monitor_of(sim)
             start = tracker.restart(sim.record())  # replay restarts the same way from the checkpoint
             self._prev = start.discrete
             self._n_changes = len(tracker.changes)
@@ -417,6 +427,8 @@ class DemoRecorder:
         self.rec.command(k, record.target_pos, record.target_quat)
         if (k - self.start_step) % WRENCH_EVERY == 0:
             self.rec.wrench(k, record.time, record.gripper_force, record.gripper_torque)
+        for ep in self.plausibility.update(record):
+            self.rec.warning(ep.step, ep.payload())
         for st in self.tracker.changes[self._n_changes :]:
             classes = classify_step(self._prev, st.discrete) if self._prev is not None else ()
             self.rec.contact_state(st.step, st.payload(classes))
@@ -437,6 +449,8 @@ class DemoRecorder:
         if not self.rec.closed:
             if (int(self.sim.step_index) - self.start_step) % self._cp_every:
                 self._checkpoint()
+            for ep in self.plausibility.finish():
+                self.rec.warning(ep.step, ep.payload())
             cur = self.tracker.current
             if cur is not None:  # where the recording ends (the situation it ends in, unchanged)
                 end = {

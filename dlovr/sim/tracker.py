@@ -338,7 +338,7 @@ class ContactTracker:
         if table is None or len(table) == 0:
             return tuple(0.0 for _ in topo.contacts)
         if self._spans[0] is not topo:
-            spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in topo.contacts]
+            spans = _force_spans(topo)
             self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
             views = self._views
             if len(spans) > len(views.forces):
@@ -368,6 +368,24 @@ def _vector_independent(topo: Situation) -> bool:
     """Discrete states depend on DLO vectors only through point/line decisions of E contacts on
     edges: without such contacts the discrete situation of an unchanged topology can be reused."""
     return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
+
+
+def _force_spans(topo: Situation) -> list[tuple[int, int]]:
+    """Per contact of ``topo``, the cable points whose simulator contacts its force sums (first, last;
+    ``(-1, -1)``: none): its own span, but an end vertex that is free or only held hands its point to
+    the interior contact next to it when that one touches the environment, where the end-vertex and
+    gripped-end rules put what the end touched (docs/model.md, section 2)."""
+    cs = topo.contacts
+    spans = [(-1, -1) if c.is_free or c.dlo.span is None else c.dlo.span for c in cs]
+    last = len(cs) - 1
+    for end, inner in ((0, 1), (last, last - 1)):
+        c, nxt = cs[end], cs[inner]
+        if last < 2 or c.touches_environment or not nxt.touches_environment or c.dlo.span is None:
+            continue
+        p, (a, b) = c.dlo.span[0], spans[inner]
+        if b == p - 1 or a == p + 1:  # the interior contact ends next to the end vertex
+            spans[inner], spans[end] = (min(a, p), max(b, p)), (-1, -1)
+    return spans
 
 
 def _table_of(arrays: Any) -> np.ndarray:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from dlovr.model.transitions import classify_step, format_classes
+from dlovr.plausibility import monitor_of
 from dlovr.recording import DemoRecorder
 from dlovr.scene import Scene
 from dlovr.sim import SimulationDiverged, Simulator
@@ -42,6 +43,7 @@ class Session:
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self.note = ""
+        self.plausibility = monitor_of(self.sim)
         self._class_cache: dict[Any, tuple[str, ...]] = {}
         self._format_cache: dict[Any, str] = {}
         self._faces_cache: dict[Any, dict[str, Any]] = {}
@@ -102,6 +104,8 @@ class Session:
             self.recorder.step(rec)
         self.record, self.state = rec, rec.state  # the simulator tracks the contacts (track=True)
         self.forces.add(rec.time, rec.gripper_force)
+        for ep in self.plausibility.update(rec):  # shown in the state panel (docs/recordings.md)
+            self.note = f"implausible simulation: {ep.text()}"
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept

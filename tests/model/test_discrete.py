@@ -32,6 +32,7 @@ from dlovr.model.discrete import (
     parse_discrete_situation,
     pinch_axis,
     state,
+    without_internal,
 )
 from dlovr.model.topology import NotationError, parse_situation
 
@@ -293,6 +294,22 @@ def test_given_crease_direction_is_used():
     fs, ps = groove(90)
     facts = ContactFacts(fs, ps, X, crease=Y)  # the caller says the edge runs along y
     assert classify_contact("E", facts).name == "E/E^P"
+
+
+def test_internal_faces_are_dropped_from_a_situation_before_contraction():
+    """docs/model.md 1 and 3.2: internal faces are never contact faces. A contact of internal faces
+    alone is N and contracts with a free neighbour; an edge of a real and an internal face is the real
+    face."""
+    book = FactBook({
+        "box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X), "box.F9": ff("box.F9", X, internal=True)
+    })  # fmt: skip
+    sit = parse_situation("VS/G & E3/N & E8/box.F9 & VE/N")
+    assert without_internal(sit, book).format() == "VS/G & E3/N & VE/N"
+    assert discretize(sit, book).format() == "V/G & E/N & V/N"
+    sit = parse_situation("VS/G & E3/N & E6/(box.F1,box.F9) & E8/box.F1 + E8/box.F9 & E10/box.F9 & VE/box.F9")
+    assert without_internal(sit, book).format() == "VS/G & E3/N & E6/box.F1 & E10/N & VE/N"
+    real = parse_situation("VS/G & E3/N & E8/box.F1 & VE/N")
+    assert without_internal(real, book) is real  # nothing internal: the situation itself
 
 
 def test_rank_merges_nearly_equal_normals_and_drops_internal_faces():

@@ -16,6 +16,7 @@ from dlovr.model.topology import (
     NotationError,
     Situation,
     contract,
+    contract_contacts,
     face_object,
     faces,
     parse_contact,
@@ -100,6 +101,25 @@ def test_contraction_merges_equal_interior_points_indexed_by_the_middle():
     assert s.format() == "VS/G & E1/N & E5/table.F1 & E8/(box.F1,box.F2) & E9/N & VE/table.F1"
     run = s.contacts[2].dlo
     assert run.span == (3, 7) and run.index == 5 and run.vector == (5.0, 0.0, 0.0)
+
+
+def test_contract_contacts_merges_neighbours_that_became_equal():
+    """Contacts made equal after contraction (internal faces dropped) are contracted again: the run
+    keeps its middle contact's DLO primitive and the union of the spans; ends are never merged."""
+    f1 = faces("table.F1")
+    cs = [
+        Contact(DloPrimitive("VS", 0, (0, 0)), (N,)),
+        Contact(DloPrimitive("E", 2, (1, 3), (1.0, 0.0, 0.0)), (N,)),
+        Contact(DloPrimitive("E", 5, (4, 6), (2.0, 0.0, 0.0)), (N,)),
+        Contact(DloPrimitive("E", 8, (7, 9)), (f1,)),
+        Contact(DloPrimitive("VE", 10, (10, 10)), (N,)),
+    ]
+    s = contract_contacts(cs)
+    assert s.format() == "VS/N & E2/N & E8/table.F1 & VE/N"
+    assert s.contacts[1].dlo.span == (1, 6) and s.contacts[1].dlo.vector == (1.0, 0.0, 0.0)
+    typed = parse_situation("VS/N & E3/N & E8/N & E12/N & VE/N")  # no spans: the middle one's index
+    assert contract_contacts(typed.contacts).format() == "VS/N & E8/N & VE/N"
+    assert contract_contacts(typed.contacts).contacts[1].dlo.span is None
 
 
 def test_end_vertices_are_never_contracted_into_edge_contacts():
@@ -202,11 +222,12 @@ def test_situation_from_points_applies_gripper_and_end_vertex_rule():
     env = [[floor], [], [floor], [floor], [floor]]
     flat = [(1.0, 0.0, 0.0)] * 4
     s = situation_from_points(env, flat, normals.__getitem__, gripper_z=(0.0, 0.0, 1.0))
-    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/N"  # last segment lies on the face: V_E free
+    # last segment lies on the face: V_E free; the held V_S touches G, and its face is E_1's
+    assert s.format() == "VS/G & E2/t.F1 & VE/N"
     assert s.contacts[0].env[0].z == (0.0, 0.0, 1.0)
     down = [*flat[:3], (0.7, 0.0, -0.7)]
     s = situation_from_points(env, down, normals.__getitem__)
-    assert s.format() == "VS/G & E1/N & E2/t.F1 & VE/t.F1"  # the tip points into the face
+    assert s.format() == "VS/G & E2/t.F1 & VE/t.F1"  # the tip points into the face
     s = situation_from_points(env, flat, normals.__getitem__, gripped=False)
     assert s.contacts[0].is_free  # V_S lying flat, not gripped: not a tip contact
     with pytest.raises(ValueError, match="DLO vectors"):
@@ -234,3 +255,37 @@ def test_a_shallow_tip_contact_is_never_dropped_it_is_an_E_contact_of_the_last_s
     # a tip pointing into the face keeps its own contact
     s = situation_from_points([[], [], [], [], [floor]], [*flat[:3], _down(45)], normals.__getitem__)
     assert s.format() == "VS/G & E2/N & VE/t.F1"
+
+
+def test_leaning_past_the_tip_angle_makes_the_tip_the_contact_on_the_side_face():
+    """docs/model.md 4.4 (Fig. 11, step 6): a cable hanging along a side face (normal +x) lays its last
+    segment on it (E contact, V_E free); bent further so that the last segment points into the face by
+    more than the tip angle, the tip is the contact (V_E/F), reachable from E/F."""
+    import math
+
+    side = faces("block.F3")
+    normals = {"block.F3": (1.0, 0.0, 0.0)}
+    env = [[], [], [], [side], [side]]
+    down = [(1.0, 0.0, 0.0), (1.0, 0.0, -1.0), (0.0, 0.0, -1.0), (0.0, 0.0, -1.0)]
+    s = situation_from_points(env, down, normals.__getitem__)
+    assert s.format() == "VS/G & E1/N & E3/block.F3 & VE/N"
+    leaning = [*down[:3], (-math.sin(math.radians(20)), 0.0, -math.cos(math.radians(20)))]
+    s = situation_from_points([[], [], [], [], [side]], leaning, normals.__getitem__)
+    assert s.format() == "VS/G & E2/N & VE/block.F3"
+
+
+def test_the_gripped_vertex_is_VG_and_what_it_touches_is_a_contact_of_the_first_segment():
+    """docs/model.md, section 2 (issue 27, item 4): point 0 pressed into a face is not replaced by the
+    gripper: its contact is an E contact at E_1, merged with what point 1 touches itself."""
+    flank, other = faces("v.F1"), faces("v.F2")
+    normals = {"v.F1": (0.5, 0.0, 0.866), "v.F2": (-0.5, 0.0, 0.866)}
+    flat = [(1.0, 0.0, 0.0)] * 5
+    s = situation_from_points([[flank], [], [], [other], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 & E2/N & E3/v.F2 & E4/N & VE/N"
+    assert s.contacts[0].env == (G,) and s.contacts[1].dlo.span == (1, 1)
+    s = situation_from_points([[flank], [flank], [flank], [], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 & E3/N & VE/N"  # one run with the points that touch too
+    s = situation_from_points([[flank], [other], [], [], [], []], flat, normals.__getitem__)
+    assert s.format() == "VS/G & E1/v.F1 + E1/v.F2 & E3/N & VE/N"
+    s = situation_from_points([[flank], [], [], [], [], []], flat, normals.__getitem__, gripped=False)
+    assert s.format() == "VS/v.F1 & E2/N & VE/N"  # not gripped, pointing into the flank: V_S's own

@@ -116,6 +116,14 @@ RULE_CASES = [
     ("stable-edge", ch(["E/F[a.F1]"], ["E/E^P[a.F1,a.F2]"]), ("C",)),
     ("fallback-E", ch(["E/F"], ["E/VS"], y_run=["E/E^LI", "E/VS", "E/E^LI"]), ("E",)),
     ("fallback-C", ch(["E/F"], ["E/VS"], y_run=["E/F", "E/VS"]), ("C",)),
+    (  # the new situation, not only the new run, holds the E/E^LI
+        "fallback-E-elsewhere",
+        replace(
+            ch(["E/F"], ["E/VS"], y_run=["E/VS"]),
+            after=tuple(map(parse_discrete_contact, ["V/G", "E/N", "E/VS", "E/N", "E/E^LI", "V/N"])),
+        ),
+        ("E",),
+    ),
     ("no-names-stable", ch(["V/F"], ["E/F"]), ("C",)),
     ("unchanged", ch(["E/F[a.F1]"], ["E/F[a.F1]"]), ()),
 ]
@@ -411,3 +419,35 @@ def test_no_flight_without_an_instable_release_or_a_landing():
     assert [k.situation for k in kept] == [RIDGE, elsewhere] and kept_classes(kept)[1] == ("S", "E")
     with pytest.raises(ValueError, match="flight"):
         Debouncer(0.01, is_transient, flight=-1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Runs without a partner; the flight belongs to the run that flew (issue 27)
+# --------------------------------------------------------------------------------------------------
+
+
+def test_an_unmatched_run_pairs_with_N_whatever_the_other_runs_hold():
+    """A split, a merge, an equal-state run appearing or leaving: the run without a partner is E, even
+    when an equal contact lies in another run of the other situation (docs/model.md 4.2)."""
+    one = P("V/G & E/N & E/F[table.F1] & V/N")
+    two = P("V/G & E/N & E/F[table.F1] & E/N & E/F[table.F1] & V/N")
+    assert classify_step(one, two) == ("E",) and classify_step(two, one) == ("E",)
+    [c] = changes(one, two)
+    assert not c.x and [str(y) for y in c.y] == ["E/F[table.F1]"]
+    three = P("V/G & E/N & E/F[table.F1] & E/N & E/E^LI[table.F1,table.F2] & E/N & E/F[table.F1] & V/N")
+    assert classify_step(two, three) == ("E",)  # a ridge run appears between the two
+
+
+def test_a_flight_flags_only_the_changes_that_flew():
+    ridge_and_tip = P("V/G & E/N & E/E^LI[box.F1,box.F2] & E/N & V/E^LI[crate.F1,crate.F2]")
+    landed = P("V/G & E/N & E/E^LI[box.F2,box.F3] & E/N & V/F[crate.F2]")
+    got = {(str(c.x[0]), c.through_free) for c in changes(ridge_and_tip, landed, through_free=True)}
+    assert got == {("E/E^LI[box.F1,box.F2]", False), ("V/E^LI[crate.F1,crate.F2]", True)}
+    assert classify_step(ridge_and_tip, landed, through_free=True) == ("S", "I", "E")
+    # released to N and landed elsewhere: the pair is S and E; the other run's change keeps its class
+    table = P("V/G & E/N & E/E^LI[box.F2,box.F3] & E/N & V/F[table.F1]")
+    assert not any(c.through_free for c in changes(ridge_and_tip, table, through_free=True))
+    assert classify_step(ridge_and_tip, table, through_free=True) == ("S", "I", "E")
+    # landing on a ridge or corner: the instable -> instable change flew
+    assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]"), through_free=True) == ("S", "E")
+    assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]")) == ("I",)

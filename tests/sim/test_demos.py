@@ -208,7 +208,7 @@ FIG11 = [
     (("C",), [("E/F", B_TOP)]),  # 3: the cable laid down on it (4, `-`: pushed over the +x edge)
     (("C",), [("E/E^P", B_EDGE)]),  # 5: turned about the edge, the cable lies on the edge only
     # 6: hanging down along the side face, the tip's last segment on it (the paper has the tip alone,
-    # V/F; a straight cable on the edge cannot reach the side face with its tip alone)
+    # V/F, which leaning further gives, one C later: docs/model.md 4.4; the script does not lean so far)
     (("C",), [("E/F", B_SIDE)]),
     (("E",), [("V/E^LS", GROOVE)]),  # 7: the tip in the groove with the hole block
     (("I",), [("V/VI", CORNER)]),  # 8: dragged onto the corner at the groove's end, the hole's rim

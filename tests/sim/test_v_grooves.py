@@ -1,0 +1,113 @@
+"""A cable in V grooves built in the test, recorded with ``dlovr record``: the gripped end's contact
+(docs/model.md, section 2) in a 120° groove."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from dlovr.cli import main
+from dlovr.geometry import prism_mesh
+from dlovr.recording import Recording, kept_states
+
+HALF_WIDTH, BOTTOM = 0.06, 0.02
+"""The groove block: 12 cm wide, its groove line along y at x = 0 and z = 2 cm."""
+
+
+def v_groove(tmp: Path, opening_deg: float, young: float, x0: float, press: float, hold: float,
+             pose: str = "across") -> Path:
+    """Write a scene with one V-groove block of the given opening angle (the angle between the two
+    flanks, degrees) and a script that moves a 12 cm cable until it is ``press`` (m) deeper than
+    touching, then holds ``hold`` s. Across (default): the cable horizontal, held at ``x0`` (m) and
+    pointing along +x across the groove, lowered until its held end is ``press`` into the flank below
+    it. ``down``: hanging, held above ``x0``, pushed tip first into the V until the tip is ``press``
+    below where it would touch both flanks. ``along``: horizontal along the groove line (+y), held
+    at y = ``x0``, pushed into the V until its held end is ``press`` below touching both flanks.
+    Returns the script's path."""
+    half = math.radians(opening_deg / 2)
+    w, bottom = HALF_WIDTH, BOTTOM
+    top = bottom + w / math.tan(half)
+    prism_mesh([(-w, 0.0), (w, 0.0), (w, top), (0.0, bottom), (-w, top)], 0.2).export(tmp / "v.obj")
+    quat = {"across": "[0.7071068, 0.0, -0.7071068, 0.0]", "down": "[1.0, 0.0, 0.0, 0.0]",
+            "along": "[0.7071068, 0.7071068, 0.0, 0.0]"}[pose]
+    x, y = (0.0, x0) if pose == "along" else (x0, 0.0)
+    (tmp / "v.toml").write_text(
+        f'name = "v"\n[dlo]\nlength = 0.12\nradius = 0.005\nsegments = 12\nyoung = {young:g}\nmass = 0.02\n'
+        f"[gripper]\npos = [{x}, {y}, {top + 0.15:.5f}]\nquat = {quat}\n"
+        '[[objects]]\nname = "v"\nmesh = "v.obj"\n'
+    )
+    if pose == "down":  # the tip's centre where it touches both flanks, plus the cable's length
+        z = bottom + 0.005 / math.sin(half) + 0.12 - press
+    elif pose == "along":  # the cable's centre where it touches both flanks
+        z = bottom + 0.005 / math.sin(half) - press
+    else:  # the cable's centre one radius above the flank under the held end
+        z = bottom + abs(x0) / math.tan(half) + 0.005 / math.sin(half) - press
+    script = tmp / "v.script.toml"
+    script.write_text(
+        'scene = "v.toml"\n'
+        f"[[waypoints]]\npos = [{x}, {y}, {z + 0.02:.5f}]\nduration = 0.3\n"
+        f"[[waypoints]]\npos = [{x}, {y}, {z:.5f}]\nduration = 0.6\nhold = {hold}\n"
+    )
+    return script
+
+
+def record(script: Path, out: Path) -> Path:
+    r = CliRunner().invoke(main, ["record", "--script", str(script), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def held_across_120(tmp_path_factory) -> Path:
+    tmp = tmp_path_factory.mktemp("v120")
+    return record(v_groove(tmp, 120.0, 1e8, -0.045, 0.001, 0.3), tmp / "v120.mcap")
+
+
+def test_the_gripped_ends_contact_is_a_contact_of_the_first_segment(held_across_120):
+    """A cable held across a 120° V groove, its held end pressed into the near flank: V_S is V/G, and
+    what it touches is an E contact at E_1 that carries the largest force (issue 27, item 4); the far
+    flank's edge where the cable rests is a contact of its own."""
+    rec = Recording(held_across_120)
+    last = kept_states(rec)[-1]
+    first = last.situation.contacts[1]
+    assert last.situation.contacts[0].state.name == "V/G"
+    assert first.state.name == "E/F" and first.span == (1, 1), last.situation.format()
+    assert len(last.situation.successional()) == 2, last.situation.format()  # and the far flank
+    payload = rec.states()[-1]
+    forces = [c["force"] for c in payload["contacts"]]
+    assert payload["contacts"][1]["state"] == "E/F" and forces[1] == max(forces) > 1.0, payload
+    assert payload["topological"].startswith("VS/G & E1/v.F")
+
+
+@pytest.fixture(scope="module")
+def pushed_into_60(tmp_path_factory) -> tuple[Path, str]:
+    """A stiff cable (E = 1 GPa) along a 60° V, its held end pushed 25 mm into it: the wedge makes
+    MuJoCo's soft contacts give way, the cable sinks about 3.4 mm (more than half its radius)."""
+    tmp = tmp_path_factory.mktemp("v60")
+    out = tmp / "v60.mcap"
+    script = v_groove(tmp, 60.0, 1e9, -0.06, 0.025, 0.3, pose="along")
+    r = CliRunner().invoke(main, ["record", "--script", str(script), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    return out, r.output
+
+
+def test_a_cable_jammed_into_a_narrow_v_is_reported_as_implausible(pushed_into_60):
+    """docs/recordings.md, plausibility warnings (issue 27, item 5): the penetration beyond its bound
+    is one warning event in the recording, said by `record` and by `dlovr states` (on stderr: the table
+    on stdout stays as it is)."""
+    out, said = pushed_into_60
+    [ep] = Recording(out).warnings()
+    assert ep.kind == "penetration" and ep.where == "v"
+    assert ep.peak > ep.bound == pytest.approx(0.0025) and ep.end >= ep.start > 0.3
+    assert f"warning: implausible simulation: {ep.text()}" in said
+    r = CliRunner().invoke(main, ["states", str(out)])
+    assert r.exit_code == 0 and "warning: implausible simulation: penetration" in r.output
+    r = CliRunner().invoke(main, ["states", str(out), "--format", "json"])
+    assert r.exit_code == 0
+
+
+def test_the_plausible_recordings_have_no_warnings(held_across_120):
+    assert Recording(held_across_120).warnings() == []
