@@ -55,6 +55,7 @@ __all__ = [  # the program format's names, importable from here too (dlovr.model
     "RISKY",
     "RISK_LEVELS",
     "RISK_OF_CLASS",
+    "ChatterRules",
     "ContactChange",
     "ContactSpec",
     "Detection",
@@ -70,6 +71,7 @@ __all__ = [  # the program format's names, importable from here too (dlovr.model
     "motion_between",
     "program_schema",
     "readable_versions",
+    "remove_chatter",
     "risk",
     "summarize",
 ]
@@ -130,6 +132,57 @@ def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
         cast(_Vec3, tup(d)), cast(_Vec3, tup(r0.T @ d)), cast(_Vec3, tup(matrix_to_rotvec(r0.T @ r1))),
         round(t1 - t0, 9), cast(_Vec3, tup(p0)), cast(_Quat, tup(q0)),
     )
+
+
+# --------------------------------------------------------------------------------------------------
+# Chatter: a situation left and re-entered without the task moving on (docs/model.md, section 6)
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ChatterRules:
+    """When ``A -> B -> A`` is chatter, not two transitions: ``B`` held less than ``max_s`` (s) and the
+    gripper moved less than ``max_m`` (m, straight-line distance from entering ``B`` to leaving it)
+    and turned less than ``max_deg`` (degrees). A hand hovering at a threshold (the shallow-tip angle,
+    a contact distance) flips there for tens to hundreds of milliseconds while barely moving; laying
+    a cable down, dragging it and lifting it again takes seconds and centimetres."""
+
+    max_s: float = 1.0
+    max_m: float = 0.05
+    max_deg: float = 20.0
+
+
+def _is_chatter(b: TimedSituation, poses: PoseTrack, rules: ChatterRules) -> bool:
+    if b.duration >= rules.max_s:
+        return False
+    p0, q0 = poses.at(b.t)
+    p1, q1 = poses.at(b.t + b.duration)
+    moved = float(np.linalg.norm(np.asarray(p1) - np.asarray(p0)))
+    turn = abs(float(np.dot(np.asarray(q0), np.asarray(q1))))
+    turned = float(np.degrees(2.0 * np.arccos(min(turn, 1.0))))
+    return moved < rules.max_m and turned < rules.max_deg
+
+
+def remove_chatter(
+    states: Sequence[TimedSituation], poses: PoseTrack, rules: ChatterRules | None = None
+) -> list[TimedSituation]:
+    """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`) made one ``A`` (it
+    begins when the first began and holds through the three), repeated until none is left: a flip
+    back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
+    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion."""
+    r = rules or ChatterRules()
+    out = list(states)
+    i = 1
+    while i + 1 < len(out):
+        a, b, c = out[i - 1], out[i], out[i + 1]
+        if a.situation == c.situation and _is_chatter(b, poses, r):
+            merged = TimedSituation(a.t, round(a.duration + b.duration + c.duration, 9), a.situation,
+                                    a.topological, max(a.force or 0.0, c.force or 0.0), a.through_free)
+            out[i - 1 : i + 2] = [merged]
+            i = max(i - 1, 1)
+        else:
+            i += 1
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -215,6 +268,7 @@ def compile_program(
     source: str = "",
     wrench: WrenchSeries | None = None,
     rules: DerivationRules | None = None,
+    chatter: ChatterRules | None = ChatterRules(),
 ) -> Program:
     """Compile a demonstration into a program of macros (docs/model.md, Programs).
 
@@ -223,10 +277,13 @@ def compile_program(
     transition, to the end of ``poses``, is the final macro. ``wrench``: the demonstration's sensed
     gripper wrench, from which each macro's detection parameters are derived
     (:func:`dlovr.model.derivation.derive`); without it every parameter is its class's default,
-    marked as such.
+    marked as such. ``chatter``: a situation left and re-entered after a short time and little
+    motion is one (:func:`remove_chatter`; None keeps every flip).
     """
     if not states:
         raise ValueError("a program needs at least one contact situation")
+    if chatter is not None:
+        states = remove_chatter(states, poses, chatter)
     macros: list[Macro] = []
     anchor = 0
     for k in range(1, len(states)):
