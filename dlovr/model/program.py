@@ -14,7 +14,7 @@ is expressed in the gripper frame at the macro's start; times in seconds; forces
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
@@ -44,6 +44,7 @@ from dlovr.model.transitions import (
     changes,
     classify_change,
     classify_step,
+    is_instable,
     principal,
     successional_contacts,
 )
@@ -145,11 +146,17 @@ class ChatterRules:
     gripper moved less than ``max_m`` (m, straight-line distance from entering ``B`` to leaving it)
     and turned less than ``max_deg`` (degrees). A hand hovering at a threshold (the shallow-tip angle,
     a contact distance) flips there for tens to hundreds of milliseconds while barely moving; laying
-    a cable down, dragging it and lifting it again takes seconds and centimetres."""
+    a cable down, dragging it and lifting it again takes seconds and centimetres.
+
+    ``settle_s``: a landing after a flight (``S,E``) that holds less than this (s) before the cable
+    bounces off again or its landed contact changes (without a new contact: no ``E``) is the impact,
+    not a situation: the landing is the one it settles in; and an instable situation held less than
+    it between an instable one and a flight is the slip into the flight."""
 
     max_s: float = 1.0
     max_m: float = 0.05
     max_deg: float = 20.0
+    settle_s: float = 0.1
 
 
 def _is_chatter(b: TimedSituation, poses: PoseTrack, rules: ChatterRules) -> bool:
@@ -163,13 +170,27 @@ def _is_chatter(b: TimedSituation, poses: PoseTrack, rules: ChatterRules) -> boo
     return moved < rules.max_m and turned < rules.max_deg
 
 
+def _settles(b: TimedSituation, c: TimedSituation, rules: ChatterRules) -> bool:
+    """Is ``b`` the impact of a landing that settles into ``c``: reached by a flight, held less than
+    ``rules.settle_s``, and left either by another flight (a bounce) or by a change of the landed
+    contact (no ``E``: a new contact made after the landing is a transition of its own)?"""
+    if not (b.through_free and b.duration < rules.settle_s and successional_contacts(c.situation)):
+        return False
+    return c.through_free or "E" not in classify_step(b.situation, c.situation, False)
+
+
 def remove_chatter(
     states: Sequence[TimedSituation], poses: PoseTrack, rules: ChatterRules | None = None
 ) -> list[TimedSituation]:
     """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`) made one ``A`` (it
     begins when the first began and holds through the three), repeated until none is left: a flip
     back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
-    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion."""
+    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion.
+    A landing after a flight that settles within ``rules.settle_s`` into another contact situation
+    (a bounce, or a change of the landed contact without a new one, :func:`_settles`) lands there
+    (``S,E`` into the settled situation, not ``S,E`` then ``C``); the other way round, a brief
+    instable situation between an instable one and a flight is the cable slipping off (``I, S,E``,
+    not ``I, I, S,E``)."""
     r = rules or ChatterRules()
     out = list(states)
     i = 1
@@ -180,6 +201,14 @@ def remove_chatter(
                                     a.topological, max(a.force or 0.0, c.force or 0.0), a.through_free)
             out[i - 1 : i + 2] = [merged]
             i = max(i - 1, 1)
+        elif c.through_free and b.duration < r.settle_s and is_instable(a.situation.contacts) \
+                and is_instable(b.situation.contacts):
+            # slipping off: a brief instable contact on the way from an instable one into a flight
+            out[i - 1 : i + 1] = [replace(a, duration=round(a.duration + b.duration, 9))]
+        elif _settles(b, c, r):
+            # the impact of a landing: the flight lands where the cable settles
+            out[i : i + 2] = [TimedSituation(b.t, round(b.duration + c.duration, 9), c.situation,
+                                             c.topological, c.force, True)]
         else:
             i += 1
     return out

@@ -37,8 +37,44 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
     except (KeyError, TypeError, ValueError) as e:
         raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
     wrench = rec.wrench()
+    track, wrench, smoothing = _intended(rec, track, wrench)
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
+    if smoothing:
+        from dataclasses import replace
+
+        from dlovr.model.smoothing import WINDOW_S
+
+        prog = replace(prog, smoothing_s=WINDOW_S, smoothing=smoothing)
     return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+
+
+def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
+    """The track and wrench to compile from, and why they were smoothed ("" when not): a
+    demonstration whose commanded track trembles (:func:`dlovr.model.smoothing.tremor_of`) is
+    compiled from its commanded track and wrench smoothed (the motion meant, the force a detector
+    will see following it); any other from its contact-state poses and its wrench as recorded."""
+    from dlovr.model import smoothing as sm
+    from dlovr.model.derivation import WrenchSeries
+    from dlovr.model.program import PoseTrack
+
+    steps, pos, quat = rec.commands()
+    t = np.asarray(steps, dtype=float) * rec.dt
+    tremor = sm.tremor_of(t, pos)
+    if tremor <= sm.TREMOR_ACCEL:
+        return track, wrench, ""
+    spos, squat = sm.smooth_poses(t, pos, quat)
+    why = (
+        f"the commanded track trembles (median acceleration {tremor:.2f} m/s^2, above "
+        f"{sm.TREMOR_ACCEL:g}): "
+        f"motions and the executor's path are the track averaged over {sm.WINDOW_S:g} s "
+        f"({sm.PASSES} passes)"
+    )
+    if wrench is not None and len(wrench.t):
+        n = sm.samples(wrench.t, sm.WINDOW_S)
+        force, torque = sm.moving_average(wrench.force, n), sm.moving_average(wrench.torque, n)
+        wrench = WrenchSeries(wrench.t, force, torque)
+        why += ", detection parameters derived from the wrench averaged the same way"
+    return PoseTrack(t, spos, squat), wrench, why
 
 
 # --------------------------------------------------------------------------------------------------

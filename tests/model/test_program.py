@@ -286,3 +286,20 @@ def test_a_quick_return_with_much_motion_is_kept():
     assert len(remove_chatter(states, fast)) == 3
     assert len(remove_chatter(states, straight_track(4), ChatterRules(max_s=0.4))) == 3
     assert len(remove_chatter(states, straight_track(4))) == 1
+
+
+def test_a_landing_that_settles_at_once_lands_where_it_settles_and_a_new_contact_stays():
+    from dlovr.model.program import remove_chatter
+
+    vi = "V/G & E/N & V/VI[b.F3,b.F5,h.F2,h.F11]"
+    ef = "V/G & E/N & E/F[h.F6] & V/N"
+    els = "V/G & E/N & V/E^LS[h.F1,h.F6]"
+    vs = "V/G & E/N & V/VS[b.F5,h.F1,h.F6]"
+    states = [TimedSituation(0, 1, P(vi)), TimedSituation(1.1, 0.03, P(ef), through_free=True),
+              TimedSituation(1.13, 0.02, P(els)), TimedSituation(1.15, 1, P(vs))]
+    kept = remove_chatter(states, straight_track(4))
+    # the segment's brief touch of the wall settles into the tip in the groove (C, no new contact);
+    # the groove -> corner step makes a new contact (E): kept however short
+    assert [k.situation.format() for k in kept] == [vi, els, vs]
+    assert kept[1].through_free and kept[1].t == 1.1
+    assert [m.label for m in compile_program(states, straight_track(4)).macros] == ["S,E", "E", "end"]
