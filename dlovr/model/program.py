@@ -142,7 +142,8 @@ def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
 
 @dataclass(frozen=True)
 class ChatterRules:
-    """When ``A -> B -> A`` is chatter, not two transitions: ``B`` held less than ``max_s`` (s) and the
+    """When ``A -> B -> A`` is chatter, not two transitions (``B`` one situation or several): ``B`` held
+    less than ``max_s`` (s) and the
     gripper moved less than ``max_m`` (m, straight-line distance from entering ``B`` to leaving it)
     and turned less than ``max_deg`` (degrees). A hand hovering at a threshold (the shallow-tip angle,
     a contact distance) flips there for tens to hundreds of milliseconds while barely moving; laying
@@ -159,15 +160,28 @@ class ChatterRules:
     settle_s: float = 0.1
 
 
-def _is_chatter(b: TimedSituation, poses: PoseTrack, rules: ChatterRules) -> bool:
-    if b.duration >= rules.max_s:
+def _is_chatter(t0: float, t1: float, poses: PoseTrack, rules: ChatterRules) -> bool:
+    """Is an excursion from ``t0`` to ``t1`` (s) short and still enough to be chatter?"""
+    if t1 - t0 >= rules.max_s:
         return False
-    p0, q0 = poses.at(b.t)
-    p1, q1 = poses.at(b.t + b.duration)
+    p0, q0 = poses.at(t0)
+    p1, q1 = poses.at(t1)
     moved = float(np.linalg.norm(np.asarray(p1) - np.asarray(p0)))
     turn = abs(float(np.dot(np.asarray(q0), np.asarray(q1))))
     turned = float(np.degrees(2.0 * np.arccos(min(turn, 1.0))))
     return moved < rules.max_m and turned < rules.max_deg
+
+
+def _return(out: Sequence[TimedSituation], i: int, poses: PoseTrack, rules: ChatterRules) -> int | None:
+    """The last ``j > i`` at which the situation before ``i`` comes back after an excursion
+    ``out[i:j]`` that is chatter (:func:`_is_chatter`), or None."""
+    a, found = out[i - 1], None
+    for j in range(i + 1, len(out)):
+        if out[j].t - out[i].t >= rules.max_s:
+            break
+        if out[j].situation == a.situation and _is_chatter(out[i].t, out[j].t, poses, rules):
+            found = j
+    return found
 
 
 def _settles(b: TimedSituation, c: TimedSituation, rules: ChatterRules) -> bool:
@@ -182,8 +196,9 @@ def _settles(b: TimedSituation, c: TimedSituation, rules: ChatterRules) -> bool:
 def remove_chatter(
     states: Sequence[TimedSituation], poses: PoseTrack, rules: ChatterRules | None = None
 ) -> list[TimedSituation]:
-    """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`) made one ``A`` (it
-    begins when the first began and holds through the three), repeated until none is left: a flip
+    """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`; ``B`` may be several
+    situations, ``A -> B1 -> ... -> Bk -> A``, the whole excursion within the rules' time and motion)
+    made one ``A`` (it begins when the first began and holds through all), repeated until none is left: a flip
     back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
     C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion.
     A landing after a flight that settles within ``rules.settle_s`` into another contact situation
@@ -196,10 +211,12 @@ def remove_chatter(
     i = 1
     while i + 1 < len(out):
         a, b, c = out[i - 1], out[i], out[i + 1]
-        if a.situation == c.situation and _is_chatter(b, poses, r):
-            merged = TimedSituation(a.t, round(a.duration + b.duration + c.duration, 9), a.situation,
-                                    a.topological, max(a.force or 0.0, c.force or 0.0), a.through_free)
-            out[i - 1 : i + 2] = [merged]
+        j = _return(out, i, poses, r)
+        if j is not None:
+            c = out[j]
+            merged = TimedSituation(a.t, round(c.t + c.duration - a.t, 9), a.situation, a.topological,
+                                    max(x.force or 0.0 for x in (a, c)), a.through_free)
+            out[i - 1 : j + 1] = [merged]
             i = max(i - 1, 1)
         elif c.through_free and b.duration < r.settle_s and is_instable(a.situation.contacts) \
                 and is_instable(b.situation.contacts):

@@ -24,20 +24,12 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
 
 def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
     """The program of a recording, and why the recording ended early (its end marker says) or None."""
-    from dlovr.model.program import PoseTrack, compile_program
+    from dlovr.model.program import compile_program
 
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
-    try:
-        t = np.array([float(p["t"]) for p in payloads])
-        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float).reshape(-1, 3)
-        quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
-        track = PoseTrack(t, pos, quat.reshape(-1, 4))
-    except (KeyError, TypeError, ValueError) as e:
-        raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
-    wrench = rec.wrench()
-    track, wrench, smoothing = _intended(rec, track, wrench)
+    track, wrench, smoothing = compile_inputs(rec)
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     if smoothing:
         from dataclasses import replace
@@ -46,6 +38,24 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
 
         prog = replace(prog, smoothing_s=WINDOW_S, smoothing=smoothing)
     return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+
+
+def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:
+    """What a recording's program is compiled from besides its kept situations: the gripper's pose
+    track (a ``PoseTrack``), the wrench (a ``WrenchSeries`` or None) and why they were smoothed ("":
+    as recorded; see :func:`_intended`)."""
+    from dlovr.model.program import PoseTrack
+
+    payloads = rec.states()
+    try:
+        t = np.array([float(p["t"]) for p in payloads])
+        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+        quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
+        track = PoseTrack(t, pos.reshape(-1, 3), quat.reshape(-1, 4))
+    except (KeyError, TypeError, ValueError) as e:
+        why = f"bad gripper pose in a contact-state message: {one_line(e)}"
+        raise RecordingError(f"{rec.path}: {why}") from None
+    return _intended(rec, track, rec.wrench())
 
 
 def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:

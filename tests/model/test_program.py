@@ -303,3 +303,14 @@ def test_a_landing_that_settles_at_once_lands_where_it_settles_and_a_new_contact
     assert [k.situation.format() for k in kept] == [vi, els, vs]
     assert kept[1].through_free and kept[1].t == 1.1
     assert [m.label for m in compile_program(states, straight_track(4)).macros] == ["S,E", "E", "end"]
+
+
+def test_an_excursion_through_several_situations_that_comes_back_at_once_is_chatter():
+    from dlovr.model.program import remove_chatter
+
+    hop = "V/G & E/N & E/F[table.F1] & E/N & V/N"
+    states = _seq((0, 1, _N), (1, 2, _EF), (3, 0.036, _N), (3.036, 0.04, hop), (3.076, 2, _EF),
+                  (5.076, 1, _VF))
+    kept = remove_chatter(states, straight_track(8))
+    assert [k.situation.format() for k in kept] == [_N, _EF, _VF]
+    assert kept[1].duration == pytest.approx(4.076)
