@@ -74,6 +74,10 @@ def success(program: Program, rec: Path, args: argparse.Namespace) -> tuple[floa
     return prog, replay
 
 
+def _pct(x: float) -> str:
+    return "-" if x != x else f"{x:.0%}"  # NaN: no trials run
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--scripts", nargs="+", default=list(SCRIPTS), choices=SCRIPTS)
@@ -99,15 +103,15 @@ def main() -> None:
             ok, replay = success(prog, rec, args) if args.trials > 0 else (float("nan"), float("nan"))
             rows.append((len(prog.macros), dist, ok, replay))
             print(f"{name:<12} {k:>4} {len(prog.macros):>6} {len(prog.macros) / len(ref.macros):>5.2f} "
-                  f"{dist:>4} {'yes' if dist == 0 else 'no':>4} {ok:>7.0%} {replay:>6.0%}  "
+                  f"{dist:>4} {'yes' if dist == 0 else 'no':>4} {_pct(ok):>7} {_pct(replay):>6}  "
                   f"{' '.join(labels(prog))}", flush=True)
         same = sum(r[1] == 0 for r in rows)
         worst = max(r[0] for r in rows) / len(ref.macros)
         mean_ok = sum(r[2] for r in rows) / len(rows)
         mean_replay = sum(r[3] for r in rows) / len(rows)
         print(f"{name:<12}  all: scripted {len(ref.macros)} macros ({' '.join(labels(ref))}); classes "
-              f"equal in {same}/{len(rows)}, macros <= {worst:.2f}x, program {mean_ok:.0%} vs replay "
-              f"{mean_replay:.0%} ({time.perf_counter() - t0:.0f} s)", flush=True)
+              f"equal in {same}/{len(rows)}, macros <= {worst:.2f}x, program {_pct(mean_ok)} vs replay "
+              f"{_pct(mean_replay)} ({time.perf_counter() - t0:.0f} s)", flush=True)
 
 
 if __name__ == "__main__":
