@@ -32,12 +32,27 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
     track, wrench, smoothing = compile_inputs(rec)
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     if smoothing:
-        from dataclasses import replace
-
-        from dlovr.model.smoothing import WINDOW_S
-
-        prog = replace(prog, smoothing_s=WINDOW_S, smoothing=smoothing)
+        prog = _smoothed_program(prog, smoothing)
     return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+
+
+def _smoothed_program(prog: Any, why: str) -> Any:
+    """``prog`` marked as compiled from the smoothed track and wrench: ``smoothing_s``, ``smoothing``,
+    and every derived detection parameter's text saying so."""
+    from dataclasses import replace
+
+    from dlovr.model.smoothing import PASSES, WINDOW_S
+
+    note = f" (from the wrench averaged over {WINDOW_S:g} s, {PASSES} passes: the hand's tremor taken out)"
+
+    def noted(texts: dict[str, str]) -> dict[str, str]:
+        return {k: v + note if v.startswith("derived:") else v for k, v in texts.items()}
+
+    macros = tuple(
+        replace(m, detection=tuple(replace(d, derivation=noted(d.derivation)) for d in m.detection))
+        for m in prog.macros
+    )
+    return replace(prog, macros=macros, smoothing_s=WINDOW_S, smoothing=why)
 
 
 def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:

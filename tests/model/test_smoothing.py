@@ -68,3 +68,19 @@ def test_programs_say_how_they_were_smoothed_and_the_executor_follows_suit():
     assert calm is not None and sm.tremor_of(T, calm.pos) < sm.TREMOR_ACCEL
     with pytest.raises(ValueError, match="smoothing_s"):
         Program.from_json({**json.loads(shaky.dumps()), "smoothing_s": -1})
+
+
+def test_a_smoothed_program_says_so_per_derived_parameter():
+    from dlovr.model.derivation import WrenchSeries
+    from dlovr.recording.compile import _smoothed_program
+
+    states = [TimedSituation(0.0, 1.0, P("V/G & E/N & V/N")),
+              TimedSituation(1.0, 3.0, P("V/G & E/N & V/F[t.F1]"))]
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(T), 1))
+    force = np.zeros((len(T), 3))
+    force[T >= 1.0, 2] = 0.2
+    prog = compile_program(states, PoseTrack(T, legs(), quat), wrench=WrenchSeries(T, force, force * 0))
+    marked = _smoothed_program(prog, "why")
+    texts = [v for m in marked.macros for d in m.detection for v in d.derivation.values()]
+    assert texts and all(v.endswith("tremor taken out)") for v in texts if v.startswith("derived:"))
+    assert marked.smoothing_s == sm.WINDOW_S and marked.smoothing == "why"
