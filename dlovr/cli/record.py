@@ -174,7 +174,8 @@ def demo_cmd(scene_ref: str, script_path: str | None, out: str | None, as_json: 
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output file if it exists.")
 @click.option("--trials", type=click.IntRange(min=1), help="Record N demonstrations in perturbed scenes.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of the trials.")
-@click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help="Perturb, as `dlovr run --vary`.")
+@click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC",
+              help="Perturb, as `dlovr run --vary`; demo.KEY=LEVEL: a person's motion (docs/people.md).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True, help="Processes.")
 @cluster_option
 @finishes_on_sigterm
@@ -196,6 +197,8 @@ def record_cmd(
 
     With --trials N -o DIR: N demonstrations, each in the scene perturbed by --vary (the syntax and
     draws of `dlovr run --vary`, deterministic from --seed), as DIR/demo_KKK.mcap with DIR/demos.json;
+    --vary demo.KEY=LEVEL plays the script with a person's motion (drift, tremor, pace, key jog:
+    docs/people.md; demo.person=1 for the defaults);
     on --workers local processes or, with --cluster, on Ray. `dlovr network DIR` merges them.
 
     Exit status: 0 done; 2 bad input; 1 the simulation diverged (the recording is kept up to there;
@@ -236,7 +239,7 @@ def _record_trials(
 
     script = load_script(script_path)
     scene = script_scene(script, scene_ref)
-    variations = parse_varies(varies, scene)
+    variations = parse_varies(varies, scene, demo=True)
     if os.path.exists(out) and not os.path.isdir(out):
         raise UserError(f"{out}: exists and is not a directory")
     setup = DemoSetup(

@@ -8,10 +8,15 @@ the trial, the seed, the drawn values and ``base_scene_sha256``, the hash of the
 by which ``dlovr network`` merges perturbed recordings of one scene. ``DIR/demos.json`` lists them.
 A demonstration whose simulation diverged is kept up to there and reported; one whose perturbed
 scene cannot start (the cable inside an obstacle) writes no file and is reported.
+
+With ``--vary demo.*`` keys the script is played by the person-like demonstrator
+(:mod:`dlovr.recording.person`, docs/people.md), its hand drawn from the seed and the trial; the
+recording's metadata names the demonstrator (``demonstrator``: its motion's fields as JSON).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,9 +50,12 @@ def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
     """Record demonstration ``trial`` (see the module docstring); a JSON-able summary of it."""
     from dlovr.execution.run import fresh_simulator
     from dlovr.recording import DemoRecorder
+    from dlovr.recording.person import PersonScript, motion_of
     from dlovr.recording.scripted import play_script
 
     scene, values = perturb(setup.scene, setup.variations, setup.seed, trial)
+    motion = motion_of(values)
+    script = setup.script if motion is None else PersonScript(setup.script, motion, setup.seed, trial)
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, "path": None}
     sim, why = fresh_simulator(scene, setup.pieces)
     if sim is None:
@@ -61,8 +69,10 @@ def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
         "vary": json.dumps(values),
         "base_scene_sha256": setup.base_sha256,
     }
+    if motion is not None:
+        meta["demonstrator"] = json.dumps(dataclasses.asdict(motion))
     with DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta) as rec:
-        error = play_script(sim, setup.script, rec)
+        error = play_script(sim, script, rec)
     return {**out, "path": path.name, "error": error, "situations": len(sim.tracker.kept)}
 
 

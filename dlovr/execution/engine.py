@@ -49,7 +49,7 @@ class Engine:
         on_step: Callable[[Any], None] | None = None,
         on_event: Callable[[Event], None] | None = None,
     ) -> None:
-        self.program, self.sim, self.track, self.scene = program, sim, track, scene
+        self.program, self.sim, self.track, self.scene = program, sim, smoothed(program, track), scene
         self.opts = opts if opts is not None else ExecOptions()
         self.network = network if network is not None else NetworkOptions()
         self._on_step, self._on_event = on_step, on_event
@@ -181,3 +181,15 @@ def execute(
     if eng.execution is None:
         raise RuntimeError(f"the run ended without an outcome: {eng.error}")
     return eng.execution
+
+
+def smoothed(program: Runnable, track: DemoTrack | None) -> DemoTrack | None:
+    """The track a compiled program follows: its demonstration's, smoothed as the program was
+    compiled (``Program.smoothing_s``: a trembling hand's track; :mod:`dlovr.model.smoothing`)."""
+    window = getattr(program, "smoothing_s", 0.0)
+    if track is None or not window:
+        return track
+    from dlovr.model.smoothing import smooth_poses
+
+    pos, quat = smooth_poses(track.t, track.pos, track.quat, window)
+    return DemoTrack(track.t, pos, quat)

@@ -6,7 +6,12 @@ Keys name scene-file entries (docs/scenes.md):
   ``dlo.friction``: a number of the cable;
 - ``gripper.pos``: the gripper's start position (the cable hangs from it);
 - ``objects.pos``: the positions of all objects together (one common shift: the environment as a
-  whole sits elsewhere); ``objects.NAME.pos``: the position of the object ``NAME`` alone.
+  whole sits elsewhere); ``objects.NAME.pos``: the position of the object ``NAME`` alone;
+- ``demo.KEY`` (``dlovr record --trials`` only): the person-like demonstrator
+  (:mod:`dlovr.recording.person`, docs/people.md): ``demo.person=S`` (drift and tremor ``S`` times the
+  defaults), ``demo.drift=M`` (m), ``demo.turn=DEG``, ``demo.tremor=M`` (m), ``demo.pace=A..B``,
+  ``demo.ease=E``, ``demo.hesitate=S`` (s), ``demo.jog=M`` (m; 0: no key jogging). A demonstrator key
+  is a level, not a draw: each trial's hand is drawn from the seed and the trial.
 
 Specs:
 
@@ -35,6 +40,8 @@ import numpy as np
 from dlovr.inputs import InputError
 
 NUMBER_KEYS = ("length", "radius", "young", "damping", "mass", "poisson", "friction")
+#: ``demo.KEY`` keys (the person-like demonstrator's levels; ``pace`` a range, the others numbers).
+DEMO_KEYS = ("person", "drift", "turn", "tremor", "pace", "ease", "hesitate", "jog")
 _POS_HINT = "positions vary by an absolute offset in metres, e.g. {key}=0.005"
 _NUM = r"[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?"
 
@@ -45,8 +52,9 @@ class VaryError(InputError):
 
 @dataclass(frozen=True)
 class Variation:
-    """One ``--vary`` item: ``key``, ``kind`` (``relative``, ``range`` or ``offset``) and its bounds:
-    ``lo``/``hi`` factors, or ``hi`` the offset bound (m)."""
+    """One ``--vary`` item: ``key``, ``kind`` (``relative``, ``range``, ``offset`` or ``level``) and its
+    bounds: ``lo``/``hi`` factors, or ``hi`` the offset bound (m), or a demonstrator level ``lo..hi``
+    (``lo == hi`` for a number)."""
 
     key: str
     kind: str
@@ -58,8 +66,11 @@ class Variation:
     def is_position(self) -> bool:
         return self.key.endswith(".pos")
 
-    def draw(self, seed: int, trial: int) -> float | tuple[float, float, float]:
-        """This variation's value in ``trial`` of ``seed``: a factor, or an offset (m, world)."""
+    def draw(self, seed: int, trial: int) -> float | tuple[float, ...]:
+        """This variation's value in ``trial`` of ``seed``: a factor, or an offset (m, world); a
+        demonstrator level is the level itself (a number, or ``(lo, hi)`` for a range)."""
+        if self.kind == "level":
+            return (self.lo, self.hi) if self.key == "demo.pace" else self.lo
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, int(trial), zlib.crc32(self.key.encode())])
         if self.kind == "offset":
             offset = tuple(float(x) for x in rng.uniform(-self.hi, self.hi, 3))
@@ -75,12 +86,38 @@ class Variation:
         return float(math.sqrt(sum(float(x) ** 2 for x in value)))
 
 
-def parse_vary(item: str, scene: Any = None) -> Variation:
-    """Parse ``KEY=SPEC`` (see the module docstring); with ``scene``, object names are checked."""
+def _parse_demo(item: str, key: str, spec: str) -> Variation:
+    """A ``demo.KEY=LEVEL`` item (``pace``: ``A..B``, the others a number >= 0)."""
+    name = key.split(".", 1)[1]
+    if name not in DEMO_KEYS:
+        known = ", ".join("demo." + k for k in DEMO_KEYS)
+        raise VaryError(f"--vary {item!r}: unknown key {key!r} (known: {known})")
+    if name == "pace":
+        m = re.fullmatch(rf"({_NUM})\s*\.\.\s*({_NUM})", spec)
+        if m is None or not 0 < float(m.group(1)) <= float(m.group(2)) <= 10:
+            raise VaryError(f"--vary {item!r}: demo.pace is a range A..B of duration factors, "
+                            "0 < A <= B <= 10")
+        return Variation(key, "level", float(m.group(1)), float(m.group(2)), spec)
+    bound = {"ease": 1.0, "hesitate": 10.0, "person": 20.0, "turn": 20.0}.get(name, 0.05)
+    if re.fullmatch(_NUM, spec) is None or not 0 <= float(spec) <= bound:
+        unit = {"ease": "", "hesitate": " s", "person": "x", "turn": " deg"}.get(name, " m")
+        raise VaryError(f"--vary {item!r}: {key} is a number in [0, {bound:g}]{unit}")
+    return Variation(key, "level", float(spec), float(spec), spec)
+
+
+def parse_vary(item: str, scene: Any = None, demo: bool = False) -> Variation:
+    """Parse ``KEY=SPEC`` (see the module docstring); with ``scene``, object names are checked;
+    ``demo``: the demonstrator's ``demo.*`` keys are allowed (recording demonstrations)."""
     if "=" not in item:
         raise VaryError(f"--vary {item!r}: expected KEY=SPEC, e.g. dlo.length=10%")
     key, spec = (x.strip() for x in item.split("=", 1))
     parts = key.split(".")
+    if parts[0] == "demo":
+        if not demo:
+            raise VaryError(
+                f"--vary {item!r}: demo.* keys vary demonstrations (dlovr record --script S --trials N)"
+            )
+        return _parse_demo(item, key, spec)
     valid = (
         (len(parts) == 2 and parts[0] == "dlo" and parts[1] in NUMBER_KEYS)
         or key in ("gripper.pos", "objects.pos")
@@ -120,9 +157,10 @@ def parse_vary(item: str, scene: Any = None) -> Variation:
 
 
 
-def parse_varies(items: Sequence[str], scene: Any = None) -> tuple[Variation, ...]:
-    """Every ``--vary KEY=SPEC`` of a command; a key given twice is an error (:class:`VaryError`)."""
-    variations = tuple(parse_vary(v, scene) for v in items)
+def parse_varies(items: Sequence[str], scene: Any = None, demo: bool = False) -> tuple[Variation, ...]:
+    """Every ``--vary KEY=SPEC`` of a command; a key given twice is an error (:class:`VaryError`);
+    ``demo``: the demonstrator's keys are allowed."""
+    variations = tuple(parse_vary(v, scene, demo) for v in items)
     keys = [v.key for v in variations]
     if len(set(keys)) != len(keys):
         raise VaryError(f"--vary: key {next(k for k in keys if keys.count(k) > 1)!r} given twice")
@@ -142,6 +180,8 @@ def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) 
         x = v.draw(seed, trial)
         values[v.key] = list(x) if isinstance(x, tuple) else x
         parts = v.key.split(".")
+        if parts[0] == "demo":
+            continue  # the demonstrator's level: no change of the scene
         off = cast(tuple[float, float, float], x)  # what a ".pos" key draws; the others draw a factor
         if parts[0] == "dlo":
             dlo = replace(dlo, **{parts[1]: getattr(dlo, parts[1]) * float(cast(float, x))})

@@ -14,7 +14,7 @@ is expressed in the gripper frame at the macro's start; times in seconds; forces
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
@@ -44,6 +44,7 @@ from dlovr.model.transitions import (
     changes,
     classify_change,
     classify_step,
+    is_instable,
     principal,
     successional_contacts,
 )
@@ -55,6 +56,7 @@ __all__ = [  # the program format's names, importable from here too (dlovr.model
     "RISKY",
     "RISK_LEVELS",
     "RISK_OF_CLASS",
+    "ChatterRules",
     "ContactChange",
     "ContactSpec",
     "Detection",
@@ -70,6 +72,7 @@ __all__ = [  # the program format's names, importable from here too (dlovr.model
     "motion_between",
     "program_schema",
     "readable_versions",
+    "remove_chatter",
     "risk",
     "summarize",
 ]
@@ -130,6 +133,102 @@ def motion_between(track: PoseTrack, t0: float, t1: float) -> Motion:
         cast(_Vec3, tup(d)), cast(_Vec3, tup(r0.T @ d)), cast(_Vec3, tup(matrix_to_rotvec(r0.T @ r1))),
         round(t1 - t0, 9), cast(_Vec3, tup(p0)), cast(_Quat, tup(q0)),
     )
+
+
+# --------------------------------------------------------------------------------------------------
+# Chatter: a situation left and re-entered without the task moving on (docs/model.md, section 6)
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ChatterRules:
+    """When ``A -> B -> A`` is chatter, not two transitions (``B`` one situation or several): ``B`` held
+    less than ``max_s`` (s) and the
+    gripper moved less than ``max_m`` (m, straight-line distance from entering ``B`` to leaving it)
+    and turned less than ``max_deg`` (degrees). A hand hovering at a threshold (the shallow-tip angle,
+    a contact distance) flips there for tens to hundreds of milliseconds while barely moving; laying
+    a cable down, dragging it and lifting it again takes seconds and centimetres.
+
+    ``settle_s``: a landing after a flight (``S,E``) that holds less than this (s) before the cable
+    bounces off again or its landed contact changes (without a new contact: no ``E``) is the impact,
+    not a situation: the landing is the one it settles in; and an instable situation held less than
+    it between an instable one and a flight is the slip into the flight."""
+
+    max_s: float = 1.0
+    max_m: float = 0.05
+    max_deg: float = 20.0
+    settle_s: float = 0.1
+
+
+def _is_chatter(t0: float, t1: float, poses: PoseTrack, rules: ChatterRules) -> bool:
+    """Is an excursion from ``t0`` to ``t1`` (s) short and still enough to be chatter?"""
+    if t1 - t0 >= rules.max_s:
+        return False
+    p0, q0 = poses.at(t0)
+    p1, q1 = poses.at(t1)
+    moved = float(np.linalg.norm(np.asarray(p1) - np.asarray(p0)))
+    turn = abs(float(np.dot(np.asarray(q0), np.asarray(q1))))
+    turned = float(np.degrees(2.0 * np.arccos(min(turn, 1.0))))
+    return moved < rules.max_m and turned < rules.max_deg
+
+
+def _return(out: Sequence[TimedSituation], i: int, poses: PoseTrack, rules: ChatterRules) -> int | None:
+    """The last ``j > i`` at which the situation before ``i`` comes back after an excursion
+    ``out[i:j]`` that is chatter (:func:`_is_chatter`), or None."""
+    a, found = out[i - 1], None
+    for j in range(i + 1, len(out)):
+        if out[j].t - out[i].t >= rules.max_s:
+            break
+        if out[j].situation == a.situation and _is_chatter(out[i].t, out[j].t, poses, rules):
+            found = j
+    return found
+
+
+def _settles(b: TimedSituation, c: TimedSituation, rules: ChatterRules) -> bool:
+    """Is ``b`` the impact of a landing that settles into ``c``: reached by a flight, held less than
+    ``rules.settle_s``, and left either by another flight (a bounce) or by a change of the landed
+    contact (no ``E``: a new contact made after the landing is a transition of its own)?"""
+    if not (b.through_free and b.duration < rules.settle_s and successional_contacts(c.situation)):
+        return False
+    return c.through_free or "E" not in classify_step(b.situation, c.situation, False)
+
+
+def remove_chatter(
+    states: Sequence[TimedSituation], poses: PoseTrack, rules: ChatterRules | None = None
+) -> list[TimedSituation]:
+    """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`; ``B`` may be several
+    situations, ``A -> B1 -> ... -> Bk -> A``, the whole excursion within the rules' time and motion)
+    made one ``A`` (it begins when the first began and holds through all), repeated until none is left: a flip
+    back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
+    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion.
+    A landing after a flight that settles within ``rules.settle_s`` into another contact situation
+    (a bounce, or a change of the landed contact without a new one, :func:`_settles`) lands there
+    (``S,E`` into the settled situation, not ``S,E`` then ``C``); the other way round, a brief
+    instable situation between an instable one and a flight is the cable slipping off (``I, S,E``,
+    not ``I, I, S,E``)."""
+    r = rules or ChatterRules()
+    out = list(states)
+    i = 1
+    while i + 1 < len(out):
+        a, b, c = out[i - 1], out[i], out[i + 1]
+        j = _return(out, i, poses, r)
+        if j is not None:
+            c = out[j]
+            merged = TimedSituation(a.t, round(c.t + c.duration - a.t, 9), a.situation, a.topological,
+                                    max(x.force or 0.0 for x in (a, c)), a.through_free)
+            out[i - 1 : j + 1] = [merged]
+            i = max(i - 1, 1)
+        elif c.through_free and b.duration < r.settle_s and is_instable(a.situation.contacts) \
+                and is_instable(b.situation.contacts):
+            # slipping off: a brief instable contact on the way from an instable one into a flight
+            out[i - 1 : i + 1] = [replace(a, duration=round(a.duration + b.duration, 9))]
+        elif _settles(b, c, r):
+            # the impact of a landing: the flight lands where the cable settles
+            out[i : i + 2] = [TimedSituation(b.t, round(b.duration + c.duration, 9), c.situation,
+                                             c.topological, c.force, True)]
+        else:
+            i += 1
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -215,6 +314,7 @@ def compile_program(
     source: str = "",
     wrench: WrenchSeries | None = None,
     rules: DerivationRules | None = None,
+    chatter: ChatterRules | None = ChatterRules(),
 ) -> Program:
     """Compile a demonstration into a program of macros (docs/model.md, Programs).
 
@@ -223,10 +323,13 @@ def compile_program(
     transition, to the end of ``poses``, is the final macro. ``wrench``: the demonstration's sensed
     gripper wrench, from which each macro's detection parameters are derived
     (:func:`dlovr.model.derivation.derive`); without it every parameter is its class's default,
-    marked as such.
+    marked as such. ``chatter``: a situation left and re-entered after a short time and little
+    motion is one (:func:`remove_chatter`; None keeps every flip).
     """
     if not states:
         raise ValueError("a program needs at least one contact situation")
+    if chatter is not None:
+        states = remove_chatter(states, poses, chatter)
     macros: list[Macro] = []
     anchor = 0
     for k in range(1, len(states)):

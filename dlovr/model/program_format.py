@@ -199,7 +199,10 @@ class Program:
     """A compiled program: its macros in order (the classed ones, then the final one), as written to
     and read from ``*.program.json`` (:meth:`dumps`, :meth:`from_json`, :meth:`load`; the format is
     ``dlovr/data/program.schema.json``). ``scene``: the scene the file names, if any; ``path``: the
-    file it was read from. Neither is written."""
+    file it was read from. Neither is written. ``smoothing_s``: the moving-average window (s) the
+    demonstrated track and wrench were smoothed over (:mod:`dlovr.model.smoothing`; 0: taken as
+    recorded), and ``smoothing`` says why; both written only when not 0 (the executor follows the
+    demonstrated track smoothed the same way)."""
 
     name: str
     source: str
@@ -208,14 +211,18 @@ class Program:
     summary: dict[str, int] = field(default_factory=dict)
     scene: str | None = None
     path: Path | None = None
+    smoothing_s: float = 0.0
+    smoothing: str = ""
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
         for m in d["macros"]:
             if m["frame"] is None:
                 del m["frame"]
-        return {"version": d["version"], "name": d["name"], "source": d["source"],
-                "macros": d["macros"], "summary": d["summary"]}
+        out = {"version": d["version"], "name": d["name"], "source": d["source"]}
+        if self.smoothing_s > 0:
+            out |= {"smoothing_s": self.smoothing_s, "smoothing": self.smoothing}
+        return {**out, "macros": d["macros"], "summary": d["summary"]}
 
     def dumps(self) -> str:
         return json.dumps(self.to_json(), indent=2, sort_keys=False, ensure_ascii=False) + "\n"
@@ -505,6 +512,9 @@ def _read_program(raw: Any, source: str | Path) -> Program:
         raise r.err("version", f"program format {raw.get('version')!r}, this dlovr runs formats {known}")
     macros = _read_macros(r, raw)
     scene, path = raw.get("scene"), str(source)
+    smoothing = raw.get("smoothing_s", 0.0)
+    if not isinstance(smoothing, int | float) or isinstance(smoothing, bool) or not 0 <= smoothing <= 10:
+        raise r.err("smoothing_s", f"must be a number of seconds in [0, 10], got {smoothing!r}")
     return Program(
         name=str(raw.get("name", Path(path).stem)),
         source=str(raw.get("source", "")),
@@ -512,4 +522,6 @@ def _read_program(raw: Any, source: str | Path) -> Program:
         summary=summarize(macros),
         scene=scene if isinstance(scene, str) and scene else None,
         path=Path(path) if path != "<program>" else None,
+        smoothing_s=float(smoothing),
+        smoothing=str(raw.get("smoothing", "")),
     )

@@ -24,21 +24,82 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
 
 def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
     """The program of a recording, and why the recording ended early (its end marker says) or None."""
-    from dlovr.model.program import PoseTrack, compile_program
+    from dlovr.model.program import compile_program
 
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
+    track, wrench, smoothing = compile_inputs(rec)
+    prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
+    if smoothing:
+        prog = _smoothed_program(prog, smoothing)
+    return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+
+
+def _smoothed_program(prog: Any, why: str) -> Any:
+    """``prog`` marked as compiled from the smoothed track and wrench: ``smoothing_s``, ``smoothing``,
+    and every derived detection parameter's text saying so."""
+    from dataclasses import replace
+
+    from dlovr.model.smoothing import PASSES, WINDOW_S
+
+    note = f" (from the wrench averaged over {WINDOW_S:g} s, {PASSES} passes: the hand's tremor taken out)"
+
+    def noted(texts: dict[str, str]) -> dict[str, str]:
+        return {k: v + note if v.startswith("derived:") else v for k, v in texts.items()}
+
+    macros = tuple(
+        replace(m, detection=tuple(replace(d, derivation=noted(d.derivation)) for d in m.detection))
+        for m in prog.macros
+    )
+    return replace(prog, macros=macros, smoothing_s=WINDOW_S, smoothing=why)
+
+
+def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:
+    """What a recording's program is compiled from besides its kept situations: the gripper's pose
+    track (a ``PoseTrack``), the wrench (a ``WrenchSeries`` or None) and why they were smoothed ("":
+    as recorded; see :func:`_intended`)."""
+    from dlovr.model.program import PoseTrack
+
+    payloads = rec.states()
     try:
         t = np.array([float(p["t"]) for p in payloads])
-        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float).reshape(-1, 3)
+        pos = np.array([p.get("gripper_pos", [0.0, 0.0, 0.0]) for p in payloads], dtype=float)
         quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
-        track = PoseTrack(t, pos, quat.reshape(-1, 4))
+        track = PoseTrack(t, pos.reshape(-1, 3), quat.reshape(-1, 4))
     except (KeyError, TypeError, ValueError) as e:
-        raise RecordingError(f"{path}: bad gripper pose in a contact-state message: {one_line(e)}") from None
-    wrench = rec.wrench()
-    prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
-    return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+        why = f"bad gripper pose in a contact-state message: {one_line(e)}"
+        raise RecordingError(f"{rec.path}: {why}") from None
+    return _intended(rec, track, rec.wrench())
+
+
+def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
+    """The track and wrench to compile from, and why they were smoothed ("" when not): a
+    demonstration whose commanded track trembles (:func:`dlovr.model.smoothing.tremor_of`) is
+    compiled from its commanded track and wrench smoothed (the motion meant, the force a detector
+    will see following it); any other from its contact-state poses and its wrench as recorded."""
+    from dlovr.model import smoothing as sm
+    from dlovr.model.derivation import WrenchSeries
+    from dlovr.model.program import PoseTrack
+
+    steps, pos, quat = rec.commands()
+    t = np.asarray(steps, dtype=float) * rec.dt
+    tremor = sm.tremor_of(t, pos)
+    if tremor <= sm.TREMOR_ACCEL:
+        return track, wrench, ""
+    spos, squat = sm.smooth_poses(t, pos, quat)
+    why = (
+        f"the commanded track trembles (median acceleration {tremor:.2f} m/s^2, above "
+        f"{sm.TREMOR_ACCEL:g}): "
+        f"motions and the executor's path are the track averaged over {sm.WINDOW_S:g} s "
+        f"({sm.PASSES} passes)"
+    )
+    if wrench is not None and len(wrench.t):
+        n = sm.samples(wrench.t, sm.WINDOW_S)
+        force, torque = sm.moving_average(wrench.force, n), sm.moving_average(wrench.torque, n)
+        wrench = WrenchSeries(wrench.t, force, torque)
+        why += ", detection parameters derived from the wrench averaged the same way"
+    return PoseTrack(t, spos, squat), wrench, why
 
 
 # --------------------------------------------------------------------------------------------------

@@ -99,6 +99,10 @@ class ContactState:
 class ContactTracker:
     """Turns simulation steps into contact situations, debounced into the demonstration's sequence.
 
+    ``tip_band_deg`` is the hysteresis of the end-vertex rule (docs/model.md, section 2): a tip that
+    touches keeps touching until its last segment points into the surface by less than the tip angle
+    minus this band (degrees); one that does not must pass the tip angle itself.
+
     ``hold`` (s) is the flicker hold time and ``flight`` (s) the flight time of the debouncing
     (docs/model.md, :class:`dlovr.model.transitions.Debouncer`). ``changes`` lists every step at
     which the raw situation changed (what a recording stores); ``kept`` the debounced situations.
@@ -117,6 +121,7 @@ class ContactTracker:
     flight: float = DEFAULT_FLIGHT_S
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
+    tip_band_deg: float = 3.0
     changes: list[ContactState] = field(default_factory=list)
     reuse: bool = True
 
@@ -142,6 +147,7 @@ class ContactTracker:
         self._tip: tuple[int, list[list[float]]] | None = None
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
+        self._tip_held = False  # the tip's own contact at the last step (the rule's hysteresis)
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -170,9 +176,13 @@ class ContactTracker:
             tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
             tip_info = self._tip = (self._version, [self._normal(f) for f in tip_faces])
         tip = None
+        angle = self.params.tip_angle_deg
+        if self._tip_held:  # a touching tip holds until the angle passes the threshold by the band
+            angle = max(angle - self.tip_band_deg, 0.0)
         if tip_info[1]:
             a, b = pts[n - 1 :].tolist()  # the last DLO vector, rounded as pts[n] - pts[n - 1]
-            tip = tip_touches([b[0] - a[0], b[1] - a[1], b[2] - a[2]], tip_info[1], self.params.tip_angle_deg)
+            tip = tip_touches([b[0] - a[0], b[1] - a[1], b[2] - a[2]], tip_info[1], angle)
+        self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         if signature == self._signature and self._situation is not None:
             return self._situation
@@ -182,7 +192,7 @@ class ContactTracker:
             self._env,
             pts[1:] - pts[:-1],
             self._normal,
-            tip_angle_deg=self.params.tip_angle_deg,
+            tip_angle_deg=angle,
             gripper_z=z,
         )
         self._signature, self._situation = signature, sit

@@ -240,3 +240,77 @@ def test_a_format_1_program_is_read_with_its_risk_and_summary_derived():
     back = Program.from_json(raw)
     assert [m.risk for m in back.macros] == [m.risk for m in prog.macros]
     assert back.summary == prog.summary and back.final is not None and back.final.kind == "final"
+
+
+# -- chatter (docs/model.md, section 6) --------------------------------------------------------------
+
+
+def _seq(*items):
+    """TimedSituations from (t, duration, situation text)."""
+    return [TimedSituation(t, d, P(s)) for t, d, s in items]
+
+
+_N = "V/G & E/N & V/N"
+_VF = "V/G & E/N & V/F[table.F1]"
+_EF = "V/G & E/N & E/F[table.F1] & V/N"
+
+
+def test_a_brief_flip_back_and_forth_with_little_motion_is_not_two_macros():
+    from dlovr.model.program import remove_chatter
+
+    states = _seq((0, 1, _N), (1, 2, _VF), (3, 0.02, _EF), (3.02, 0.3, _VF), (3.32, 0.01, _EF),
+                  (3.33, 2, _VF), (5.33, 1, _EF))
+    track = straight_track(8)  # 0.1 m/s: the flips move the gripper a few mm
+    kept = remove_chatter(states, track)
+    assert [k.situation.format() for k in kept] == [_N, _VF, _EF]
+    assert kept[1].t == 1 and kept[1].duration == pytest.approx(4.33)
+    prog = compile_program(states, track)
+    assert [m.label for m in prog.macros] == ["E", "C", "end"]
+    assert [m.label for m in compile_program(states, track, chatter=None).macros] == [
+        "E", "C", "C", "C", "C", "C", "end"]
+
+
+def test_laying_down_dragging_and_lifting_stays_four_transitions():
+    # E, C, C, E: the drag (E/F) holds seconds and moves the gripper decimetres: a real detour
+    states = _seq((0, 1, _N), (1, 1, _VF), (2, 3, _EF), (5, 1, _VF), (6, 1, _N))
+    prog = compile_program(states, straight_track(8))
+    assert [m.label for m in prog.macros] == ["E", "C", "C", "E", "end"]
+
+
+def test_a_quick_return_with_much_motion_is_kept():
+    from dlovr.model.program import ChatterRules, remove_chatter
+
+    states = _seq((0, 1, _VF), (1, 0.5, _EF), (1.5, 1, _VF))
+    pos = np.array([[0, 0, 0], [0, 0, 0], [0.2, 0, 0], [0.2, 0, 0]])
+    fast = PoseTrack(np.array([0.0, 1.0, 1.5, 3.0]), pos, np.tile([1.0, 0, 0, 0], (4, 1)))
+    assert len(remove_chatter(states, fast)) == 3
+    assert len(remove_chatter(states, straight_track(4), ChatterRules(max_s=0.4))) == 3
+    assert len(remove_chatter(states, straight_track(4))) == 1
+
+
+def test_a_landing_that_settles_at_once_lands_where_it_settles_and_a_new_contact_stays():
+    from dlovr.model.program import remove_chatter
+
+    vi = "V/G & E/N & V/VI[b.F3,b.F5,h.F2,h.F11]"
+    ef = "V/G & E/N & E/F[h.F6] & V/N"
+    els = "V/G & E/N & V/E^LS[h.F1,h.F6]"
+    vs = "V/G & E/N & V/VS[b.F5,h.F1,h.F6]"
+    states = [TimedSituation(0, 1, P(vi)), TimedSituation(1.1, 0.03, P(ef), through_free=True),
+              TimedSituation(1.13, 0.02, P(els)), TimedSituation(1.15, 1, P(vs))]
+    kept = remove_chatter(states, straight_track(4))
+    # the segment's brief touch of the wall settles into the tip in the groove (C, no new contact);
+    # the groove -> corner step makes a new contact (E): kept however short
+    assert [k.situation.format() for k in kept] == [vi, els, vs]
+    assert kept[1].through_free and kept[1].t == 1.1
+    assert [m.label for m in compile_program(states, straight_track(4)).macros] == ["S,E", "E", "end"]
+
+
+def test_an_excursion_through_several_situations_that_comes_back_at_once_is_chatter():
+    from dlovr.model.program import remove_chatter
+
+    hop = "V/G & E/N & E/F[table.F1] & E/N & V/N"
+    states = _seq((0, 1, _N), (1, 2, _EF), (3, 0.036, _N), (3.036, 0.04, hop), (3.076, 2, _EF),
+                  (5.076, 1, _VF))
+    kept = remove_chatter(states, straight_track(8))
+    assert [k.situation.format() for k in kept] == [_N, _EF, _VF]
+    assert kept[1].duration == pytest.approx(4.076)

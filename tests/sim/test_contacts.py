@@ -338,3 +338,25 @@ def _stack(parts):
         },
         names=parts[0].names,
     )
+
+
+def _leaning(deg, n=21, length=0.3):
+    """A straight cable from the gripper down to its tip on the table, meeting it at ``deg``."""
+    a = np.radians(deg)
+    tip = np.array([0.0, -0.3, R + 2e-4])
+    top = tip + length * np.array([-np.cos(a), 0.0, np.sin(a)])
+    return _line(top, tip, n)
+
+
+def test_the_tip_angle_has_hysteresis(geom):
+    """docs/model.md section 2: a touching tip holds until the angle is the band below the tip angle
+    (15 - 3 = 12 deg); a tip that does not touch must pass 15 deg again."""
+    tip, lying = "V/G & E/N & V/F[table.F1]", "V/G & E/N & E/F[table.F1] & V/N"
+    angles = [17, 13.5, 11, 13.5, 16, 13.5]
+
+    def states(tr):
+        return [tr.update(Rec(_leaning(d), step=k, time=k * 0.002)).discrete.format()
+                for k, d in enumerate(angles)]
+
+    assert states(ContactTracker(geom)) == [tip, tip, lying, lying, tip, tip]
+    assert states(ContactTracker(geom, tip_band_deg=0.0)) == [tip, lying, lying, lying, tip, lying]
