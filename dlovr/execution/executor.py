@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Generator
+from collections import deque
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar, cast
 
@@ -37,7 +38,9 @@ from dlovr.model.detection import (
     Expectation,
     NoiseModel,
     WrenchConditioner,
+    for_sensor,
     make_detector,
+    sensor_weak,
 )
 from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
@@ -58,6 +61,9 @@ ENDED_OK = ("detected", "motion")
 #: soft, high-friction cable still creeps into place after the motion stops (a tip sliding into a
 #: corner goes on at a few mm/s for a second), and the goal is a situation the cable rests in.
 FINAL_SETTLE_S = 2.0
+
+#: How much of the sensed force (s) a session keeps to settle a detector's own smoothing at its start.
+HISTORY_S = 0.3
 
 #: How far (m) a program's start may lie from the scene's gripper pose, and by what angle (deg).
 START_TOL_M = 0.02
@@ -90,7 +96,11 @@ class ExecOptions:
     motion phase (where the gripper last set off after holding still), since the transition came in
     it and the gripper starting or stopping earlier shakes the wrench. ``min_snr``: a detection whose
     demonstrated step is less than this many times the noise before it (a gradual change) ends its
-    macro by motion, as one whose threshold is not below its step does.
+    macro by motion, as one whose threshold is not below its step does. ``sensor_noise`` (N): the
+    white noise the detectors assume of the sensor (:func:`dlovr.model.detection.for_sensor`: their
+    smoothing and threshold floors); ``None``: the simulated ``noise`` (a robot knows its sensor).
+    ``registered``: the objects' true poses are given to the executor (the scene's, against the
+    program's scene ``nominal``; :mod:`dlovr.execution.motion`, "Frames of objects").
     """
 
     detect: str = "force"
@@ -111,6 +121,7 @@ class ExecOptions:
     arm: float = 0.5
     phase_blank: float = 0.15
     min_snr: float = 8.0
+    sensor_noise: float | None = None
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
@@ -129,6 +140,14 @@ class ExecOptions:
             raise ValueError(f"allowance must be >= 1 (times the demonstrated motion), got {self.allowance}")
         if self.frame not in ("world", "relative"):
             raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+        sn = self.sensor_noise
+        if sn is not None and not (isinstance(sn, int | float) and math.isfinite(sn) and sn >= 0):
+            raise ValueError(f"sensor_noise must be a number >= 0, got {sn!r}")
+
+    @property
+    def assumed_noise(self) -> float:
+        """The sensor's white noise (N) the detectors are set for: ``sensor_noise``, else ``noise``."""
+        return self.noise if self.sensor_noise is None else self.sensor_noise
 
 
 @dataclass(frozen=True)
@@ -220,19 +239,27 @@ class _Guard:
         self.macro = m
         self.oracle = opts.detect == "oracle"
         self.detectors: list[Detector] = []
+        sigma = opts.assumed_noise
+        params = [for_sensor(d.cls, d.params, sigma, 1.0 / rate_hz)[0] for d in m.detection]
         if not self.oracle:
             exp = expectation(m)
-            self.detectors = [make_detector(d.cls, d.params, exp, rate_hz) for d in m.detection]
+            pairs = zip(m.detection, params, strict=True)
+            self.detectors = [make_detector(d.cls, p, exp, rate_hz) for d, p in pairs]
         self.peak = 0.0
         self.hold = opts.oracle_hold
         self._since: float | None = None
-        #: every detection's threshold is at or above the demonstrated step: no force signal to watch
-        self.weak = bool(m.detection) and all(_weak(d.cls, d.params, opts.min_snr) for d in m.detection)
+        #: every detection's threshold is at or above the demonstrated step (or too close to it for the
+        #: sensor's noise): no force signal to watch
+        self.weak = bool(m.detection) and all(
+            _weak(d.cls, p, opts.min_snr) for d, p in zip(m.detection, params, strict=True)
+        )
 
-    def start(self, t: float, f: np.ndarray, tq: np.ndarray) -> None:
+    def start(
+        self, t: float, f: np.ndarray, tq: np.ndarray, history: Sequence[tuple[float, np.ndarray]] = ()
+    ) -> None:
         self._since = None
         for d in self.detectors:
-            d.start(t, f, tq)
+            d.start(t, f, tq, history)
 
     def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any, armed: bool = True) -> bool:
         """Whether the transition is seen at ``t``; before ``armed`` a detector that fires is reset
@@ -264,7 +291,7 @@ def _weak(cls: str, params: Any, min_snr: float = 0.0) -> bool:
     if step is None:
         return False
     step = float(step)
-    if step <= 0.0 or (key in params and float(params[key]) >= step):
+    if step <= 0.0 or (key in params and float(params[key]) >= step) or sensor_weak(cls, params):
         return True
     return "noise_n" in params and step < min_snr * float(params["noise_n"])
 
@@ -303,6 +330,9 @@ class Session:
         if sim.tracker is not None and sim.tracker.current is None:
             sim.tracker.restart(rec)
         self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", np.zeros(3)), self.dt)
+        #: the sensed force of the last :data:`HISTORY_S` (time s, force N): settles a detector's own
+        #: smoothing when it starts (kept only for a noisy sensor)
+        self.recent: deque[tuple[float, np.ndarray]] = deque(maxlen=max(1, round(HISTORY_S / self.dt)))
 
     @property
     def signal(self) -> float:
@@ -324,6 +354,8 @@ class Session:
         self.sim.set_target(pos, quat)
         r = self.sim.step()
         self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", np.zeros(3)), self.dt)
+        if self.opts.assumed_noise > 0.0:
+            self.recent.append((float(r.time), self.f))
         if self.on_step is not None:
             self.on_step(r)
         return r
@@ -498,7 +530,7 @@ def run_macro(
     blank = opts.blank if force else 0.0
     started = blank <= 0.0
     if started:
-        guard.start(t0, ses.f, ses.tq)
+        guard.start(t0, ses.f, ses.tq, ses.recent)
     ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
@@ -525,7 +557,7 @@ def run_macro(
                 continue
             if not started:
                 if t - t0 >= blank - 1e-12:
-                    guard.start(t, ses.f, ses.tq)
+                    guard.start(t, ses.f, ses.tq, ses.recent)
                     started = True
                 continue
             # after the allowance the gripper stops short, which shakes the cable: in force mode
