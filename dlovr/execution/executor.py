@@ -30,7 +30,16 @@ from typing import Any, TypeVar, cast
 
 import numpy as np
 
-from dlovr.execution.motion import Quat, ScrewPath, TrackPath, Vec, last_start, local_twist
+from dlovr.execution.motion import (
+    Quat,
+    ScrewPath,
+    ShiftedPath,
+    TrackPath,
+    Vec,
+    eased,
+    last_start,
+    local_twist,
+)
 from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
@@ -44,7 +53,7 @@ from dlovr.model.detection import (
 )
 from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
-from dlovr.transforms import dot, norm, quat_rotate
+from dlovr.transforms import dot, norm, quat_rotate, slerp
 
 T = TypeVar("T")
 #: A run's work between two simulation steps: a generator that yields after each step and returns
@@ -99,8 +108,10 @@ class ExecOptions:
     macro by motion, as one whose threshold is not below its step does. ``sensor_noise`` (N): the
     white noise the detectors assume of the sensor (:func:`dlovr.model.detection.for_sensor`: their
     smoothing and threshold floors); ``None``: the simulated ``noise`` (a robot knows its sensor).
-    ``registered``: the objects' true poses are given to the executor (the scene's, against the
-    program's scene ``nominal``; :mod:`dlovr.execution.motion`, "Frames of objects").
+    ``object_shifts``: (object name, shift m world) pairs, where the objects really are against the
+    demonstration (a registered run, ``dlovr run --registered``; empty: blind): each macro moves in
+    the frame of the object its principal contacts name (:mod:`dlovr.execution.motion`, "Frames of
+    objects").
     """
 
     detect: str = "force"
@@ -122,6 +133,7 @@ class ExecOptions:
     phase_blank: float = 0.15
     min_snr: float = 8.0
     sensor_noise: float | None = None
+    object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
@@ -143,6 +155,11 @@ class ExecOptions:
         sn = self.sensor_noise
         if sn is not None and not (isinstance(sn, int | float) and math.isfinite(sn) and sn >= 0):
             raise ValueError(f"sensor_noise must be a number >= 0, got {sn!r}")
+
+    @property
+    def registered(self) -> bool:
+        """Whether the executor is told where the objects are (``object_shifts``)."""
+        return bool(self.object_shifts)
 
     @property
     def assumed_noise(self) -> float:
@@ -325,6 +342,8 @@ class Session:
         #: once the tip's first touch has been felt (:func:`tip_offset`); turns are repeated about it
         self.tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.tool_known = False
+        #: the shift (m, world) of the objects the motion is in the frame of, as applied so far
+        self.shift: Vec = (0.0, 0.0, 0.0)
         self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
@@ -383,6 +402,8 @@ def program_steps(
     ses.emit("start", 0, f"program {program.name}: {len(classed)} macros, detection {opts.detect}")
     try:
         yield from ses.hold(*ses.mocap_pose(), opts.start_settle)
+        first = macro_shift(classed[0], opts) if classed else None
+        yield from to_start(program.start.start_pos, program.start.start_quat, ses, first)
         if (yield from _classed_steps(classed, ses, out, track)):
             final = program.final
             if final is None and track is not None and classed:
@@ -397,6 +418,56 @@ def program_steps(
         ses.emit("failed", 0, f"simulation diverged outside the macros: {e.reason}")
     out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
     out.sim_time = float(sim.time)
+
+
+#: Speeds (m/s, rad/s) and the shortest time (s) of the move to a program's start pose.
+START_SPEED = 0.02
+START_ANGULAR_SPEED = 0.5
+START_MIN_S = 0.25
+
+
+def macro_shift(m: Macro, opts: ExecOptions) -> Vec | None:
+    """The shift (m, world) of the objects ``m``'s principal contacts name (those it begins, else
+    those it ends; the mean of several), from ``opts.object_shifts``; None where it names none (or
+    the run is blind)."""
+    if not opts.object_shifts:
+        return None
+    shifts = dict(opts.object_shifts)
+    for contacts in (m.established, m.released):
+        names = sorted({o for c in contacts for o in c.objects if o in shifts})
+        if names:
+            return cast(Vec, tuple(sum(shifts[o][i] for o in names) / len(names) for i in range(3)))
+    return None
+
+
+def to_start(
+    start_pos: Any, start_quat: Any, ses: Session, shift: Vec | None = None
+) -> Steps[None]:
+    """Move the gripper to the program's start pose (world; plus ``shift``, the registered shift of
+    the first macro's objects) where it starts more than 0.1 mm or 1 mrad from it: the robot knows
+    its own pose, and the demonstration started there (smoothly, at :data:`START_SPEED`). Nothing
+    where it is there already."""
+    goal = [float(start_pos[i]) + (shift[i] if shift is not None else 0.0) for i in range(3)]
+    here_p, here_q = ses.sim.target_pos.copy(), ses.sim.target_quat.copy()
+    gq = np.asarray(start_quat, dtype=float)
+    gq = gq / math.sqrt(float((gq * gq).sum()))
+    c = min(1.0, abs(dot(here_q.tolist(), gq.tolist())))
+    angle = 2.0 * math.acos(c)
+    dist = math.dist(goal, here_p.tolist())
+    if dist <= 1e-4 and angle <= 1e-3:
+        return
+    ses.shift = shift if shift is not None else (0.0, 0.0, 0.0)
+    period = max(START_MIN_S, dist / START_SPEED, angle / START_ANGULAR_SPEED)
+    a = cast(Vec, tuple(float(x) for x in here_p))
+    b = cast(Vec, tuple(goal))
+    n = max(1, round(period / ses.dt))
+    ses.emit("start", 0, f"to the program's start pose: {dist * 1000:.1f} mm, {math.degrees(angle):.1f} deg")
+    for k in range(1, n + 1):
+        s = k / n
+        k_ease = 0.5 * (1.0 - math.cos(math.pi * s))
+        q = slerp(here_q, gq, k_ease) if angle > 1e-9 else here_q
+        ses.step(np.array(eased(a, b, s)), np.asarray(q))
+        yield
 
 
 def _classed_steps(
@@ -520,6 +591,7 @@ def run_macro(
 
     sim, opts = ses.sim, ses.opts
     path = _path(m, sim, opts, track, t_from, ses.tool)
+    path, shift = _in_object_frame(path, m, ses)
     period = _period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
     allowed = opts.allowance * scale
@@ -538,6 +610,8 @@ def run_macro(
     def ended(
         how: str, t: float, at: float | None, reason: str = "", resume: float | None = None
     ) -> MacroRun:
+        k = min(s, 1.0)  # the part of the object's shift applied
+        ses.shift = cast(Vec, tuple(ses.shift[i] + k * shift[i] for i in range(3)))
         return MacroRun(
             macro=m, started_at=t0, ended_at=t, ended=how, detected_at=at, moved=s * scale, allowed=allowed,
             peak_signal=guard.peak, reason=reason, resume_at=resume,
@@ -573,6 +647,18 @@ def run_macro(
     except SimulationDiverged as e:
         ses.emit("failed", m.index, f"macro {m.index} {m.label}: simulation diverged: {e.reason}")
         return ended("diverged", float(e.time), None, str(e))
+
+
+def _in_object_frame(path: Any, m: Macro, ses: Session) -> tuple[Any, Vec]:
+    """``path`` moved into the frame of the objects ``m`` names (registered runs): the difference
+    between their shift and the shift applied so far is added along the motion; and that difference."""
+    target = macro_shift(m, ses.opts)
+    if target is None:
+        return path, (0.0, 0.0, 0.0)
+    d = cast(Vec, tuple(target[i] - ses.shift[i] for i in range(3)))
+    if max(abs(x) for x in d) <= 1e-12:
+        return path, d
+    return ShiftedPath(path, d), d
 
 
 def _detected(
