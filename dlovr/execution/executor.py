@@ -278,6 +278,10 @@ class _Guard:
         for d in self.detectors:
             d.start(t, f, tq, history)
 
+    def lag(self) -> float:
+        """The delay (s) the fired detector's own smoothing (a noisy sensor) adds to a detection."""
+        return max((d.smoothing_lag() for d in self.detectors if d.fired_at is not None), default=0.0)
+
     def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any, armed: bool = True) -> bool:
         """Whether the transition is seen at ``t``; before ``armed`` a detector that fires is reset
         (keeping its reference), so it fires at arming only if its criterion still holds then."""
@@ -638,7 +642,7 @@ def run_macro(
             # only a transition felt while moving counts (the oracle still waits ``settle``)
             moving = not force or s < opts.allowance
             if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
-                at = _detected(m, ses, track, path, r, s, m.t - period + s * period)
+                at = _detected(m, ses, track, path, r, s, m.t - period + s * period, period)
                 return ended("detected", t, t, resume=at)
             if t - t0 >= limit - 1e-12:
                 why = _allowance_text(m, opts, allowed)
@@ -662,7 +666,8 @@ def _in_object_frame(path: Any, m: Macro, ses: Session) -> tuple[Any, Vec]:
 
 
 def _detected(
-    m: Macro, ses: Session, track: DemoTrack | None, path: Any, r: Any, s: float, at_demo: float
+    m: Macro, ses: Session, track: DemoTrack | None, path: Any, r: Any, s: float, at_demo: float,
+    period: float,
 ) -> float | None:
     """The macro's transition was seen at ``s`` of its ``path`` (record ``r``): stop there (screw
     paths), learn the tip's offset at its first touch, report; where on the demonstration's clock
@@ -671,8 +676,10 @@ def _detected(
         ses.sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
     at = at_demo if track is not None and s < 1.0 else None
     if not ses.tool_known and touches_tip(m):
-        # the approach left undone is the tip's offset, not motion for the next macro
-        ses.tool, ses.tool_known, at = tip_offset(path, s), True, None
+        # the approach left undone is the tip's offset, not motion for the next macro; where the
+        # tip touched: before the detector's own smoothing delayed its detection
+        lag = ses.guard.lag() if ses.guard is not None else 0.0
+        ses.tool, ses.tool_known, at = tip_offset(path, max(s - lag / period, 0.0)), True, None
     ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
     return at
 

@@ -208,6 +208,16 @@ class Detector:
         self._hist: list[tuple[float, np.ndarray]] = []
         self._ema: tuple[float, np.ndarray] | None = None
 
+    def smoothing_lag(self) -> float:
+        """How much later (s) the detector's own smoothing makes it fire on a clean step of the
+        demonstrated size (``step_n``) than without it: ``smooth_s * ln(step / (step - threshold))``
+        (``smooth_s`` where the threshold is not below the step; 0 without smoothing)."""
+        key = _THRESHOLD.get(self.cls)
+        if self.smooth <= 0.0 or key is None or key not in self.params:
+            return 0.0
+        step, thr = self.params.get("step_n", 0.0), self.params[key]
+        return self.smooth * math.log(step / (step - thr)) if step > thr > 0.0 else self.smooth
+
     def _smoothed(self, t: float, f: np.ndarray) -> np.ndarray:
         """``f`` through the detector's own low-pass filter (``f`` itself without one)."""
         if self.smooth <= 0.0:
@@ -435,7 +445,7 @@ class SDetector(Detector):
 #: The thresholds parameter of each class (as :data:`dlovr.model.derivation.THRESHOLD_PARAM`).
 _THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n", "I": "min_force_n"}
 #: A threshold is at least this many standard deviations of the change a detector measures.
-SENSOR_K = 5.0
+SENSOR_K = 4.0
 #: The longest smoothing (s): longer would blur a step within the detectors' 0.15 s reference.
 SENSOR_MAX_SMOOTH_S = 0.06
 #: A threshold above this fraction of the demonstrated step leaves no signal to trust at that noise.
