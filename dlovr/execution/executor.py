@@ -219,6 +219,9 @@ class Execution:
     sim_time: float = 0.0
     wall_time: float = 0.0
     final_done: bool = False
+    goal_force: tuple[float, float, float] | None = None
+    goal_sensed: bool | None = None
+    goal_force_diff: float | None = None
 
 
 def principal_states(situation: Any) -> tuple[str, ...]:
@@ -325,6 +328,29 @@ class DemoTrack:
     t: np.ndarray
     pos: np.ndarray
     quat: np.ndarray
+    #: the force (N, world) the demonstration sensed at its end (mean over its last
+    #: :data:`GOAL_SENSE_S`), where the recording has a wrench channel: what the goal feels like
+    end_force: tuple[float, float, float] | None = None
+
+
+#: The time (s) over which the sensed force at the end of a run (and of the demonstration) is averaged.
+GOAL_SENSE_S = 0.2
+#: How far (N) the force sensed at the end of a run may lie from the demonstration's end force for
+#: the goal to count as confirmed by the sensor (plus 4 standard deviations of the mean's noise).
+GOAL_FORCE_TOL = 0.02
+
+
+def goal_check(
+    sensed: Sequence[float] | np.ndarray, track: DemoTrack | None, noise: float, n: int
+) -> tuple[bool | None, float | None]:
+    """Whether the force sensed at the end of a run (mean of ``n`` samples, N, world) confirms the
+    goal: it lies within :data:`GOAL_FORCE_TOL` plus 4 standard deviations of that mean's noise
+    (white ``noise`` N a sample) of what the demonstration sensed at its end; and the distance (N).
+    (None, None) without a demonstrated end force."""
+    if track is None or track.end_force is None or n <= 0:
+        return None, None
+    d = math.dist(tuple(float(x) for x in sensed), track.end_force)
+    return d <= GOAL_FORCE_TOL + 4.0 * noise / math.sqrt(n), d
 
 
 class Session:
@@ -415,7 +441,7 @@ def program_steps(
             if final is not None:
                 yield from run_final(final, ses, track)
                 out.final_done = True
-            yield from ses.hold(*ses.mocap_pose(), opts.final_settle)
+            yield from final_hold(ses, out, track)
             ses.emit("end", 0, "program done")
     except SimulationDiverged as e:
         out.diverged = str(e)
@@ -472,6 +498,28 @@ def to_start(
         q = slerp(here_q, gq, k_ease) if angle > 1e-9 else here_q
         ses.step(np.array(eased(a, b, s)), np.asarray(q))
         yield
+
+
+def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[None]:
+    """Hold the last pose ``final_settle`` s; the force sensed over its last :data:`GOAL_SENSE_S`
+    (mean) checks the goal against the demonstration's end force (:func:`goal_check`), in ``out``."""
+    pos, quat = ses.mocap_pose()
+    n_all = round(ses.opts.final_settle / ses.dt)
+    n_sense = min(n_all, round(GOAL_SENSE_S / ses.dt))
+    total = np.zeros(3)
+    for k in range(n_all):
+        ses.step(pos, quat)
+        if k >= n_all - n_sense:
+            total = total + ses.f
+        yield
+    if n_sense > 0:
+        sensed = total / n_sense
+        out.goal_force = cast(Vec, tuple(float(x) for x in sensed))
+        out.goal_sensed, out.goal_force_diff = goal_check(sensed, track, ses.opts.noise, n_sense)
+        if out.goal_sensed is not None:
+            word = "confirms" if out.goal_sensed else "does not confirm"
+            ses.emit("end", 0, f"the sensed force {word} the goal ({out.goal_force_diff:.3f} N from the "
+                     "demonstration's end)")
 
 
 def _classed_steps(

@@ -201,11 +201,15 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
     lat = [m["latency"] for m in macros if m["outcome"] == "ok" and m["latency"] is not None]
     false = sum(m["outcome"] == "false" for m in macros)
     failures: dict[str, int] = {}
+    deviations: dict[str, int] = {}
     for t in trials:
         p = t["program"]
         if not p["success"]:
             key = f"macro {p['failed_macro']}" if p["failed_macro"] else p["reason"].split(":")[0]
             failures[key] = failures.get(key, 0) + 1
+            dev = p.get("first_deviation")
+            dkey = f"macro {dev}" if dev is not None else "none"
+            deviations[dkey] = deviations.get(dkey, 0) + 1
     per: dict[str, list[dict[str, Any]]] = {}
     for v in setup.variations:
         rows = []
@@ -246,6 +250,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "median_latency_s": statistics.median(lat) if lat else None,
         "latencies": len(lat),
         "failures": failures,
+        "first_deviations": deviations,
         "per_parameter": per,
         "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
         "retried_trials": sum(t.get("attempts", 1) > 1 for t in trials),
