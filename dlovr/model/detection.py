@@ -484,14 +484,14 @@ def for_sensor(
         return p, {}
     thr = p.get(key, DEFAULTS[cls].get(key, 0.0))
     step = p.get("step_n", thr / _DERIVED_FRACTION)
-    if step <= 0.0:  # no step to see: it ends by its motion anyway
+    if step <= 0.0 or thr >= step:  # no step to see: it ends by its motion anyway
         p["sensor_noise_n"] = max(p.get("sensor_noise_n", 0.0), sigma)
         return p, {"sensor_noise_n": f"derived: the sensor's white noise, {sigma:g} N"}
     tau = SENSOR_MAX_SMOOTH_S
     if thr > 0.0:  # K std of the change (change_std) at most the threshold
         r = SENSOR_K * math.sqrt(2.0) * sigma / thr
         tau = min(max(0.5 * dt * (r * r - 1.0), 0.0), SENSOR_MAX_SMOOTH_S)
-    tau = max(round(tau, 4), p.get("smooth_s", 0.0))
+    tau = max(math.ceil(tau * 1e4 - 1e-9) / 1e4, p.get("smooth_s", 0.0))  # to 0.1 ms, not below
     floor = SENSOR_K * change_std(sigma, dt, tau)
     texts = {"sensor_noise_n": f"derived: the sensor's white noise, {sigma:g} N"}
     p["sensor_noise_n"] = max(p.get("sensor_noise_n", 0.0), sigma)
