@@ -19,8 +19,8 @@ Columns: the program blind, the program registered (rows that move objects), the
 demonstration's commands open loop, and the program's false detections over the macros it ran.
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
 per row). ``--rows`` keeps the rows whose name contains one of the given words; ``--trials 5`` for a
-quick look. The trials run through :func:`dlovr.execution.trials.run_trials` on ``--workers``
-local processes.
+quick look; ``--no-replay`` and ``--blind-only`` leave columns out. The trials run through
+:func:`dlovr.execution.trials.run_trials` on ``--workers`` local processes.
 """
 
 from __future__ import annotations
@@ -98,11 +98,13 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     out: dict[str, Any] = {"row": row.name, "vary": list(row.vary), "noise_n": row.noise,
                            "trials": args.trials, "seed": args.seed}
     t0 = time.perf_counter()
-    blind = run_trials(TrialSetup(program=base["program"], track=base["track"], baseline=True, **common),
+    replay = not args.no_replay
+    blind = run_trials(TrialSetup(program=base["program"], track=base["track"], baseline=replay, **common),
                        args.trials, workers=args.workers)
-    out["program"], out["replay"] = _rate(blind, "program"), _rate(blind, "openloop")
+    out["program"] = _rate(blind, "program")
+    out["replay"] = _rate(blind, "openloop") if replay else None
     out["false"], out["macros"] = _false(blind)
-    if row.moves_objects:
+    if row.moves_objects and not args.blind_only:
         reg = run_trials(TrialSetup(program=base["program"], track=base["track"], registered=True, **common),
                          args.trials, workers=args.workers)
         out["registered"] = _rate(reg, "program")
@@ -124,10 +126,11 @@ def table(results: list[dict[str, Any]]) -> str:
     lines = ["| row | program (blind) | registered | network | replay | false detections |",
              "|---|---|---|---|---|---|"]
     for r in results:
-        below = " **below replay**" if r["program"] < r["replay"] else ""
+        below = " **below replay**" if r["replay"] is not None and r["program"] < r["replay"] else ""
         fd = f"{r['false']} of {r['macros']} ({r['false'] / max(r['macros'], 1):.1%})"
-        lines.append(f"| {r['row']} ({r['trials']} trials, seed {r['seed']}) | {_pct(r['program'])}{below} | "
-                     f"{_pct(r.get('registered'))} | {_pct(r.get('network'))} | {_pct(r['replay'])} | {fd} |")
+        cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r['program'])}{below}",
+                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -165,6 +168,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--rows", help="comma-separated words: keep the rows whose name contains one")
+    ap.add_argument("--no-replay", action="store_true", help="leave the open-loop replay out (faster)")
+    ap.add_argument("--blind-only", action="store_true", help="leave the registered runs out (faster)")
     ap.add_argument("-o", "--output", default="envelope")
     args = ap.parse_args()
 
@@ -185,7 +190,7 @@ def main() -> None:
         results.append(run_row(row, base, args))
         r = results[-1]
         print(f"{row.name}: program {_pct(r['program'])}, registered {_pct(r.get('registered'))}, "
-              f"network {_pct(r.get('network'))}, replay {_pct(r['replay'])}, "
+              f"network {_pct(r.get('network'))}, replay {_pct(r.get('replay'))}, "
               f"false {r['false']}/{r['macros']} ({r['wall_s']} s)", flush=True)
         (out / "envelope.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
     text = table(results)
