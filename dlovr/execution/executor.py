@@ -720,14 +720,19 @@ def _detected(
     """The macro's transition was seen at ``s`` of its ``path`` (record ``r``): stop there (screw
     paths), learn the tip's offset at its first touch, report; where on the demonstration's clock
     (s) the next macro's motion resumes (None: at its own stretch)."""
-    if track is None:
+    # a noisy sensor's detectors smooth the force, which delays them: the transition came ``lag``
+    # earlier, and the gripper goes back to where it was then (the next macro resumes from there)
+    lag = ses.guard.lag() if ses.guard is not None else 0.0
+    s_at = max(s - lag / period, 0.0) if lag > 0.0 else s
+    if lag > 0.0:
+        ses.sim.set_target(*path.at(s_at))
+        at_demo -= (s - s_at) * period
+    elif track is None:
         ses.sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
-    at = at_demo if track is not None and s < 1.0 else None
+    at = at_demo if track is not None and s_at < 1.0 else None
     if not ses.tool_known and touches_tip(m):
-        # the approach left undone is the tip's offset, not motion for the next macro; where the
-        # tip touched: before the detector's own smoothing delayed its detection
-        lag = ses.guard.lag() if ses.guard is not None else 0.0
-        ses.tool, ses.tool_known, at = tip_offset(path, max(s - lag / period, 0.0)), True, None
+        # the approach left undone is the tip's offset, not motion for the next macro
+        ses.tool, ses.tool_known, at = tip_offset(path, s_at), True, None
     ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
     return at
 

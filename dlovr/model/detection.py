@@ -209,14 +209,9 @@ class Detector:
         self._ema: tuple[float, np.ndarray] | None = None
 
     def smoothing_lag(self) -> float:
-        """How much later (s) the detector's own smoothing makes it fire on a clean step of the
-        demonstrated size (``step_n``) than without it: ``smooth_s * ln(step / (step - threshold))``
-        (``smooth_s`` where the threshold is not below the step; 0 without smoothing)."""
-        key = _THRESHOLD.get(self.cls)
-        if self.smooth <= 0.0 or key is None or key not in self.params:
-            return 0.0
-        step, thr = self.params.get("step_n", 0.0), self.params[key]
-        return self.smooth * math.log(step / (step - thr)) if step > thr > 0.0 else self.smooth
+        """How much later (s) the detector's own smoothing makes it fire than without it: its time
+        constant ``smooth_s`` (the delay of a first-order low-pass on a ramp; 0 without smoothing)."""
+        return self.smooth
 
     def _smoothed(self, t: float, f: np.ndarray) -> np.ndarray:
         """``f`` through the detector's own low-pass filter (``f`` itself without one)."""
