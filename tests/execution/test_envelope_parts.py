@@ -82,3 +82,30 @@ def test_the_executor_sets_its_detectors_for_the_noise_it_assumes():
     told = _Guard(touch, ExecOptions(noise=0.02, sensor_noise=0.0), 500.0)
     assert told.detectors[0].smooth == 0.0  # a sensor said to be clean: the program's own parameters
     assert _Guard(PEG.classed[4], ExecOptions(noise=0.2), 500.0).weak  # too noisy: ends by its motion
+
+
+# -- short simulations (the 0.9 s touch demonstration of conftest.py) --------------------------------
+
+
+@pytest.mark.slow
+def test_a_gripper_started_elsewhere_goes_to_the_programs_start_and_a_registered_run_follows_the_table(
+    touch,
+):
+    from dlovr.execution.run import run_program
+    from dlovr.execution.variation import object_shifts
+
+    program, scene, track, pieces = touch
+    moved = replace(scene, gripper=replace(scene.gripper, pos=tuple(
+        x + d for x, d in zip(scene.gripper.pos, (0.003, -0.002, 0.002), strict=True))))
+    events: list = []
+    res = run_program(program, moved, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
+    assert res.success and any("to the program's start pose" in e.text for e in events)
+    lowered = replace(scene, objects=tuple(replace(o, pos=(o.pos[0], o.pos[1], o.pos[2] - 0.01))
+                                           for o in scene.objects))
+    opts = ExecOptions(object_shifts=object_shifts(scene, lowered))
+    events.clear()
+    reg = run_program(program, lowered, opts, track=track, pieces=pieces, on_event=events.append)
+    assert reg.success and reg.first_deviation is None
+    assert any("to the program's start pose" in e.text for e in events)  # moved down with the table
+    quiet = run_program(program, scene, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
+    assert quiet.success and quiet.goal_sensed is not None
