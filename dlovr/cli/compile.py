@@ -33,6 +33,11 @@ from dlovr.cli.common import EXIT_BAD_INPUT, UserError, finishes_on_sigterm, os_
     type=click.Path(dir_okay=False),
     help="Compile this transition network (from `dlovr network`) into a network program (-o FILE).",
 )
+@click.option(
+    "--sensor-noise",
+    type=click.FloatRange(0.0, 1.0),
+    help="White noise (N) of the robot's force sensor: detection thresholds respect it (implies --force).",
+)
 @cluster_option
 @finishes_on_sigterm
 @os_errors_as_user_errors
@@ -43,11 +48,15 @@ def compile_cmd(
     force: bool,
     network_path: str | None,
     cluster: str | None,
+    sensor_noise: float | None = None,
 ) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing),
     or with --network NET.json a transition network into a network program.
 
-    A recording NAME.mcap gives NAME.program.json and NAME.program.txt, beside it or in -o DIR. Two
+    A recording NAME.mcap gives NAME.program.json and NAME.program.txt, beside it or in -o DIR. With
+    --sensor-noise N each detection is set for a force sensor with N newtons of white noise: its own
+    smoothing and a threshold of at least 4 standard deviations of what it measures; a transition
+    whose step is too small for that ends its macro by motion (docs/programs.md, "The sensor"). Two
     recordings with the same name into one -o folder are refused (the message names both). Recordings
     unchanged since they were last compiled there are skipped. A recording that cannot be read is
     named and the others are compiled. Exit status: 0 all compiled or skipped; 2 any failed.
@@ -82,12 +91,17 @@ def compile_cmd(
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
         paths = [p.resolve() for p in paths]
         output_dir = str(Path(output_dir).resolve()) if output_dir else None
+    force = force or bool(sensor_noise)
     tasks = [Task(str(p), (str(p), output_dir, force)) for p in paths]
     done = sorted(
         run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),
         key=lambda d: d.index,
     )
     results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
+    if sensor_noise:
+        for r in results:
+            if r.error is None and r.json_path is not None:
+                for_sensor_noise(r.json_path, sensor_noise)
     record_compiled(results, output_dir)
     if _report(results, summarize(done).retried):
         raise SystemExit(EXIT_BAD_INPUT)
@@ -109,3 +123,27 @@ def _report(results: list[Any], retried: int) -> int:
     counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
     click.echo(", ".join([*counts, f"{len(failed)} failed", f"{retried} retried"]))
     return len(failed)
+
+
+def for_sensor_noise(json_path: str, sigma: float) -> None:
+    """Rewrite a compiled program (``.program.json`` and its ``.program.txt`` listing) with every
+    detection set for a sensor of white noise ``sigma`` N (:func:`dlovr.model.detection.for_sensor`;
+    the simulation's 2 ms samples)."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from dlovr.model.detection import for_sensor
+    from dlovr.model.program import Program
+
+    prog = Program.load(json_path)
+    macros = []
+    for m in prog.macros:
+        dets = []
+        for d in m.detection:
+            params, texts = for_sensor(d.cls, d.params, sigma)
+            dets.append(replace(d, params=params, derivation={**d.derivation, **texts}))
+        macros.append(replace(m, detection=tuple(dets)))
+    prog = replace(prog, macros=tuple(macros))
+    path = Path(json_path)
+    path.write_text(prog.dumps())
+    path.with_name(path.name.removesuffix(".json") + ".txt").write_text(prog.listing())

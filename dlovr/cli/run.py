@@ -50,6 +50,18 @@ _VARY_HELP = (
 )
 @click.option("--noise", "noise_raw", metavar="N", help="Force sensor noise, std. dev. in N (default 0).")
 @click.option(
+    "--sensor-noise",
+    "sensor_noise_raw",
+    metavar="N",
+    help="The sensor noise (N) the detectors are set for (default: --noise).",
+)
+@click.option(
+    "--registered",
+    is_flag=True,
+    help="Tell the executor where the objects are (each trial's true poses; without --trials, the "
+    "scene's against the program's own): macros move in the frame of the objects they touch.",
+)
+@click.option(
     "--path",
     "path_mode",
     metavar="auto|demo|program",
@@ -126,7 +138,23 @@ def run_cmd(**given: Any) -> None:
     if n.trials is not None:
         _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline)), a, n)
         return
+    if a.registered:
+        opts = _registered(program, scene, opts, a)
     _single(program, scene, opts, track if use_track else None, a.out, a.as_json)
+
+
+def _registered(program: Any, scene: Any, opts: Any, a: RunArgs) -> Any:
+    """``opts`` told where ``scene``'s objects are against the scene the program was made in."""
+    from dataclasses import replace
+
+    from dlovr.execution.run import find_recording, resolve_scene
+    from dlovr.execution.variation import object_shifts
+
+    try:
+        nominal = resolve_scene(program, None, find_recording(program, a.recording))
+    except ValueError as e:
+        raise UserError(f"--registered: {e}") from None
+    return replace(opts, object_shifts=object_shifts(nominal, scene))
 
 
 @dataclass(frozen=True)
@@ -137,6 +165,8 @@ class RunArgs:
     scene_ref: str | None
     detect: str
     noise_raw: str | None
+    sensor_noise_raw: str | None
+    registered: bool
     path_mode: str
     recording: str | None
     frame: str
@@ -160,6 +190,7 @@ class Numbers:
     seed, workers."""
 
     noise: float
+    sensor_noise: float | None
     allowance: float
     settle: float
     trials: int | None
@@ -184,6 +215,7 @@ def _numbers(a: RunArgs) -> Numbers:
     """The numeric options, each checked (one line naming the option when bad)."""
     return Numbers(
         noise=_number("--noise", a.noise_raw, minimum=0.0) or 0.0,
+        sensor_noise=_number("--sensor-noise", a.sensor_noise_raw, minimum=0.0),
         allowance=_number("--allowance", a.allowance_raw, minimum=1.0) or 1.5,
         settle=_number("--settle", a.settle_raw, minimum=0.0) or 0.0,
         trials=_number("--trials", a.trials_raw, integer=True, minimum=1),
@@ -226,7 +258,8 @@ def _exec_options(a: RunArgs, n: Numbers) -> Any:
 
     try:
         return ExecOptions(
-            detect=a.detect, noise=n.noise, allowance=n.allowance, frame=a.frame, start_settle=n.settle
+            detect=a.detect, noise=n.noise, allowance=n.allowance, frame=a.frame, start_settle=n.settle,
+            sensor_noise=n.sensor_noise,
         )
     except ValueError as e:  # options the executor refuses
         raise UserError(str(e)) from None
@@ -298,7 +331,7 @@ def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
 
     try:
         scene = network_scene(nprog, a.scene_ref)
-        opts = ExecOptions(detect=a.detect, noise=n.noise, allowance=n.allowance)
+        opts = ExecOptions(detect=a.detect, noise=n.noise, allowance=n.allowance, sensor_noise=n.sensor_noise)
     except ValueError as e:  # a ProgramError, a SceneError, or options the executor refuses
         raise UserError(str(e)) from None
     if n.trials is not None:
@@ -344,6 +377,7 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         baseline=t.baseline,
         use_track=t.use_track,
         record_dir=record_dir,
+        registered=a.registered,
     )
     check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
     try:

@@ -23,13 +23,23 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Generator
+from collections import deque
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar, cast
 
 import numpy as np
 
-from dlovr.execution.motion import Quat, ScrewPath, TrackPath, Vec, last_start, local_twist
+from dlovr.execution.motion import (
+    Quat,
+    ScrewPath,
+    ShiftedPath,
+    TrackPath,
+    Vec,
+    eased,
+    last_start,
+    local_twist,
+)
 from dlovr.model.derivation import THRESHOLD_PARAM
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
@@ -37,11 +47,13 @@ from dlovr.model.detection import (
     Expectation,
     NoiseModel,
     WrenchConditioner,
+    for_sensor,
     make_detector,
+    sensor_weak,
 )
 from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
-from dlovr.transforms import dot, norm, quat_rotate
+from dlovr.transforms import dot, norm, quat_rotate, slerp
 
 T = TypeVar("T")
 #: A run's work between two simulation steps: a generator that yields after each step and returns
@@ -58,6 +70,9 @@ ENDED_OK = ("detected", "motion")
 #: soft, high-friction cable still creeps into place after the motion stops (a tip sliding into a
 #: corner goes on at a few mm/s for a second), and the goal is a situation the cable rests in.
 FINAL_SETTLE_S = 2.0
+
+#: How much of the sensed force (s) a session keeps to settle a detector's own smoothing at its start.
+HISTORY_S = 0.3
 
 #: How far (m) a program's start may lie from the scene's gripper pose, and by what angle (deg).
 START_TOL_M = 0.02
@@ -90,7 +105,13 @@ class ExecOptions:
     motion phase (where the gripper last set off after holding still), since the transition came in
     it and the gripper starting or stopping earlier shakes the wrench. ``min_snr``: a detection whose
     demonstrated step is less than this many times the noise before it (a gradual change) ends its
-    macro by motion, as one whose threshold is not below its step does.
+    macro by motion, as one whose threshold is not below its step does. ``sensor_noise`` (N): the
+    white noise the detectors assume of the sensor (:func:`dlovr.model.detection.for_sensor`: their
+    smoothing and threshold floors); ``None``: the simulated ``noise`` (a robot knows its sensor).
+    ``object_shifts``: (object name, shift m world) pairs, where the objects really are against the
+    demonstration (a registered run, ``dlovr run --registered``; empty: blind): each macro moves in
+    the frame of the object its principal contacts name (:mod:`dlovr.execution.motion`, "Frames of
+    objects").
     """
 
     detect: str = "force"
@@ -111,6 +132,8 @@ class ExecOptions:
     arm: float = 0.5
     phase_blank: float = 0.15
     min_snr: float = 8.0
+    sensor_noise: float | None = None
+    object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
@@ -129,6 +152,19 @@ class ExecOptions:
             raise ValueError(f"allowance must be >= 1 (times the demonstrated motion), got {self.allowance}")
         if self.frame not in ("world", "relative"):
             raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
+        sn = self.sensor_noise
+        if sn is not None and not (isinstance(sn, int | float) and math.isfinite(sn) and sn >= 0):
+            raise ValueError(f"sensor_noise must be a number >= 0, got {sn!r}")
+
+    @property
+    def registered(self) -> bool:
+        """Whether the executor is told where the objects are (``object_shifts``)."""
+        return bool(self.object_shifts)
+
+    @property
+    def assumed_noise(self) -> float:
+        """The sensor's white noise (N) the detectors are set for: ``sensor_noise``, else ``noise``."""
+        return self.noise if self.sensor_noise is None else self.sensor_noise
 
 
 @dataclass(frozen=True)
@@ -183,6 +219,9 @@ class Execution:
     sim_time: float = 0.0
     wall_time: float = 0.0
     final_done: bool = False
+    goal_force: tuple[float, float, float] | None = None
+    goal_sensed: bool | None = None
+    goal_force_diff: float | None = None
 
 
 def principal_states(situation: Any) -> tuple[str, ...]:
@@ -220,19 +259,31 @@ class _Guard:
         self.macro = m
         self.oracle = opts.detect == "oracle"
         self.detectors: list[Detector] = []
+        sigma = opts.assumed_noise
+        params = [for_sensor(d.cls, d.params, sigma, 1.0 / rate_hz)[0] for d in m.detection]
         if not self.oracle:
             exp = expectation(m)
-            self.detectors = [make_detector(d.cls, d.params, exp, rate_hz) for d in m.detection]
+            pairs = zip(m.detection, params, strict=True)
+            self.detectors = [make_detector(d.cls, p, exp, rate_hz) for d, p in pairs]
         self.peak = 0.0
         self.hold = opts.oracle_hold
         self._since: float | None = None
-        #: every detection's threshold is at or above the demonstrated step: no force signal to watch
-        self.weak = bool(m.detection) and all(_weak(d.cls, d.params, opts.min_snr) for d in m.detection)
+        #: every detection's threshold is at or above the demonstrated step (or too close to it for the
+        #: sensor's noise): no force signal to watch
+        self.weak = bool(m.detection) and all(
+            _weak(d.cls, p, opts.min_snr) for d, p in zip(m.detection, params, strict=True)
+        )
 
-    def start(self, t: float, f: np.ndarray, tq: np.ndarray) -> None:
+    def start(
+        self, t: float, f: np.ndarray, tq: np.ndarray, history: Sequence[tuple[float, np.ndarray]] = ()
+    ) -> None:
         self._since = None
         for d in self.detectors:
-            d.start(t, f, tq)
+            d.start(t, f, tq, history)
+
+    def lag(self) -> float:
+        """The delay (s) the fired detector's own smoothing (a noisy sensor) adds to a detection."""
+        return max((d.smoothing_lag() for d in self.detectors if d.fired_at is not None), default=0.0)
 
     def update(self, t: float, f: np.ndarray, tq: np.ndarray, record: Any, armed: bool = True) -> bool:
         """Whether the transition is seen at ``t``; before ``armed`` a detector that fires is reset
@@ -264,7 +315,7 @@ def _weak(cls: str, params: Any, min_snr: float = 0.0) -> bool:
     if step is None:
         return False
     step = float(step)
-    if step <= 0.0 or (key in params and float(params[key]) >= step):
+    if step <= 0.0 or (key in params and float(params[key]) >= step) or sensor_weak(cls, params):
         return True
     return "noise_n" in params and step < min_snr * float(params["noise_n"])
 
@@ -277,6 +328,29 @@ class DemoTrack:
     t: np.ndarray
     pos: np.ndarray
     quat: np.ndarray
+    #: the force (N, world) the demonstration sensed at its end (mean over its last
+    #: :data:`GOAL_SENSE_S`), where the recording has a wrench channel: what the goal feels like
+    end_force: tuple[float, float, float] | None = None
+
+
+#: The time (s) over which the sensed force at the end of a run (and of the demonstration) is averaged.
+GOAL_SENSE_S = 0.2
+#: How far (N) the force sensed at the end of a run may lie from the demonstration's end force for
+#: the goal to count as confirmed by the sensor (plus 4 standard deviations of the mean's noise).
+GOAL_FORCE_TOL = 0.02
+
+
+def goal_check(
+    sensed: Sequence[float] | np.ndarray, track: DemoTrack | None, noise: float, n: int
+) -> tuple[bool | None, float | None]:
+    """Whether the force sensed at the end of a run (mean of ``n`` samples, N, world) confirms the
+    goal: it lies within :data:`GOAL_FORCE_TOL` plus 4 standard deviations of that mean's noise
+    (white ``noise`` N a sample) of what the demonstration sensed at its end; and the distance (N).
+    (None, None) without a demonstrated end force."""
+    if track is None or track.end_force is None or n <= 0:
+        return None, None
+    d = math.dist(tuple(float(x) for x in sensed), track.end_force)
+    return d <= GOAL_FORCE_TOL + 4.0 * noise / math.sqrt(n), d
 
 
 class Session:
@@ -298,11 +372,16 @@ class Session:
         #: once the tip's first touch has been felt (:func:`tip_offset`); turns are repeated about it
         self.tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.tool_known = False
+        #: the shift (m, world) of the objects the motion is in the frame of, as applied so far
+        self.shift: Vec = (0.0, 0.0, 0.0)
         self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
             sim.tracker.restart(rec)
         self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", np.zeros(3)), self.dt)
+        #: the sensed force of the last :data:`HISTORY_S` (time s, force N): settles a detector's own
+        #: smoothing when it starts (kept only for a noisy sensor)
+        self.recent: deque[tuple[float, np.ndarray]] = deque(maxlen=max(1, round(HISTORY_S / self.dt)))
 
     @property
     def signal(self) -> float:
@@ -324,6 +403,8 @@ class Session:
         self.sim.set_target(pos, quat)
         r = self.sim.step()
         self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", np.zeros(3)), self.dt)
+        if self.opts.assumed_noise > 0.0:
+            self.recent.append((float(r.time), self.f))
         if self.on_step is not None:
             self.on_step(r)
         return r
@@ -351,6 +432,8 @@ def program_steps(
     ses.emit("start", 0, f"program {program.name}: {len(classed)} macros, detection {opts.detect}")
     try:
         yield from ses.hold(*ses.mocap_pose(), opts.start_settle)
+        first = macro_shift(classed[0], opts) if classed else None
+        yield from to_start(program.start.start_pos, program.start.start_quat, ses, first)
         if (yield from _classed_steps(classed, ses, out, track)):
             final = program.final
             if final is None and track is not None and classed:
@@ -358,13 +441,85 @@ def program_steps(
             if final is not None:
                 yield from run_final(final, ses, track)
                 out.final_done = True
-            yield from ses.hold(*ses.mocap_pose(), opts.final_settle)
+            yield from final_hold(ses, out, track)
             ses.emit("end", 0, "program done")
     except SimulationDiverged as e:
         out.diverged = str(e)
         ses.emit("failed", 0, f"simulation diverged outside the macros: {e.reason}")
     out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
     out.sim_time = float(sim.time)
+
+
+#: Speeds (m/s, rad/s) and the shortest time (s) of the move to a program's start pose.
+START_SPEED = 0.02
+START_ANGULAR_SPEED = 0.5
+START_MIN_S = 0.25
+
+
+def macro_shift(m: Macro, opts: ExecOptions) -> Vec | None:
+    """The shift (m, world) of the objects ``m``'s principal contacts name (those it begins, else
+    those it ends; the mean of several), from ``opts.object_shifts``; None where it names none (or
+    the run is blind)."""
+    if not opts.object_shifts:
+        return None
+    shifts = dict(opts.object_shifts)
+    for contacts in (m.established, m.released):
+        names = sorted({o for c in contacts for o in c.objects if o in shifts})
+        if names:
+            return cast(Vec, tuple(sum(shifts[o][i] for o in names) / len(names) for i in range(3)))
+    return None
+
+
+def to_start(
+    start_pos: Any, start_quat: Any, ses: Session, shift: Vec | None = None
+) -> Steps[None]:
+    """Move the gripper to the program's start pose (world; plus ``shift``, the registered shift of
+    the first macro's objects) where it starts more than 0.1 mm or 1 mrad from it: the robot knows
+    its own pose, and the demonstration started there (smoothly, at :data:`START_SPEED`). Nothing
+    where it is there already."""
+    goal = [float(start_pos[i]) + (shift[i] if shift is not None else 0.0) for i in range(3)]
+    here_p, here_q = ses.sim.target_pos.copy(), ses.sim.target_quat.copy()
+    gq = np.asarray(start_quat, dtype=float)
+    gq = gq / math.sqrt(float((gq * gq).sum()))
+    c = min(1.0, abs(dot(here_q.tolist(), gq.tolist())))
+    angle = 2.0 * math.acos(c)
+    dist = math.dist(goal, here_p.tolist())
+    if dist <= 1e-4 and angle <= 1e-3:
+        return
+    ses.shift = shift if shift is not None else (0.0, 0.0, 0.0)
+    period = max(START_MIN_S, dist / START_SPEED, angle / START_ANGULAR_SPEED)
+    a = cast(Vec, tuple(float(x) for x in here_p))
+    b = cast(Vec, tuple(goal))
+    n = max(1, round(period / ses.dt))
+    ses.emit("start", 0, f"to the program's start pose: {dist * 1000:.1f} mm, {math.degrees(angle):.1f} deg")
+    for k in range(1, n + 1):
+        s = k / n
+        k_ease = 0.5 * (1.0 - math.cos(math.pi * s))
+        q = slerp(here_q, gq, k_ease) if angle > 1e-9 else here_q
+        ses.step(np.array(eased(a, b, s)), np.asarray(q))
+        yield
+
+
+def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[None]:
+    """Hold the last pose ``final_settle`` s; the force sensed over its last :data:`GOAL_SENSE_S`
+    (mean) checks the goal against the demonstration's end force (:func:`goal_check`), in ``out``."""
+    pos, quat = ses.mocap_pose()
+    n_all = round(ses.opts.final_settle / ses.dt)
+    n_sense = min(n_all, round(GOAL_SENSE_S / ses.dt))
+    total = np.zeros(3)
+    for k in range(n_all):
+        ses.step(pos, quat)
+        if k >= n_all - n_sense:
+            total = total + ses.f
+        yield
+    if n_sense > 0:
+        sensed = total / n_sense
+        out.goal_force = cast(Vec, tuple(float(x) for x in sensed))
+        out.goal_sensed, out.goal_force_diff = goal_check(sensed, track, ses.opts.noise, n_sense)
+        if out.goal_sensed is not None:
+            word = "confirms" if out.goal_sensed else "does not confirm"
+            ses.emit("end", 0, f"the sensed force {word} the goal ({out.goal_force_diff:.3f} N from the "
+                     "demonstration's end)")
 
 
 def _classed_steps(
@@ -488,6 +643,7 @@ def run_macro(
 
     sim, opts = ses.sim, ses.opts
     path = _path(m, sim, opts, track, t_from, ses.tool)
+    path, shift = _in_object_frame(path, m, ses)
     period = _period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
     allowed = opts.allowance * scale
@@ -498,7 +654,7 @@ def run_macro(
     blank = opts.blank if force else 0.0
     started = blank <= 0.0
     if started:
-        guard.start(t0, ses.f, ses.tq)
+        guard.start(t0, ses.f, ses.tq, ses.recent)
     ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
@@ -506,6 +662,8 @@ def run_macro(
     def ended(
         how: str, t: float, at: float | None, reason: str = "", resume: float | None = None
     ) -> MacroRun:
+        k = min(s, 1.0)  # the part of the object's shift applied
+        ses.shift = cast(Vec, tuple(ses.shift[i] + k * shift[i] for i in range(3)))
         return MacroRun(
             macro=m, started_at=t0, ended_at=t, ended=how, detected_at=at, moved=s * scale, allowed=allowed,
             peak_signal=guard.peak, reason=reason, resume_at=resume,
@@ -525,14 +683,14 @@ def run_macro(
                 continue
             if not started:
                 if t - t0 >= blank - 1e-12:
-                    guard.start(t, ses.f, ses.tq)
+                    guard.start(t, ses.f, ses.tq, ses.recent)
                     started = True
                 continue
             # after the allowance the gripper stops short, which shakes the cable: in force mode
             # only a transition felt while moving counts (the oracle still waits ``settle``)
             moving = not force or s < opts.allowance
             if guard.update(t, ses.f, ses.tq, r, armed=(not force or s >= arm) and moving):
-                at = _detected(m, ses, track, path, r, s, m.t - period + s * period)
+                at = _detected(m, ses, track, path, r, s, m.t - period + s * period, period)
                 return ended("detected", t, t, resume=at)
             if t - t0 >= limit - 1e-12:
                 why = _allowance_text(m, opts, allowed)
@@ -543,18 +701,38 @@ def run_macro(
         return ended("diverged", float(e.time), None, str(e))
 
 
+def _in_object_frame(path: Any, m: Macro, ses: Session) -> tuple[Any, Vec]:
+    """``path`` moved into the frame of the objects ``m`` names (registered runs): the difference
+    between their shift and the shift applied so far is added along the motion; and that difference."""
+    target = macro_shift(m, ses.opts)
+    if target is None:
+        return path, (0.0, 0.0, 0.0)
+    d = cast(Vec, tuple(target[i] - ses.shift[i] for i in range(3)))
+    if max(abs(x) for x in d) <= 1e-12:
+        return path, d
+    return ShiftedPath(path, d), d
+
+
 def _detected(
-    m: Macro, ses: Session, track: DemoTrack | None, path: Any, r: Any, s: float, at_demo: float
+    m: Macro, ses: Session, track: DemoTrack | None, path: Any, r: Any, s: float, at_demo: float,
+    period: float,
 ) -> float | None:
     """The macro's transition was seen at ``s`` of its ``path`` (record ``r``): stop there (screw
     paths), learn the tip's offset at its first touch, report; where on the demonstration's clock
     (s) the next macro's motion resumes (None: at its own stretch)."""
-    if track is None:
+    # a noisy sensor's detectors smooth the force, which delays them: the transition came ``lag``
+    # earlier, and the gripper goes back to where it was then (the next macro resumes from there)
+    lag = ses.guard.lag() if ses.guard is not None else 0.0
+    s_at = max(s - lag / period, 0.0) if lag > 0.0 else s
+    if lag > 0.0:
+        ses.sim.set_target(*path.at(s_at))
+        at_demo -= (s - s_at) * period
+    elif track is None:
         ses.sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is
-    at = at_demo if track is not None and s < 1.0 else None
+    at = at_demo if track is not None and s_at < 1.0 else None
     if not ses.tool_known and touches_tip(m):
         # the approach left undone is the tip's offset, not motion for the next macro
-        ses.tool, ses.tool_known, at = tip_offset(path, s), True, None
+        ses.tool, ses.tool_known, at = tip_offset(path, s_at), True, None
     ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
     return at
 

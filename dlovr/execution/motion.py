@@ -18,6 +18,13 @@ sooner), ``tool`` (m, gripper frame) is how much further the tip is from the gri
 demonstration, and every rotation is repeated about the point moved by it: the gripper's position
 gets ``R(q_start) tool - R(q) tool`` added (nothing for a pure translation; nothing at ``tool = 0``).
 
+Frames of objects: a macro's motion belongs to the object whose faces its principal contacts name
+(the paper's macro operations act on contact faces). Where the executor is told where the objects
+really are (``dlovr run --registered``: their shifts from the poses of the demonstration), a macro
+whose object sits elsewhere than the previous macro's gets that difference added to its motion, in
+proportion to its progress (:class:`ShiftedPath`), so that it moves where it should relative to its
+object; blind (no shifts given), the motion is the demonstrated one in the world.
+
 Everything here feeds the simulator, so it is computed in Python floats without BLAS (as
 :mod:`dlovr.transforms`), and the same on every processor.
 """
@@ -26,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -264,3 +271,24 @@ class TrackPath:
         pos = np.array([self.start_pos[i] + float(offset[i]) for i in range(3)])
         quat = quat_normalize(quat)
         return tool_shift(pos, cur_q, quat, self.tool), quat
+
+
+@dataclass(frozen=True)
+class ShiftedPath:
+    """A path (anything with ``at(s)``) with the displacement ``shift`` (m, world) added in proportion
+    to its progress: ``min(s, 1) * shift`` (the whole shift from the demonstrated end on)."""
+
+    path: Any
+    shift: Vec
+
+    def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        pos, quat = self.path.at(s)
+        k = min(max(s, 0.0), 1.0)
+        return np.array([float(pos[i]) + k * self.shift[i] for i in range(3)]), quat
+
+
+def eased(a: Vec, b: Vec, s: float) -> Vec:
+    """The point ``s`` (0-1) of the way from ``a`` to ``b`` (m) with a smooth start and stop
+    (``(1 - cos(pi s)) / 2``)."""
+    k = 0.5 * (1.0 - math.cos(math.pi * min(max(s, 0.0), 1.0)))
+    return (a[0] + k * (b[0] - a[0]), a[1] + k * (b[1] - a[1]), a[2] + k * (b[2] - a[2]))

@@ -20,13 +20,14 @@ import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, overload
+from typing import Any, cast, overload
 
 import numpy as np
 
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import (
     FINAL_SETTLE_S,
+    GOAL_SENSE_S,
     START_TOL_DEG,
     START_TOL_M,
     DemoTrack,
@@ -110,7 +111,12 @@ def load_track(path: str | Path) -> DemoTrack:
 
     rec = Recording(path)
     steps, pos, quat = rec.commands()
-    return DemoTrack(steps * rec.dt, pos, quat)
+    end_force = None
+    wrench = rec.wrench()
+    if wrench is not None and len(wrench.t):
+        last = wrench.window(float(wrench.t[-1]) - GOAL_SENSE_S, float(wrench.t[-1]))
+        end_force = cast(tuple[float, float, float], tuple(float(x) for x in last.mean(axis=0)))
+    return DemoTrack(steps * rec.dt, pos, quat, end_force)
 
 
 def demo_track(program: Program, recording: str | Path | None = None) -> DemoTrack | None:

@@ -11,6 +11,12 @@ The tracker's debounced situations are not used to steer a force-detected run, o
   force signal in the demonstration, or a bounce) is **ok** when its transition happened, else
   **by motion** (no detection, so never a false one); **latency** is detection minus true
   transition (s), for detected macros only;
+- the **first deviation** is the first macro whose outcome differed from the plan (any outcome but
+  *ok*: a false detection, a transition that did not come, ...): where a failed run went wrong, even
+  when every macro "succeeded" as far as the executor could tell;
+- the **sensed goal check** (``goal_sensed``; what the robot itself can tell): the force sensed over
+  the last 0.2 s of the final hold against the demonstration's at its end
+  (:func:`dlovr.execution.executor.goal_check`);
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
   being no principal contacts).
@@ -66,6 +72,9 @@ class RunResult:
     macros: tuple[MacroScore, ...]
     sim_time: float
     wall_time: float
+    first_deviation: int | None = None
+    goal_sensed: bool | None = None
+    goal_force_diff: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -157,7 +166,17 @@ def score(ex: Execution, scene_name: str = "") -> RunResult:
         macros=tuple(macros),
         sim_time=ex.sim_time,
         wall_time=ex.wall_time,
+        first_deviation=first_deviation(macros),
+        goal_sensed=ex.goal_sensed,
+        goal_force_diff=ex.goal_force_diff,
     )
+
+
+def first_deviation(macros: Any) -> int | None:
+    """The index of the first macro (in program order) whose outcome differed from the plan: any
+    outcome but ``ok`` of a macro that ran; None when every macro that ran went as planned."""
+    ran = sorted((m for m in macros if m.outcome != "not run"), key=lambda m: m.index)
+    return next((m.index for m in ran if m.outcome != "ok"), None)
 
 
 def _t(x: float | None, ms: bool = False) -> str:
@@ -181,4 +200,7 @@ def format_result(res: RunResult) -> str:
     else:
         lines.append(f"result: FAILED: {res.reason}")
         lines.append(f"        goal {goal}: {'reached' if res.goal_reached else 'not reached'}")
+        if res.first_deviation is not None:
+            m = next(x for x in res.macros if x.index == res.first_deviation)
+            lines.append(f"        first macro whose outcome differed from the plan: {m.index} ({m.outcome})")
     return "\n".join(lines)

@@ -27,7 +27,7 @@ from dlovr.execution.executor import DemoTrack, ExecOptions
 from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.run import run_openloop, run_program
 from dlovr.execution.scoring import RunResult
-from dlovr.execution.variation import Variation, perturb
+from dlovr.execution.variation import Variation, object_shifts, perturb
 from dlovr.model.planning import NetworkProgram
 from dlovr.model.program import Program
 
@@ -43,6 +43,8 @@ class TrialSetup:
     perturbation); ``track``: the demonstration's gripper trajectory, used by the program when
     ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
     trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
+    ``registered``: the program is told where the trial's objects are (their shifts from ``scene``,
+    :func:`dlovr.execution.variation.object_shifts`); else it runs blind.
     ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
     """
 
@@ -56,6 +58,7 @@ class TrialSetup:
     baseline: bool = False
     use_track: bool = True
     record_dir: str | None = None
+    registered: bool = False
 
     @property
     def name(self) -> str:
@@ -75,6 +78,8 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     from dataclasses import replace
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
+    if setup.registered:
+        opts = replace(opts, object_shifts=object_shifts(setup.scene, scene))
     track = setup.track if setup.use_track else None
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
@@ -196,11 +201,15 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
     lat = [m["latency"] for m in macros if m["outcome"] == "ok" and m["latency"] is not None]
     false = sum(m["outcome"] == "false" for m in macros)
     failures: dict[str, int] = {}
+    deviations: dict[str, int] = {}
     for t in trials:
         p = t["program"]
         if not p["success"]:
             key = f"macro {p['failed_macro']}" if p["failed_macro"] else p["reason"].split(":")[0]
             failures[key] = failures.get(key, 0) + 1
+            dev = p.get("first_deviation")
+            dkey = f"macro {dev}" if dev is not None else "none"
+            deviations[dkey] = deviations.get(dkey, 0) + 1
     per: dict[str, list[dict[str, Any]]] = {}
     for v in setup.variations:
         rows = []
@@ -227,6 +236,8 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "vary": [f"{v.key}={v.spec}" for v in setup.variations],
         "detect": setup.opts.detect,
         "noise_n": setup.opts.noise,
+        "sensor_noise_n": setup.opts.assumed_noise,
+        "registered": setup.registered,
         "path": "demo" if setup.use_track and setup.track is not None else "program",
         "program_success_rate": _rate(prog),
         "openloop_success_rate": _rate(ol) if has_ol else None,
@@ -239,6 +250,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "median_latency_s": statistics.median(lat) if lat else None,
         "latencies": len(lat),
         "failures": failures,
+        "first_deviations": deviations,
         "per_parameter": per,
         "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
         "retried_trials": sum(t.get("attempts", 1) > 1 for t in trials),

@@ -194,3 +194,16 @@ def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) 
     if not -1.0 < dlo.poisson < 0.5:
         dlo = replace(dlo, poisson=min(max(dlo.poisson, -0.99), 0.49))
     return replace(scene, dlo=dlo, gripper=gripper, objects=tuple(objects)), values
+
+
+def object_shifts(nominal: Any, actual: Any) -> tuple[tuple[str, tuple[float, float, float]], ...]:
+    """Where each object of ``actual`` (a scene) sits against the same object of ``nominal`` (its
+    position's shift, m, world), by name: what a registered run is told
+    (:class:`dlovr.execution.executor.ExecOptions` ``object_shifts``). Objects only one scene has are
+    left out. Rotations are not compared: no ``--vary`` key turns an object."""
+    before = {o.name: o.pos for o in nominal.objects}
+    return tuple(
+        (o.name, (float(o.pos[0]) - float(before[o.name][0]), float(o.pos[1]) - float(before[o.name][1]),
+                  float(o.pos[2]) - float(before[o.name][2])))
+        for o in actual.objects if o.name in before
+    )

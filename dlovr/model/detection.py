@@ -42,6 +42,7 @@ take the defaults of :data:`DEFAULTS`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -104,24 +105,45 @@ class LowPass:
 
 @dataclass
 class NoiseModel:
-    """Gaussian sensor noise: ``force_std`` (N) on each force component, ``torque_std`` (N m) on each
-    torque component (default ``force_std *`` :data:`TORQUE_NOISE_LEVER_M`), from ``seed``."""
+    """A wrist force/torque sensor's errors (docs/programs.md, "The sensor"), drawn from ``seed``:
+
+    - white noise: ``force_std`` (N) on each force component of every sample, ``torque_std`` (N m)
+      on each torque component (default ``force_std *`` :data:`TORQUE_NOISE_LEVER_M`);
+    - bias drift: a random walk of the force bias, ``drift`` N per square root of a second on each
+      component (``dt`` s between samples; 0: none);
+    - quantisation: the force read in steps of ``quantum`` N (0: none).
+
+    The sensor's bandwidth is the low-pass filter of :class:`WrenchConditioner`. ``dlovr run --noise``
+    simulates the white noise only.
+    """
 
     force_std: float = 0.0
     torque_std: float | None = None
     seed: int = 0
+    drift: float = 0.0
+    quantum: float = 0.0
+    dt: float = 0.002
 
     def __post_init__(self) -> None:
         if not self.force_std >= 0.0 or (self.torque_std is not None and not self.torque_std >= 0.0):
             raise ValueError("noise standard deviations must be >= 0")
+        if not (self.drift >= 0.0 and self.quantum >= 0.0 and self.dt > 0.0):
+            raise ValueError("drift and quantum must be >= 0, dt > 0")
         self._rng = np.random.default_rng(self.seed)
+        self._bias = np.zeros(3)
 
     def __call__(self, force: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if self.force_std == 0.0 and not self.torque_std:
+        if self.force_std == 0.0 and not self.torque_std and self.drift == 0.0 and self.quantum == 0.0:
             return np.asarray(force, float), np.asarray(torque, float)
         ts = self.force_std * TORQUE_NOISE_LEVER_M if self.torque_std is None else self.torque_std
         n = self._rng.standard_normal(6)
-        return np.asarray(force, float) + self.force_std * n[:3], np.asarray(torque, float) + ts * n[3:]
+        f = np.asarray(force, float) + self.force_std * n[:3]
+        if self.drift > 0.0:
+            self._bias = self._bias + self.drift * math.sqrt(self.dt) * self._rng.standard_normal(3)
+            f = f + self._bias
+        if self.quantum > 0.0:
+            f = np.round(f / self.quantum) * self.quantum
+        return f, np.asarray(torque, float) + ts * n[3:]
 
 
 @dataclass
@@ -166,7 +188,12 @@ class Expectation:
 class Detector:
     """Base of the detectors: :meth:`start` with the first sample of a macro, then :meth:`update`
     with every later one; ``update`` returns True once the transition is detected (and keeps
-    returning True). ``signal``: how far the detection criterion is met (1 = fires), for display."""
+    returning True). ``signal``: how far the detection criterion is met (1 = fires), for display.
+
+    With ``smooth_s`` > 0 (:func:`for_sensor`: a noisy sensor) the detector low-passes the force it
+    is given once more (first order, that time constant) before measuring its change; ``start`` then
+    takes the samples before the first (``history``: (time s, force N) pairs, oldest first) to
+    settle that filter, so that its reference is no single noisy sample."""
 
     cls = "?"
 
@@ -177,10 +204,37 @@ class Detector:
         self.signal = 0.0
         self._f0 = np.zeros(3)
         self.lag = float(self.params.get("ref_lag_s", 0.0))
+        self.smooth = float(self.params.get("smooth_s", 0.0))
         self._hist: list[tuple[float, np.ndarray]] = []
+        self._ema: tuple[float, np.ndarray] | None = None
 
-    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
-        self._f0 = np.asarray(force, dtype=float).copy()
+    def smoothing_lag(self) -> float:
+        """How much later (s) the detector's own smoothing makes it fire than without it: its time
+        constant ``smooth_s`` (the delay of a first-order low-pass on a ramp; 0 without smoothing)."""
+        return self.smooth
+
+    def _smoothed(self, t: float, f: np.ndarray) -> np.ndarray:
+        """``f`` through the detector's own low-pass filter (``f`` itself without one)."""
+        if self.smooth <= 0.0:
+            return f
+        if self._ema is None:
+            self._ema = (t, f.copy())
+        else:
+            t_last, y = self._ema
+            dt = max(t - t_last, 0.0)
+            self._ema = (t, y + (f - y) * (dt / (self.smooth + dt)))
+        return self._ema[1].copy()
+
+    def start(
+        self, t: float, force: np.ndarray, torque: np.ndarray,
+        history: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> None:
+        self._ema = None
+        if self.smooth > 0.0:
+            for th, fh in history:
+                if th < t:
+                    self._smoothed(float(th), np.asarray(fh, float))
+        self._f0 = self._smoothed(t, np.asarray(force, dtype=float).copy())
         self._hist = [(t, self._f0.copy())]
         self.fired_at = None
         self.signal = 0.0
@@ -199,7 +253,7 @@ class Detector:
     def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
         if self.fired_at is not None:
             return True
-        f = np.asarray(force, float)
+        f = self._smoothed(t, np.asarray(force, float))
         self.signal = self._signal(t, f - self._reference(t, f))
         if self.signal >= 1.0:
             self.fired_at = t
@@ -228,8 +282,11 @@ class EDetector(Detector):
         self.dirs = [u for d in dirs if (u := unit(d, _NO_DIRECTION)) is not None]
         self._low: list[np.ndarray] = []
 
-    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
-        super().start(t, force, torque)
+    def start(
+        self, t: float, force: np.ndarray, torque: np.ndarray,
+        history: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> None:
+        super().start(t, force, torque, history)
         self._low = [np.zeros(3) for _ in self.dirs]  # per direction: the change where it was lowest
 
     def _signal(self, t: float, df: np.ndarray) -> float:
@@ -266,10 +323,12 @@ class CDetector(Detector):
             self.dir = _step_dir(self.params)
         self._scale = 0.0
 
-    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
-        super().start(t, force, torque)
-        f = np.asarray(force, float)
-        self._scale = norm(f)
+    def start(
+        self, t: float, force: np.ndarray, torque: np.ndarray,
+        history: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> None:
+        super().start(t, force, torque, history)
+        self._scale = norm(self._f0)
 
     def threshold(self) -> float:
         if "force_threshold_n" in self.params:
@@ -292,8 +351,11 @@ class TDetector(Detector):
 
     cls = "T"
 
-    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
-        super().start(t, force, torque)
+    def start(
+        self, t: float, force: np.ndarray, torque: np.ndarray,
+        history: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> None:
+        super().start(t, force, torque, history)
         self._peak: np.ndarray | None = None
 
     def _signal(self, t: float, df: np.ndarray) -> float:
@@ -347,8 +409,11 @@ class SDetector(Detector):
             )
         self._hist: list[tuple[float, np.ndarray]] = []
 
-    def start(self, t: float, force: np.ndarray, torque: np.ndarray) -> None:
-        super().start(t, force, torque)
+    def start(
+        self, t: float, force: np.ndarray, torque: np.ndarray,
+        history: Sequence[tuple[float, np.ndarray]] = (),
+    ) -> None:
+        super().start(t, force, torque, history)
         self._hist = [(t, np.asarray(force, float).copy())]
 
     def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
@@ -367,6 +432,84 @@ class SDetector(Detector):
 
     def _signal(self, t: float, df: np.ndarray) -> float:  # pragma: no cover - update overrides
         return 0.0
+
+
+# --------------------------------------------------------------------------------------------------
+# Detection parameters for a noisy sensor
+
+#: The thresholds parameter of each class (as :data:`dlovr.model.derivation.THRESHOLD_PARAM`).
+_THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n", "I": "min_force_n"}
+#: A threshold is at least this many standard deviations of the change a detector measures.
+SENSOR_K = 4.0
+#: The longest smoothing (s): longer would blur a step within the detectors' 0.15 s reference.
+SENSOR_MAX_SMOOTH_S = 0.06
+#: A threshold above this fraction of the demonstrated step leaves no signal to trust at that noise.
+SENSOR_WEAK_FRACTION = 0.8
+#: The fraction of the step the derivation sets the threshold to (for programs without ``step_n``).
+_DERIVED_FRACTION = 0.4
+
+
+def change_std(sigma: float, dt: float, smooth_s: float) -> float:
+    """Standard deviation (N) of the change a detector measures along one direction (the force now
+    minus the force ``ref_lag_s`` earlier, both through a first-order low-pass of ``smooth_s``
+    seconds) when the sensor adds white noise of ``sigma`` N to each component of each sample,
+    ``dt`` s apart (the two samples far enough apart to be independent)."""
+    return math.sqrt(2.0) * sigma * math.sqrt(dt / (2.0 * smooth_s + dt))
+
+
+def for_sensor(
+    cls: str, params: Mapping[str, float], sigma: float, dt: float = 0.002
+) -> tuple[dict[str, float], dict[str, str]]:
+    """The parameters of a ``cls`` detector for a sensor with white noise ``sigma`` (N, each force
+    component of each sample, samples ``dt`` s apart), and texts for the parameters it changed.
+
+    The threshold (derived from the expected step: its size along the direction the detector
+    watches) sets the detector's own smoothing ``smooth_s``: the shortest time constant (at most
+    :data:`SENSOR_MAX_SMOOTH_S`) at which :data:`SENSOR_K` standard deviations of the measured change
+    (:func:`change_std`) are no more than the threshold. The threshold is then raised to at least
+    those :data:`SENSOR_K` standard deviations; one above
+    :data:`SENSOR_WEAK_FRACTION` of the step means the force cannot show the transition at that noise
+    (the executor ends the macro by its motion). ``sensor_noise_n`` records ``sigma``. Idempotent;
+    ``sigma`` 0, the ``S`` class (a jump within milliseconds) and parameters without a threshold
+    are returned unchanged.
+    """
+    p = {k: float(v) for k, v in params.items()}
+    key = _THRESHOLD.get(cls)
+    if sigma <= 0.0 or key is None:
+        return p, {}
+    thr = p.get(key, DEFAULTS[cls].get(key, 0.0))
+    step = p.get("step_n", thr / _DERIVED_FRACTION)
+    if step <= 0.0 or thr >= step:  # no step to see: it ends by its motion anyway
+        p["sensor_noise_n"] = max(p.get("sensor_noise_n", 0.0), sigma)
+        return p, {"sensor_noise_n": f"derived: the sensor's white noise, {sigma:g} N"}
+    tau = SENSOR_MAX_SMOOTH_S
+    if thr > 0.0:  # K std of the change (change_std) at most the threshold
+        r = SENSOR_K * math.sqrt(2.0) * sigma / thr
+        tau = min(max(0.5 * dt * (r * r - 1.0), 0.0), SENSOR_MAX_SMOOTH_S)
+    tau = max(math.ceil(tau * 1e4 - 1e-9) / 1e4, p.get("smooth_s", 0.0))  # to 0.1 ms, not below
+    floor = SENSOR_K * change_std(sigma, dt, tau)
+    texts = {"sensor_noise_n": f"derived: the sensor's white noise, {sigma:g} N"}
+    p["sensor_noise_n"] = max(p.get("sensor_noise_n", 0.0), sigma)
+    if tau > 0.0:
+        p["smooth_s"] = tau
+        texts["smooth_s"] = (
+            f"derived: low-pass time constant at which {SENSOR_K:g} std of the measured change "
+            f"({floor:.3g} N at {sigma:g} N noise) is at most the threshold (the step is {step:.3g} N)"
+        )
+    if floor > thr:
+        p[key] = round(floor, 6)
+        weak = ": weak signal at this noise" if floor > SENSOR_WEAK_FRACTION * step else ""
+        texts[key] = f"derived: {SENSOR_K:g} std of the measured change at {sigma:g} N sensor noise{weak}"
+    return p, texts
+
+
+def sensor_weak(cls: str, params: Mapping[str, float]) -> bool:
+    """Whether parameters adapted by :func:`for_sensor` leave no force signal to trust: the threshold
+    is above :data:`SENSOR_WEAK_FRACTION` of the demonstrated step."""
+    key = _THRESHOLD.get(cls)
+    if key is None or "sensor_noise_n" not in params or "step_n" not in params or key not in params:
+        return False
+    return float(params[key]) > SENSOR_WEAK_FRACTION * float(params["step_n"])
 
 
 _CLASSES: dict[str, type[Detector]] = {

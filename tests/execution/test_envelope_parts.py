@@ -1,0 +1,111 @@
+"""The parts of issue 28's executor that need no simulation: macros in the frame of the objects
+they touch (registered runs), the first macro whose outcome differed from the plan, the sensed goal
+check, and the executor's assumption about its sensor."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dlovr.execution.executor import (
+    GOAL_FORCE_TOL,
+    DemoTrack,
+    ExecOptions,
+    _Guard,
+    goal_check,
+    macro_shift,
+)
+from dlovr.execution.motion import ScrewPath, ShiftedPath, eased
+from dlovr.execution.scoring import MacroScore, first_deviation
+from dlovr.execution.variation import object_shifts, parse_varies, perturb
+from dlovr.model.program import Program
+from dlovr.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+PEG = Program.load(ROOT / "recordings/programs/peg_in_hole.program.json")
+
+
+def test_a_macro_moves_in_the_frame_of_the_objects_its_contacts_name():
+    shifts = (("block", (0.01, 0.0, 0.0)), ("holeblock", (0.0, 0.02, 0.0)), ("table", (0.0, 0.0, 0.0)))
+    opts = ExecOptions(object_shifts=shifts)
+    first, groove = PEG.classed[0], PEG.classed[4]  # the tip on block.F1; landing on block.F3 + holeblock.F2
+    assert macro_shift(first, opts) == pytest.approx((0.01, 0.0, 0.0))
+    assert macro_shift(groove, opts) == pytest.approx((0.005, 0.01, 0.0))  # the mean of both objects
+    assert macro_shift(first, ExecOptions()) is None  # blind: the world frame
+    assert opts.registered and not ExecOptions().registered
+
+
+def test_shifted_path_adds_the_shift_along_the_motion():
+    base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.1, 0.0, 0.0))
+    p = ShiftedPath(base, (0.0, 0.02, 0.0))
+    assert p.at(0.0)[0].tolist() == pytest.approx([0.0, 0.0, 0.5])
+    assert p.at(0.5)[0].tolist() == pytest.approx([0.05, 0.01, 0.5])
+    assert p.at(1.5)[0].tolist() == pytest.approx([0.15, 0.02, 0.5])  # beyond: the whole shift
+    assert eased((0.0, 0.0, 0.0), (1.0, 2.0, 0.0), 0.5) == pytest.approx((0.5, 1.0, 0.0))
+
+
+def test_object_shifts_are_the_trials_true_object_positions():
+    scene = load_scene("peg_in_hole")
+    var = parse_varies(["objects.pos=0.015"], scene)
+    moved, values = perturb(scene, var, 7, 3)
+    shifts = dict(object_shifts(scene, moved))
+    assert set(shifts) == {o.name for o in scene.objects}
+    for d in shifts.values():
+        assert d == pytest.approx(tuple(values["objects.pos"]))
+
+
+def _score(index: int, outcome: str) -> MacroScore:
+    return MacroScore(index, "E", "", 0.0, None, None, None, outcome, 0.0, 0.0)
+
+
+def test_first_deviation_is_the_first_macro_off_the_plan():
+    assert first_deviation([_score(1, "ok"), _score(2, "ok")]) is None
+    assert first_deviation([_score(1, "ok"), _score(3, "by motion"), _score(2, "false")]) == 2
+    assert first_deviation([_score(1, "ok"), _score(2, "not run")]) is None
+
+
+def test_goal_check_against_the_demonstrations_end_force():
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.0, 0.0, -0.5))
+    assert goal_check([0.0, 0.0, -0.5 + 0.5 * GOAL_FORCE_TOL], track, 0.0, 100)[0] is True
+    ok, d = goal_check([0.0, 0.0, -0.4], track, 0.0, 100)
+    assert ok is False and d == pytest.approx(0.1)
+    assert goal_check([0.0, 0.0, -0.4], replace(track, end_force=None), 0.0, 100) == (None, None)
+
+
+def test_the_executor_sets_its_detectors_for_the_noise_it_assumes():
+    touch = PEG.classed[0]
+    quiet, noisy = _Guard(touch, ExecOptions(), 500.0), _Guard(touch, ExecOptions(noise=0.02), 500.0)
+    assert quiet.detectors[0].smooth == 0.0 and noisy.detectors[0].smooth > 0.0
+    told = _Guard(touch, ExecOptions(noise=0.02, sensor_noise=0.0), 500.0)
+    assert told.detectors[0].smooth == 0.0  # a sensor said to be clean: the program's own parameters
+    assert _Guard(PEG.classed[4], ExecOptions(noise=0.2), 500.0).weak  # too noisy: ends by its motion
+
+
+# -- short simulations (the 0.9 s touch demonstration of conftest.py) --------------------------------
+
+
+@pytest.mark.slow
+def test_a_gripper_started_elsewhere_goes_to_the_programs_start_and_a_registered_run_follows_the_table(
+    touch,
+):
+    from dlovr.execution.run import run_program
+    from dlovr.execution.variation import object_shifts
+
+    program, scene, track, pieces = touch
+    moved = replace(scene, gripper=replace(scene.gripper, pos=tuple(
+        x + d for x, d in zip(scene.gripper.pos, (0.003, -0.002, 0.002), strict=True))))
+    events: list = []
+    res = run_program(program, moved, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
+    assert res.success and any("to the program's start pose" in e.text for e in events)
+    lowered = replace(scene, objects=tuple(replace(o, pos=(o.pos[0], o.pos[1], o.pos[2] - 0.01))
+                                           for o in scene.objects))
+    opts = ExecOptions(object_shifts=object_shifts(scene, lowered))
+    events.clear()
+    reg = run_program(program, lowered, opts, track=track, pieces=pieces, on_event=events.append)
+    assert reg.success and reg.first_deviation is None
+    assert any("to the program's start pose" in e.text for e in events)  # moved down with the table
+    quiet = run_program(program, scene, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
+    assert quiet.success and quiet.goal_sensed is not None
