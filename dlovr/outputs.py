@@ -23,7 +23,7 @@ import secrets
 import stat
 from collections.abc import Iterator
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 try:
     import fcntl
@@ -284,3 +284,20 @@ __all__ = [
     "remove_partial",
     "write_output",
 ]
+
+
+#: Significant digits of every float a result file or ``--json`` output carries (a time in s to a
+#: microsecond, a force in N to a micronewton): ``0.43``, never ``0.4300000000000003``.
+RESULT_DIGITS = 6
+
+
+def rounded(value: Any, digits: int = RESULT_DIGITS) -> Any:
+    """``value`` (JSON-like: dicts, lists, tuples, numbers, strings) with every float rounded to
+    ``digits`` decimals; other values as they are. Integers and booleans stay exact."""
+    if isinstance(value, float):
+        return round(value, digits)
+    if isinstance(value, dict):
+        return {k: rounded(v, digits) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [rounded(v, digits) for v in value]
+    return value

@@ -12,6 +12,7 @@ import click
 
 from dlovr.batch import cluster_option
 from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing
+from dlovr.outputs import rounded
 
 
 def _number(name: str, raw: str | None, *, integer: bool = False, minimum: float | None = None) -> Any:
@@ -314,7 +315,7 @@ def _single(program: Any, scene: Any, opts: Any, track: Any, out: str | None, as
 
         res = run_program(program, scene, opts, track=track)
     if as_json:
-        click.echo(json.dumps(res.to_json(), indent=1))
+        click.echo(json.dumps(rounded(res.to_json()), indent=1))
     else:
         click.echo(format_result(res))
     sys.exit(EXIT_OK if res.success else EXIT_FAILED)
@@ -347,7 +348,7 @@ def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
             raise UserError(f"{out}: cannot write: {e.strerror}") from None
     else:
         res = run_program(nprog, scene, opts)
-    click.echo(json.dumps(res.to_json(), indent=1) if a.as_json else format_result(res))
+    click.echo(json.dumps(rounded(res.to_json()), indent=1) if a.as_json else format_result(res))
     sys.exit(EXIT_OK if res.success else EXIT_FAILED)
 
 

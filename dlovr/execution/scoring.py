@@ -53,6 +53,9 @@ class MacroScore:
     moved: float
     allowed: float
     reason: str = ""
+    #: How the macro's run ended: ``"detected"`` (by its detector), ``"motion"`` (its demonstrated
+    #: motion done, no detection asked or possible), or the failure (``"missed"``, ``"diverged"``...).
+    ended: str = ""
 
 
 @dataclass(frozen=True)
@@ -118,7 +121,7 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
         outcome = "missed" if true_at is not None else "no transition"
     return MacroScore(
         m.index, m.label, m.expected, run.started_at, run.detected_at, true_at, latency, outcome,
-        run.moved, run.allowed, run.reason,
+        run.moved, run.allowed, run.reason, run.ended,
     )
 
 
@@ -185,15 +188,22 @@ def _t(x: float | None, ms: bool = False) -> str:
     return f"{x * 1000:+.0f} ms" if ms else f"{x:.3f}"
 
 
+#: The mark of a macro that ended by motion in ``dlovr run``'s table (explained under the table).
+_BY_MOTION = "  (by motion)"
+
+
 def format_result(res: RunResult) -> str:
     """The per-macro table and the result line, as ``dlovr run`` prints them."""
     head = f"{'#':>3}  {'class':<5} {'detected':>9} {'true':>9} {'latency':>9}  {'outcome':<13} expected"
     lines = [f"program {res.program} in scene {res.scene}, detection {res.detect}", head]
     for m in res.macros:
+        mark = _BY_MOTION if m.ended == "motion" else ""
         lines.append(
             f"{m.index:>3}  {m.classes:<5} {_t(m.detected_at):>9} {_t(m.true_at):>9} "
-            f"{_t(m.latency, True):>9}  {m.outcome:<13} {m.expected}"
+            f"{_t(m.latency, True):>9}  {m.outcome:<13} {m.expected}{mark}"
         )
+    if any(m.ended == "motion" for m in res.macros):
+        lines.append("(by motion): the macro ended when its demonstrated motion was done, not by a detection")
     goal = " & ".join(res.goal) or "N"
     if res.success:
         lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s")

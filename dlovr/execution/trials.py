@@ -30,6 +30,7 @@ from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, object_shifts, perturb
 from dlovr.model.planning import NetworkProgram
 from dlovr.model.program import Program
+from dlovr.outputs import rounded
 
 #: Levels per variation parameter in the summary and the plot.
 LEVELS = 3
@@ -267,7 +268,7 @@ def write_outputs(
     paths = []
     for t in trials:
         p = out / f"trial_{t['trial']:03d}.json"
-        p.write_text(json.dumps(t, indent=1) + "\n", encoding="utf-8")
+        p.write_text(json.dumps(rounded(t), indent=1) + "\n", encoding="utf-8")
         paths.append(p)
     keys = sorted({k for t in trials for k in t["values"]})
     with (out / "trials.csv").open("w", newline="", encoding="utf-8") as fh:
@@ -277,13 +278,13 @@ def write_outputs(
         for t in trials:
             p = t["program"]
             lat = [m["latency"] for m in p["macros"] if m["outcome"] == "ok" and m["latency"] is not None]
-            vals = [_cell(t["values"].get(k)) for k in keys]
+            vals = [_cell(rounded(t["values"].get(k))) for k in keys]
             w.writerow([t["trial"], *vals, p["success"], p["failed_macro"] or "", p["reason"],
                         t["openloop"]["goal_reached"] if "openloop" in t else "",
                         sum(m["outcome"] == "false" for m in p["macros"]),
-                        statistics.median(lat) if lat else "", round(t["wall_time"], 3)])
+                        rounded(statistics.median(lat)) if lat else "", round(t["wall_time"], 3)])
     paths.append(out / "trials.csv")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    (out / "summary.json").write_text(json.dumps(rounded(summary), indent=1) + "\n", encoding="utf-8")
     paths.append(out / "summary.json")
     paths.append(plot(summary, out / "plot.png"))
     return paths
