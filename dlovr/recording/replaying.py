@@ -101,7 +101,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
     for i, k in enumerate(steps.tolist()):
         sim.target_pos, sim.target_quat = pos_rows[i], quat_rows[i]
         r = step()
-        if wrench_steps and divergence is None and k in wrench_steps:
+        if wrench is not None and divergence is None and k in wrench_steps:
             j = wrench_steps.pop(k)
             got = r.gripper_force.tobytes() + r.gripper_torque.tobytes()
             if wrench.t[j] != r.time or wrench_bytes[j] != got:

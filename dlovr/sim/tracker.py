@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import numpy as np
 
@@ -388,6 +388,7 @@ class ContactTracker:
 
 
 _ORIGIN = (0.0, 0.0, 0.0)
+_T = TypeVar("_T")
 _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
@@ -411,10 +412,19 @@ def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
         i = cast(int, d.index)
         a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
         vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-        if any(e.kind == "G" for e in env):
+        if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
             env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
-        contacts.append(Contact(DloPrimitive(d.kind, i, d.span, vector), env))
-    return Situation(tuple(contacts))
+        dlo = _made(DloPrimitive, kind=d.kind, index=i, span=d.span, vector=vector)
+        contacts.append(_made(Contact, dlo=dlo, env=env))
+    return _made(Situation, contacts=tuple(contacts))
+
+
+def _made(cls: type[_T], **fields: Any) -> _T:
+    """A frozen dataclass of these fields without its ``__init__`` and checks (for objects whose
+    fields come from a checked one: an env already canonical, the same contacts' structure)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 def _vector_independent(topo: Situation) -> bool:
