@@ -26,7 +26,8 @@ of raw contacts per step and how often the tracker labelled all queried points o
 
 ``--scaling`` runs every case at 10, 20, 40, 80, 120 and 200 segments (``--segments`` to change;
 ``--repeat`` defaults to 1 there) and prints the same table; ``--plot FILE`` draws µs per step
-against segments and against contacts per step (matplotlib).
+against segments and against contacts per step (matplotlib); ``--from LOG...`` draws it from tables
+this script printed before (measuring nothing), so a long run can be done in parts.
 
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
@@ -182,7 +183,8 @@ def plot(rows: list[Row], path: Path) -> None:
                  label=f"{case}: bare mj_step")
         ax2.plot([r.contacts for r in rs], [r.ratio for r in rs], "o-", color=line.get_color(), label=case)
     ax1.set(xlabel="segments", ylabel="µs per step (thread CPU)", title="cost per step")
-    ax2.set(xlabel="raw contacts per step (mean)", ylabel="pipeline / bare mj_step",
+    ax2.set_xscale("log")
+    ax2.set(xlabel="raw contacts per step (mean, log scale)", ylabel="pipeline / bare mj_step",
             title="ratio to bare mj_step")
     ax1.legend(fontsize=7)
     ax2.legend(fontsize=7)
@@ -191,6 +193,20 @@ def plot(rows: list[Row], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     print(f"plot: {path}")
+
+
+def read_rows(paths: list[Path]) -> list[Row]:
+    """The rows of tables this script printed (``--from``)."""
+    rows = []
+    for path in paths:
+        for line in path.read_text().splitlines():
+            f = line.split()
+            if len(f) == 13 and f[1].isdigit() and f[2].isdigit():
+                case, seg, steps, contacts, b, s, full, _ratio, spread = f[:9]
+                lo, hi = (float(x) for x in spread.split("-"))
+                rows.append(Row(case, int(seg), int(steps), float(contacts), float(b) * 1e-6, float(s) * 1e-6,
+                                float(full) * 1e-6, (lo, float(_ratio), hi), f[10] + " / " + f[12]))
+    return rows
 
 
 def main() -> None:
@@ -207,7 +223,14 @@ def main() -> None:
     ap.add_argument("--scaling", action="store_true", help="every case at 10 to 200 segments")
     ap.add_argument("--plot", type=Path, default=None, help="with --scaling: draw the table into FILE")
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall clock")
+    ap.add_argument("--from", dest="logs", type=Path, nargs="+", default=None,
+                    help="with --plot: draw the tables of earlier runs' output instead of measuring")
     args = ap.parse_args()
+    if args.logs:
+        if args.plot is None:
+            raise SystemExit("--from needs --plot FILE")
+        plot(read_rows(args.logs), args.plot)
+        return
     global CLOCK
     CLOCK = time.thread_time if args.clock == "cpu" else time.perf_counter
     segments = args.segments or ([10, 20, 40, 80, 120, 200] if args.scaling else [40])
