@@ -88,11 +88,9 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
         raise RecordingError(f"{rec.path}: command stream does not start right after the first checkpoint")
     by_step = {c.step: c for c in cps[1:]}
     divergence: str | None = None
-    # each wrench sample's bits (force, then torque), compared with the replayed record's as bytes
     wrench_bytes = [] if wrench is None else _wrench_rows(wrench)
-    # the recorded targets are the exact ones used (already validated and normalised when recorded):
-    # set them as they are, since normalising again may change the last bit (rows of private copies:
-    # the simulator copies its target into each record and never changes it in place)
+    # the recorded targets are the exact ones used (validated and normalised when recorded): set as
+    # they are (normalising again may change the last bit), rows of private copies (records copy them)
     pos_rows, quat_rows = list(np.array(pos, dtype=float)), list(np.array(quat, dtype=float))
     t0 = time.perf_counter()
     tracker.restart(sim.record())
@@ -102,10 +100,7 @@ def replay(path: str | Path, *, verify: bool = False, progress: Any = None) -> R
         sim.target_pos, sim.target_quat = pos_rows[i], quat_rows[i]
         r = step()
         if wrench is not None and divergence is None and k in wrench_steps:
-            j = wrench_steps.pop(k)
-            got = r.gripper_force.tobytes() + r.gripper_torque.tobytes()
-            if wrench.t[j] != r.time or wrench_bytes[j] != got:
-                divergence = _compare_wrench(wrench, j, r, dt)
+            divergence = _check_wrench(wrench, wrench_bytes, wrench_steps.pop(k), r, dt)
         if verify and divergence is None and k in by_step:
             want = by_step[int(k)].state
             got = sim.get_state().mj
@@ -145,6 +140,14 @@ def _wrench_rows(wrench: Any) -> list[bytes]:
     """Each wrench sample's force and torque as the bytes of six float64 values."""
     rows = np.ascontiguousarray(np.concatenate([wrench.force, wrench.torque], axis=1), dtype=np.float64)
     return [row.tobytes() for row in rows]
+
+
+def _check_wrench(wrench: Any, rows: Sequence[bytes], i: int, r: Any, dt: float) -> str | None:
+    """:func:`_compare_wrench`, with the bits of sample ``i`` (``rows``: :func:`_wrench_rows`)
+    compared as bytes first: the message is made only on a difference."""
+    if wrench.t[i] == r.time and rows[i] == r.gripper_force.tobytes() + r.gripper_torque.tobytes():
+        return None
+    return _compare_wrench(wrench, i, r, dt)
 
 
 def _compare_wrench(wrench: Any, i: int, r: Any, dt: float) -> str | None:
