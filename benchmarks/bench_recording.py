@@ -1,12 +1,15 @@
 """Recording overhead, replay speed and compile throughput, measured side by side in one run.
 
-Run: ``.venv/bin/python benchmarks/bench_recording.py [--scene peg_in_hole] [--segments 40] [--copies 8]``
+Run: ``.venv/bin/python benchmarks/bench_recording.py [--scene peg_in_hole] [--segments 40] [--copies 8]
+[--replays 5] [--no-compile]``
 
 1. simulation (step + contact extraction) alone vs the same with recording to MCAP (target: at most
    10% more);
-2. ``replay --verify`` of that recording as a real-time factor (target: at least 15x at 40 segments),
-   beside bare ``mj_step`` along the same commands (its real-time factor bounds the replay's);
-3. ``dlovr compile`` throughput in recordings per second with 1 and 2 workers.
+2. ``replay --verify`` of that recording as a real-time factor, beside bare ``mj_step`` along the same
+   commands (its real-time factor bounds the replay's), and their throughput ratio in thread CPU time
+   (the replay loop's steps against bare ``mj_step``'s, medians of ``--replays`` interleaved rounds;
+   target: at least 0.85);
+3. ``dlovr compile`` throughput in recordings per second with 1 and 2 workers (``--no-compile``: not).
 
 ``--segments N`` records the scene with an N-segment cable (a copy of the scene file with that count,
 embedded in the recording as usual).
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -61,7 +65,7 @@ def scene_with_segments(scene_name: str, segments: int, tmp: Path) -> str:
     return str(path)
 
 
-def bare_rtf(scene_name: str, script_path: Path) -> float:
+def bare_rtf(scene_name: str, script_path: Path, clock=time.perf_counter) -> float:
     """Real-time factor of bare ``mj_step`` along the script's commands (the gripper's pose set untimed)."""
     import mujoco
 
@@ -72,10 +76,19 @@ def bare_rtf(scene_name: str, script_path: Path) -> float:
     for pos, quat in targets:
         sim.target_pos, sim.target_quat = pos, quat
         sim._move_mocap()
-        t0 = time.perf_counter()
+        t0 = clock()
         mujoco.mj_step(sim.model, sim.data)
-        total += time.perf_counter() - t0
+        total += clock() - t0
     return len(targets) * sim.model.opt.timestep / total
+
+
+def replay_cpu(path: Path):
+    """``replay --verify`` of ``path``: its result and the thread CPU seconds per step of its loop
+    (from the end of its first step to its last, read from its progress calls)."""
+    marks: list[tuple[int, float]] = []
+    res = replay(path, verify=True, progress=lambda done, total: marks.append((done, time.thread_time())))
+    (d0, c0), (d1, c1) = marks[0], marks[-1]
+    return res, (c1 - c0) / max(d1 - d0, 1)
 
 
 def main() -> None:
@@ -85,6 +98,8 @@ def main() -> None:
     ap.add_argument("--copies", type=int, default=8, help="recordings compiled in the throughput test")
     ap.add_argument("--repeat", type=int, default=3, help="interleaved runs with and without recording")
     ap.add_argument("--segments", type=int, default=None, help="the cable's segments (default: the scene's)")
+    ap.add_argument("--replays", type=int, default=3, help="interleaved rounds of replay and bare mj_step")
+    ap.add_argument("--no-compile", action="store_true", help="leave out the compile throughput")
     args = ap.parse_args()
     script = args.script or scenes_dir() / f"{args.scene}.script.toml"
     sim_time = load_script(script).total_duration
@@ -103,12 +118,28 @@ def main() -> None:
               f"simulated, {size:.2f} MB")
         print(f"simulation alone        {plain:7.2f} s")
         print(f"simulation + recording  {recorded:7.2f} s   ratio {recorded / plain:.3f} (target <= 1.10)")
-        bare = bare_rtf(args.scene, script)
-        res = replay(out, verify=True)
-        rtf = res.sim_time / res.wall_time
-        print(f"replay --verify         {res.wall_time:7.2f} s   {rtf:.2f}x real time (target >= 15 at 40 "
-              f"segments), divergence: {res.divergence}")
-        print(f"bare mj_step                       {bare:.2f}x real time (the bound of the above)")
+        cpu_bare, cpu_replay, walls, bares = [], [], [], []
+        res = None
+        for _ in range(args.replays):  # interleaved; medians (the machine is shared and noisy)
+            bares.append(bare_rtf(args.scene, script))
+            cpu_bare.append(bare_rtf(args.scene, script, time.thread_time))
+            res, per_step = replay_cpu(out)
+            cpu_replay.append(per_step)
+            walls.append(res.wall_time)
+        assert res is not None
+        med = statistics.median
+        rtf = res.sim_time / med(walls)
+        dt = res.sim_time / res.steps  # the time step (s)
+        # bare's CPU seconds per step (dt / its real-time factor) over the replay's
+        ratios = [dt / b / r for b, r in zip(cpu_bare, cpu_replay, strict=True)]
+        print(f"replay --verify         {med(walls):7.2f} s   {rtf:.2f}x real time (wall, median of "
+              f"{args.replays}), divergence: {res.divergence}")
+        print(f"bare mj_step                       {med(bares):.2f}x real time (wall; the replay's bound)")
+        print(f"replay --verify / bare mj_step throughput, thread CPU: {med(ratios):.3f} (rounds "
+              f"{', '.join(f'{x:.3f}' for x in ratios)}; {med(cpu_replay) * 1e6:.0f} vs "
+              f"{dt / med(cpu_bare) * 1e6:.0f} µs per step (replay vs bare); target >= 0.85)")
+        if args.no_compile:
+            return
         src = Path(tmp) / "many"
         src.mkdir()
         for i in range(args.copies):

@@ -1,20 +1,33 @@
-"""Cost of contact-state extraction on top of bare MuJoCo stepping, at 40 and 80 segments.
+"""Cost of the per-step pipeline on top of bare MuJoCo stepping, on peg-in-hole and on contact-rich
+scenes, and how it grows with the number of segments and contacts.
 
-Run: ``.venv/bin/python benchmarks/bench_sim.py [--scene peg_in_hole] [--script FILE] [--repeat N]
-[--clock cpu|wall]``
+Run: ``.venv/bin/python benchmarks/bench_sim.py [--case peg_in_hole channel drape] [--segments 40]
+[--repeat 5] [--clock cpu|wall]``, or ``... --scaling [--plot docs/img/step_cost.png]``
 
-Plays the scene's built-in demonstration (``scenes/NAME.script.toml``) along one command stream, side
-by side in one run, three ways (interleaved, best of ``--repeat``):
+The cases (``--case``): ``peg_in_hole`` (the built-in demonstration, ``scenes/peg_in_hole.script.toml``)
+and two contact-rich scenes of ``benchmarks/scenes/``: ``channel`` (a cable lying in a U channel 1 mm
+wider than itself, pulled along it and pushed back: every segment touches the floor and both walls,
+about three contacts a segment) and ``drape`` (a cable draped across four bars, over their eight top
+edges, dragged along them and across them: it crosses edges all the time). Any other name is a
+built-in scene with its script.
+
+Each case plays its script along one command stream, three ways, interleaved, ``--repeat`` rounds:
 
 - bare: ``mj_step`` only (the gripper's mocap pose is set untimed);
 - sim: ``Simulator.step`` without tracking: gripper motion, divergence checks, the per-step record
   with the raw contact arrays and gripper force;
 - sim+extract: ``Simulator(track=True).step``: the above plus contact-state extraction (topology,
-  discrete states, forces, debouncing) every step.
+  discrete states, forces, debouncing) every step: the per-step pipeline.
 
-Prints µs per step, the ratio of sim+extract to bare (targets: at most 1.3 at 40 segments, 1.2 at
-80), the real-time factor of sim+extract (2 ms step / time per step) and how often the tracker
-labelled all queried points or some of them (the rest of the steps keep their labels).
+Prints µs per step (the median of the rounds), the ratio of sim+extract to bare (median, with the
+lowest and highest round's: targets at most 1.2 on peg-in-hole at 40 segments, 1.3 on the
+contact-rich cases), the real-time factor of sim+extract (2 ms step / time per step), the mean number
+of raw contacts per step and how often the tracker labelled all queried points or some of them.
+
+``--scaling`` runs every case at 10, 20, 40, 80, 120 and 200 segments (``--segments`` to change;
+``--repeat`` defaults to 1 there) and prints the same table; ``--plot FILE`` draws µs per step
+against segments and against contacts per step (matplotlib); ``--from LOG...`` draws it from tables
+this script printed before (measuring nothing), so a long run can be done in parts.
 
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
@@ -24,8 +37,9 @@ charges to whichever variant ran then.
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -34,13 +48,34 @@ from dlovr.scene import load_scene, scenes_dir
 from dlovr.script import load_script
 from dlovr.sim import DEFAULT_MAX_STRETCH, SimulationDiverged, Simulator
 
+BENCH_SCENES = Path(__file__).resolve().parent / "scenes"
+CASES = ("peg_in_hole", "channel", "drape")
+TARGETS = {"peg_in_hole": 1.2, "channel": 1.3, "drape": 1.3}
+CLOCK = time.thread_time
+
+
+def script_path(case: str) -> Path:
+    """The case's script: a contact-rich scene of benchmarks/scenes/, else a built-in scene's."""
+    own = BENCH_SCENES / f"{case}.script.toml"
+    return own if own.is_file() else scenes_dir() / f"{case}.script.toml"
+
+
+def case_scene(case: str, segments: int | None):
+    """The case's scene and script, the cable cut into ``segments`` (None: the scene's own)."""
+    script = load_script(script_path(case))
+    scene = load_scene(script.scene or case)
+    if segments is not None:
+        scene = replace(scene, dlo=replace(scene.dlo, segments=segments))
+    return scene, script
+
 
 def _commands(scene, script, max_stretch):
     sim = Simulator(scene, max_stretch=max_stretch)
-    return [(rec.target_pos, rec.target_quat) for rec in sim.run(script)]
-
-
-CLOCK = time.thread_time
+    out, contacts = [], 0
+    for rec in sim.run(script):
+        out.append((rec.target_pos, rec.target_quat))
+        contacts += len(rec.contact_arrays)
+    return out, contacts / max(len(out), 1)
 
 
 def bare(scene, targets, max_stretch) -> float:
@@ -57,15 +92,20 @@ def bare(scene, targets, max_stretch) -> float:
     return total / len(targets) - _clock_cost()
 
 
+_CLOCK_COST: dict[object, float] = {}
+
+
 def _clock_cost() -> float:
     """About one clock read (s): what an interval between two reads carries besides the work, taken
     off bare's per-step times (an iteration below makes two reads)."""
-    n = 20000
-    t0 = CLOCK()
-    for _ in range(n):
-        a = CLOCK()
-        CLOCK() - a
-    return (CLOCK() - t0) / n / 2.0
+    if CLOCK not in _CLOCK_COST:
+        n = 20000
+        t0 = CLOCK()
+        for _ in range(n):
+            a = CLOCK()
+            CLOCK() - a
+        _CLOCK_COST[CLOCK] = (CLOCK() - t0) / n / 2.0
+    return _CLOCK_COST[CLOCK]
 
 
 def stepped(scene, targets, max_stretch, track: bool) -> tuple[float, Simulator]:
@@ -77,45 +117,147 @@ def stepped(scene, targets, max_stretch, track: bool) -> tuple[float, Simulator]
     return (CLOCK() - t0) / len(targets), sim
 
 
+@dataclass(frozen=True)
+class Row:
+    """One case at one segment count: medians (s per step) and the rounds' ratios."""
+
+    case: str
+    segments: int
+    steps: int
+    contacts: float
+    bare: float
+    sim: float
+    full: float
+    ratios: tuple[float, ...]
+    labelled: str
+
+    @property
+    def ratio(self) -> float:
+        return statistics.median(self.ratios)
+
+
+def measure(case: str, segments: int | None, repeat: int, max_stretch: float) -> Row:
+    """Interleaved rounds of bare, sim and sim+extract along the case's commands."""
+    scene, script = case_scene(case, segments)
+    targets, contacts = _commands(scene, script, max_stretch)
+    b, s, f = [], [], []
+    sim = None
+    for _ in range(repeat):
+        b.append(bare(scene, targets, max_stretch))
+        s.append(stepped(scene, targets, max_stretch, False)[0])
+        t, sim = stepped(scene, targets, max_stretch, True)
+        f.append(t)
+    assert sim is not None
+    n, tr = len(targets), sim.tracker
+    lab = f"{tr.labellings / n:.1%} / {tr.partial_labellings / n:.1%}"
+    med = statistics.median
+    return Row(case, scene.dlo.segments, n, contacts, med(b), med(s), med(f),
+               tuple(x / y for x, y in zip(f, b, strict=True)), lab)
+
+
+HEAD = ("case", "segments", "steps", "contacts", "bare µs", "sim µs", "sim+extract µs", "ratio",
+        "(low-high)", "RTF", "labelled all/some")
+FMT = "{:>12} {:>8} {:>6} {:>8} {:>8} {:>8} {:>15} {:>6} {:>12} {:>6} {:>18}"
+
+
+def print_row(row: Row) -> None:
+    spread = f"{min(row.ratios):.2f}-{max(row.ratios):.2f}"
+    print(FMT.format(row.case, row.segments, row.steps, f"{row.contacts:.1f}", f"{row.bare * 1e6:.1f}",
+                     f"{row.sim * 1e6:.1f}", f"{row.full * 1e6:.1f}", f"{row.ratio:.2f}", spread,
+                     f"{0.002 / row.full:.2f}", row.labelled), flush=True)
+
+
+def plot(rows: list[Row], path: Path) -> None:
+    """µs per step (bare and pipeline) against segments, and the pipeline's ratio against contacts."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for case in dict.fromkeys(r.case for r in rows):
+        rs = sorted((r for r in rows if r.case == case), key=lambda r: r.segments)
+        seg = [r.segments for r in rs]
+        (line,) = ax1.plot(seg, [r.full * 1e6 for r in rs], "o-", label=f"{case}: pipeline")
+        ax1.plot(seg, [r.bare * 1e6 for r in rs], "o--", color=line.get_color(), alpha=0.6,
+                 label=f"{case}: bare mj_step")
+        ax2.plot([r.contacts for r in rs], [r.ratio for r in rs], "o-", color=line.get_color(), label=case)
+    ax1.set(xlabel="segments", ylabel="µs per step (thread CPU)", title="cost per step")
+    ax2.set_xscale("log")
+    ax2.set(xlabel="raw contacts per step (mean, log scale)", ylabel="pipeline / bare mj_step",
+            title="ratio to bare mj_step")
+    ax1.legend(fontsize=7)
+    ax2.legend(fontsize=7)
+    ax1.grid(alpha=0.3)
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"plot: {path}")
+
+
+def read_rows(paths: list[Path]) -> list[Row]:
+    """The rows of tables this script printed (``--from``)."""
+    rows = []
+    for path in paths:
+        for line in path.read_text().splitlines():
+            f = line.split()
+            if len(f) == 13 and f[1].isdigit() and f[2].isdigit():
+                case, seg, steps, contacts, b, s, full, _ratio, spread = f[:9]
+                lo, hi = (float(x) for x in spread.split("-"))
+                rows.append(Row(case, int(seg), int(steps), float(contacts), float(b) * 1e-6, float(s) * 1e-6,
+                                float(full) * 1e-6, (lo, float(_ratio), hi), f[10] + " / " + f[12]))
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default="peg_in_hole")
-    ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
+    ap.add_argument("--case", nargs="+", default=list(CASES), help=f"default: {' '.join(CASES)}")
+    ap.add_argument("--scene", dest="case", nargs="+", help=argparse.SUPPRESS)  # the old name
     ap.add_argument(
         "--max-stretch", type=float, default=DEFAULT_MAX_STRETCH, help="divergence bound on segment stretch"
     )
-    ap.add_argument("--segments", type=int, nargs="+", default=[40, 80])
-    ap.add_argument("--repeat", type=int, default=2, help="interleaved rounds; the best of each is kept")
+    ap.add_argument("--segments", type=int, nargs="+", default=None,
+                    help="default: 40 (--scaling: 10 20 40 80 120 200)")
+    ap.add_argument("--repeat", type=int, default=None,
+                    help="interleaved rounds, the median kept (default 5; --scaling: 1)")
+    ap.add_argument("--scaling", action="store_true", help="every case at 10 to 200 segments")
+    ap.add_argument("--plot", type=Path, default=None, help="with --scaling: draw the table into FILE")
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall clock")
+    ap.add_argument("--from", dest="logs", type=Path, nargs="+", default=None,
+                    help="with --plot: draw the tables of earlier runs' output instead of measuring")
     args = ap.parse_args()
+    if args.logs:
+        if args.plot is None:
+            raise SystemExit("--from needs --plot FILE")
+        plot(read_rows(args.logs), args.plot)
+        return
     global CLOCK
     CLOCK = time.thread_time if args.clock == "cpu" else time.perf_counter
-    script_path = args.script or scenes_dir() / f"{args.scene}.script.toml"
-    if not script_path.is_file():
-        raise SystemExit(f"no script {script_path}; give --script")
-    script = load_script(script_path)
-    print(f"mujoco {mujoco.__version__}; {args.scene}; {script_path.name}; best of {args.repeat}; "
-          f"{args.clock} time")
-    head = ("segments", "steps", "bare µs", "sim µs", "sim+extract µs", "ratio", "RTF", "labelled all/some")
-    print("{:>8} {:>6} {:>8} {:>8} {:>15} {:>6} {:>6} {:>18}".format(*head))
-    for segments in args.segments:
-        scene = load_scene(args.scene)
-        scene = replace(scene, dlo=replace(scene.dlo, segments=segments))
-        try:
-            targets = _commands(scene, script, args.max_stretch)
-            b = s = f = float("inf")
-            for _ in range(args.repeat):
-                b = min(b, bare(scene, targets, args.max_stretch))
-                s = min(s, stepped(scene, targets, args.max_stretch, False)[0])
-                t, sim = stepped(scene, targets, args.max_stretch, True)
-                f = min(f, t)
-        except SimulationDiverged as e:
-            print(f"{segments:>8} diverged: {e}")
-            continue
-        n, tr = len(targets), sim.tracker
-        lab = f"{tr.labellings / n:.1%} / {tr.partial_labellings / n:.1%}"
-        row = (segments, n, b * 1e6, s * 1e6, f * 1e6, f / b, 0.002 / f, lab)
-        print("{:>8} {:>6} {:>8.1f} {:>8.1f} {:>15.1f} {:>6.2f} {:>6.2f} {:>18}".format(*row))
+    segments = args.segments or ([10, 20, 40, 80, 120, 200] if args.scaling else [40])
+    repeat = args.repeat or (1 if args.scaling else 5)
+    for case in args.case:
+        if not script_path(case).is_file():
+            raise SystemExit(f"no script for case {case!r} ({script_path(case)})")
+    print(f"mujoco {mujoco.__version__}; median of {repeat}; {args.clock} time")
+    print(FMT.format(*HEAD))
+    rows = []
+    for case in args.case:
+        for n in segments:
+            try:
+                row = measure(case, n, repeat, args.max_stretch)
+            except SimulationDiverged as e:
+                print(f"{case:>12} {n:>8} diverged: {e}", flush=True)
+                continue
+            rows.append(row)
+            print_row(row)
+    for row in rows:
+        target = TARGETS.get(row.case)
+        if target is not None and (row.segments == 40 or not args.scaling):
+            met = "met" if row.ratio <= target else "NOT met"
+            print(f"{row.case} at {row.segments} segments: median ratio {row.ratio:.2f} "
+                  f"(rounds {', '.join(f'{r:.2f}' for r in row.ratios)}), target <= {target}: {met}")
+    if args.plot is not None and rows:
+        plot(rows, args.plot)
 
 
 if __name__ == "__main__":

@@ -1,12 +1,14 @@
 """Bit-identity check of the per-step pipeline: every step's states, forces and raw contacts over
-every built-in script, saved from one checkout and compared against another.
+every built-in script and the benchmarks' contact-rich scenes (``benchmarks/scenes/``), saved from
+one checkout and compared against another.
 
 Run: ``python benchmarks/check_states.py save REF.pkl`` on the reference checkout, then
 ``python benchmarks/check_states.py compare REF.pkl`` on the changed one (``--only NAME`` for one
 script, ``--segments 40 80`` for extra runs of the peg-in-hole demonstration at those segment counts).
 
 Per step it keeps: the topological and discrete situation (their notation and the objects
-themselves), the per-contact forces, the gripper force, the cable points and every field of the raw
+themselves, with the annotations their equality leaves out: DLO vectors, spans, the gripper's z), the
+per-contact forces, the gripper force, the cable points and every field of the raw
 contact arrays (as bytes), plus the tracker's changes, kept situations and labelling counts at the
 end. ``compare`` names the first step that differs. Speeding the pipeline up must change none of it.
 """
@@ -38,6 +40,10 @@ def _step_digest(rec) -> tuple:
     a = rec.contact_arrays
     for f in _FIELDS:
         h.update(np.ascontiguousarray(getattr(a, f)).astype(bool if f == "active" else np.float64).tobytes())
+    for c in st.topological.contacts:  # the annotations equality leaves out: vectors, G's z
+        h.update(repr((c.dlo.index, c.dlo.span, c.dlo.vector, [e.z for e in c.env])).encode())
+    for c in st.discrete.contacts:
+        h.update(repr(c.vector).encode())
     return (
         rec.step,
         st.topological.format(),
@@ -55,7 +61,7 @@ def _same(a: tuple, b: tuple) -> bool:
 
 
 def run(name: str, segments: int | None) -> dict:
-    script = load_script(scenes_dir() / f"{name}.script.toml")
+    script = load_script(_script_path(name))
     scene = load_scene(script.scene or name)
     if segments is not None:
         scene = replace(scene, dlo=replace(scene.dlo, segments=segments))
@@ -73,8 +79,18 @@ def run(name: str, segments: int | None) -> dict:
     return {"steps": steps, "end": end, "wall": wall}
 
 
+BENCH_SCENES = Path(__file__).resolve().parent / "scenes"
+
+
+def _script_path(name: str) -> Path:
+    """A built-in script, or one of the benchmarks' contact-rich scenes (benchmarks/scenes/)."""
+    own = BENCH_SCENES / f"{name}.script.toml"
+    return own if own.is_file() else scenes_dir() / f"{name}.script.toml"
+
+
 def _runs(args) -> list[tuple[str, int | None]]:
     names = sorted(p.name.removesuffix(".script.toml") for p in scenes_dir().glob("*.script.toml"))
+    names += sorted(p.name.removesuffix(".script.toml") for p in BENCH_SCENES.glob("*.script.toml"))
     runs: list[tuple[str, int | None]] = [(n, None) for n in names]
     runs += [("peg_in_hole", s) for s in args.segments]
     if args.only:

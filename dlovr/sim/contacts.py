@@ -82,6 +82,16 @@ class ContactArrays:
     self_pairs: np.ndarray
     names: tuple[tuple[str, ...], dict[int, str]]
 
+    @classmethod
+    def _of(
+        cls, table: np.ndarray, self_pairs: np.ndarray, names: tuple[tuple[str, ...], dict[int, str]]
+    ) -> ContactArrays:
+        """The arrays of these fields, as the constructor makes them but without the dataclass's
+        ``__init__``, which sets a frozen field at a time (the simulator makes one every step)."""
+        arrays = object.__new__(cls)
+        arrays.__dict__.update(table=table, self_pairs=self_pairs, names=names)
+        return arrays
+
     def __len__(self) -> int:
         return len(self.table)
 

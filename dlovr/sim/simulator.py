@@ -122,6 +122,8 @@ class SimState:
 # Simulator
 
 _NO_PAIRS = np.zeros((0, 2), np.int64)
+_T_WIDTH = kernels.T_WIDTH
+_step_record = kernels.step_record
 
 
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
@@ -364,11 +366,12 @@ class Simulator:
             rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
             self._hold_rows = (ne, rows)
             views.set_hold_rows(rows)
-        pts = np.empty(self._pts_shape)
-        table = np.empty((ncon, kernels.T_WIDTH))
-        grip, torque = np.empty(3), np.empty(3)
+        empty = np.empty
+        pts = empty(self._pts_shape)
+        table = empty((ncon, _T_WIDTH))
+        grip, torque = empty(3), empty(3)
         arena = views.contacts() if ncon else views.arena
-        code, index, value, rows, nself = kernels.step_record(
+        code, index, value, rows, nself = _step_record(
             views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
             table, grip, torque,
         )
@@ -376,7 +379,7 @@ class Simulator:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS
         if nself:
-            pairs = np.empty((nself, 2), np.int64)
+            pairs = empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
         return StepRecord._of(
             self.step_index,
@@ -386,7 +389,7 @@ class Simulator:
             self._mocap_quat.copy(),
             self.target_pos.copy(),
             self.target_quat.copy(),
-            ContactArrays(table if rows == ncon else table[:rows], pairs, self._names),
+            ContactArrays._of(table if rows == ncon else table[:rows], pairs, self._names),
             grip,
             torque,
         )

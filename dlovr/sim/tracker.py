@@ -16,13 +16,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import numpy as np
 
 from dlovr.geometry import SceneGeometry, point_primitives
 from dlovr.model.discrete import DiscreteSituation, Discretizer, ModelParams
-from dlovr.model.topology import Situation, Vec3, situation_from_points, tip_touches
+from dlovr.model.topology import (
+    Contact,
+    DloPrimitive,
+    EnvPrimitive,
+    Situation,
+    Vec3,
+    situation_from_points,
+    tip_touches,
+)
 from dlovr.model.transitions import (
     DEFAULT_FLIGHT_S,
     DEFAULT_HOLD_S,
@@ -135,6 +143,9 @@ class ContactTracker:
         self._made: dict[tuple[str, ...], Any] = {}  # environment primitives by face names
         self._disc: Discretizer | None = None
         self._normals: dict[str, list[float]] = {}
+        # a point's faces and primitives by its face rows
+        self._by_rows: dict[bytes, tuple[list[tuple[str, ...]], list[Any]]] = {}
+        self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
         self.partial_labellings = 0
@@ -148,6 +159,7 @@ class ContactTracker:
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
         self._tip_held = False  # the tip's own contact at the last step (the rule's hysteresis)
+        self._situation_env = -1  # the primitives' version the situation was made from
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -167,14 +179,19 @@ class ContactTracker:
     def classify(self, pts: np.ndarray, record: Any) -> Situation:
         """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
         :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
-        situation is made again) is the gripper's z axis."""
+        situation is made again) is the gripper's z axis.
+
+        The situation is made again whenever the kept hits or the tip's decision change (which also
+        refreshes its DLO vectors and the gripper's z). When no point's primitives changed, it is
+        the last one with those annotations refreshed (:func:`_refreshed`): what
+        ``situation_from_points`` makes of the same primitives, without contracting them again."""
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
         tip_info = self._tip
-        if tip_info is None or tip_info[0] != self._version:  # the tip's faces, per labelling
+        if tip_info is None or tip_info[0] != self._env_version:  # the tip's faces, per primitives
             tip_faces = sorted({f for faces in self._point_faces[n] for f in faces})
-            tip_info = self._tip = (self._version, [self._normal(f) for f in tip_faces])
+            tip_info = self._tip = (self._env_version, [self._normal(f) for f in tip_faces])
         tip = None
         angle = self.params.tip_angle_deg
         if self._tip_held:  # a touching tip holds until the angle passes the threshold by the band
@@ -184,18 +201,27 @@ class ContactTracker:
             tip = tip_touches([b[0] - a[0], b[1] - a[1], b[2] - a[2]], tip_info[1], angle)
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
-        if signature == self._signature and self._situation is not None:
+        last = self._signature
+        if signature == last and self._situation is not None:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
-        sit = situation_from_points(
-            self._env,
-            pts[1:] - pts[:-1],
-            self._normal,
-            tip_angle_deg=angle,
-            gripper_z=z,
-        )
-        self._signature, self._situation = signature, sit
+        if (
+            self._situation is not None and last is not None and last[0] == n and last[2] == tip
+            and self._situation_env == self._env_version
+        ):
+            sit = _refreshed(self._situation, pts, z)
+            if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
+                self._spans = (sit, self._spans[1])
+        else:
+            sit = situation_from_points(
+                self._env,
+                pts[1:] - pts[:-1],
+                self._normal,
+                tip_angle_deg=angle,
+                gripper_z=z,
+            )
+        self._signature, self._situation, self._situation_env = signature, sit, self._env_version
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -222,7 +248,8 @@ class ContactTracker:
         touching at the last step; every point against every piece without a table) keep their last
         labels while their points stay within their slack or budgets; the others are labelled again
         (all of them, or the moved points alone). The environment primitives of the points whose hits
-        changed are made again (``_env``, ``_point_faces``, ``_version``)."""
+        changed are made again (``_env``, ``_point_faces``, ``_version``; ``_env_version`` when a
+        point's primitives differ), kept by the point's face rows (the lists are shared, never changed)."""
         has = table is not None
         table = _NO_TABLE if table is None else table
         n1, nc = len(pts), len(table)
@@ -252,12 +279,18 @@ class ContactTracker:
             elif out == tk.PARTIAL:
                 self.partial_labellings += 1
         if changed:
-            face, made = self.geometry.face_tuple, self._made
-            group, start = self._views.group, self._views.start
+            group, start, env, by_rows = self._views.group, self._views.start, self._env, self._by_rows
             for p in self._views.changed[: self._work_i[tk.W_CHANGED_N]].tolist():
-                faces = [face(row) for row in group[start[p] : start[p + 1]]]
-                self._point_faces[p] = faces
-                self._env[p] = point_primitives(faces, made)
+                rows = group[start[p] : start[p + 1]]
+                key = rows.tobytes()  # the point's face rows (their width is fixed)
+                got = by_rows.get(key)
+                if got is None:
+                    faces = [self.geometry.face_tuple(row) for row in rows]
+                    got = by_rows[key] = (faces, point_primitives(faces, self._made))
+                self._point_faces[p] = got[0]
+                if env[p] is not got[1] and env[p] != got[1]:
+                    self._env_version += 1
+                env[p] = got[1]
             self._version += 1
 
     def _grow(self) -> None:
@@ -285,6 +318,7 @@ class ContactTracker:
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
             self._version = 0
+            self._env_version += 1
         self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
         self._views = tk.work_views(self._work_i, self._work_f)
 
@@ -364,6 +398,7 @@ class ContactTracker:
 
 
 _ORIGIN = (0.0, 0.0, 0.0)
+_T = TypeVar("_T")
 _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 
 
@@ -372,6 +407,34 @@ def _tuple(v: Any) -> Any:
     if type(v) is np.ndarray and v.dtype is _F64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
+
+
+def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
+    """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
+    from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
+    its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
+    ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
+    cost (no contraction of every point's primitives)."""
+    n = len(pts) - 1
+    contacts = []
+    for c in sit.contacts:
+        d, env = c.dlo, c.env
+        i = cast(int, d.index)
+        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+        vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+        if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
+            env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
+        dlo = _made(DloPrimitive, kind=d.kind, index=i, span=d.span, vector=vector)
+        contacts.append(_made(Contact, dlo=dlo, env=env))
+    return _made(Situation, contacts=tuple(contacts))
+
+
+def _made(cls: type[_T], **fields: Any) -> _T:
+    """A frozen dataclass of these fields without its ``__init__`` and checks (for objects whose
+    fields come from a checked one: an env already canonical, the same contacts' structure)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 def _vector_independent(topo: Situation) -> bool:

@@ -360,3 +360,31 @@ def test_the_tip_angle_has_hysteresis(geom):
 
     assert states(ContactTracker(geom)) == [tip, tip, lying, lying, tip, tip]
     assert states(ContactTracker(geom, tip_band_deg=0.0)) == [tip, lying, lying, lying, tip, lying]
+
+
+def test_a_refreshed_situation_is_the_one_made_from_the_points_again():
+    """When the kept hits change but no point's primitives do, the tracker refreshes the last
+    situation's DLO vectors and gripper z instead of contracting every point again: the very objects
+    ``situation_from_points`` makes, annotations included (vectors, spans, indices, G's z)."""
+    from dlovr.model.topology import EnvPrimitive, situation_from_points
+    from dlovr.sim.tracker import _refreshed
+
+    floor, wall = EnvPrimitive("faces", ("table.F1",)), EnvPrimitive("faces", ("wall.F2",))
+    edge = EnvPrimitive("faces", ("wall.F1", "wall.F2"))
+    env = [[], [floor], [floor], [floor, wall], [floor, wall], [edge], [], [], [floor]]
+    normals = {"table.F1": [0.0, 0.0, 1.0], "wall.F1": [0.0, 0.0, 1.0], "wall.F2": [1.0, 0.0, 0.0]}
+
+    def ann(s):
+        return [(c.dlo.kind, c.dlo.index, c.dlo.span, c.dlo.vector, c.env, [e.z for e in c.env])
+                for c in s.contacts]
+
+    rng = np.random.default_rng(5)
+    pts = cable(R, n=len(env))
+    first = situation_from_points(env, pts[1:] - pts[:-1], normals.__getitem__, gripper_z=(0.0, 0.0, 1.0))
+    for _ in range(20):
+        moved = pts + rng.normal(0.0, 1e-4, pts.shape)
+        z = tuple(float(x) for x in rng.normal(0.0, 1.0, 3))
+        want = situation_from_points(env, moved[1:] - moved[:-1], normals.__getitem__, gripper_z=z)
+        got = _refreshed(first, moved, z)
+        assert got == want and ann(got) == ann(want)
+        assert got.format() == want.format()
