@@ -66,10 +66,24 @@ def interrupt(signum: int) -> NoReturn:
     raise SignalExit(signum)
 
 
-def handler(signum: int, _frame: Any) -> None:
-    """The handler :func:`install` sets: remember the signal, then interrupt."""
+def handler(signum: int, frame: Any) -> None:
+    """The handler :func:`install` sets: remember the signal, then interrupt, unless a module is being
+    imported: an interruption there can leave a dependency half-imported (trimesh then keeps a
+    placeholder for an optional module, and a later ``placeholder | None`` fails with a ``TypeError``).
+    The signal stays pending, and the command ends at its next check (:func:`check`, the recording
+    loop's stop request, or the command's return)."""
     note(signum)
-    interrupt(signum)
+    if not _importing(frame):
+        interrupt(signum)
+
+
+def _importing(frame: Any) -> bool:
+    """Whether ``frame`` or a frame it was called from runs Python's import machinery."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame = frame.f_back
+    return False
 
 
 def defer() -> None:

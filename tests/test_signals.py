@@ -4,6 +4,7 @@ command run to the end with exit 0), and a recording in progress kept, finished.
 
 from __future__ import annotations
 
+import importlib
 import os
 import signal
 import subprocess
@@ -121,3 +122,20 @@ def test_signals_at_every_moment_of_record_start_up(tmp_path):
         if out.exists():  # it had begun recording: the file is finished and valid
             assert str(out) in last
             assert Recording(out).checkpoints()
+
+
+def test_a_signal_during_an_import_is_remembered_not_raised(tmp_path, monkeypatch):
+    """A SIGINT while a module is being imported must not interrupt the import (a dependency would be
+    left half-imported): it stays pending and ends the command at its next check."""
+    mod = tmp_path / "sig_during_import_mod.py"
+    mod.write_text("import os, signal\nos.kill(os.getpid(), signal.SIGINT)\nDONE = True\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    signals.clear()
+    try:
+        with signals.installed():
+            assert importlib.import_module("sig_during_import_mod").DONE
+            assert signals.pending() == signal.SIGINT
+            with pytest.raises(KeyboardInterrupt):
+                signals.check()
+    finally:
+        signals.clear()

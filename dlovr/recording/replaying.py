@@ -104,14 +104,7 @@ def replay(
         if wrench is not None and divergence is None and k in wrench_steps:
             divergence = _check_wrench(wrench, wrench_bytes, wrench_steps.pop(k), r, dt)
         if verify and divergence is None and k in by_step:
-            want = by_step[int(k)].state
-            got = sim.get_state().mj
-            if not np.array_equal(want.view(np.uint64), got.view(np.uint64)):
-                bad = int(np.argmax(want.view(np.uint64) != got.view(np.uint64)))
-                divergence = (
-                    f"state differs at checkpoint step {int(k)} (t={k * dt:.3f} s), element {bad}: "
-                    f"recorded {float(want[bad])!r}, replayed {float(got[bad])!r}"
-                )
+            divergence = _check_state(by_step[k].state, sim.get_state().mj, k, dt)
         if progress is not None and (i % 500 == 0 or i == len(steps) - 1):
             progress(i + 1, len(steps))
     wall = time.perf_counter() - t0
@@ -121,6 +114,18 @@ def replay(
     if verify and divergence is None:
         divergence = _compare_states([p for p in recorded_states if not p.get("end")], replayed, dt)
     return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
+
+
+def _check_state(want: np.ndarray, got: np.ndarray, k: int, dt: float) -> str | None:
+    """The difference of the replayed state ``got`` from the checkpoint's ``want`` at step ``k``, bit
+    for bit (None when equal)."""
+    if np.array_equal(want.view(np.uint64), got.view(np.uint64)):
+        return None
+    bad = int(np.argmax(want.view(np.uint64) != got.view(np.uint64)))
+    return (
+        f"state differs at checkpoint step {k} (t={k * dt:.3f} s), element {bad}: "
+        f"recorded {float(want[bad])!r}, replayed {float(got[bad])!r}"
+    )
 
 
 def _version_warnings(rec: Recording) -> list[str]:
