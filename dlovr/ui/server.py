@@ -36,6 +36,7 @@ from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
+from dlovr.ui.jog import HeldKeys, key_motion, keys_js, turn_about
 from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
     ForcePanel,
@@ -47,6 +48,7 @@ from dlovr.ui.panels import (
     TimelinePanel,
     status_markdown,
 )
+from dlovr.ui.panels.status import Status, StatusPanel, legend_html
 from dlovr.ui.session import Session
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
@@ -126,6 +128,8 @@ class DemoServer:
             verbose=verbose,
         )
         self.viewport = Viewport(self, face_labels=lambda: self.simulation_panel.face_labels)
+        self.held = HeldKeys()
+        self.status_panel = StatusPanel()
         self.state_panel = StatePanel()
         self.run_panel = RunPanel(self)
         self.force_panel = ForcePanel(self, self.run_panel)
@@ -214,6 +218,41 @@ class DemoServer:
             q = quat_mul(np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]), q)
         self.set_target(p + np.array([dx, dy, dz]), q)
 
+    def jog_keys(self, keys: list[str], linear: float, angular: float) -> None:
+        """Move the target as the jog keys ``keys`` say (:mod:`dlovr.ui.jog`): ``linear`` m along
+        and ``angular`` rad about their axes, turns about the simulation panel's pivot."""
+        if not keys:
+            return
+        dp, rv = key_motion(keys, linear, angular)
+        p, q = self.target()
+        p, q = turn_about(p + dp, q, rv, self.pivot_point() if np.any(rv) else None)
+        self.set_target(p, q)
+
+    def pivot_point(self) -> np.ndarray | None:
+        """The point turns are about (m, world): None for the gripper itself, the cable's tip, or the
+        middle of the points in contact with the obstacles (the tip when none is)."""
+        pivot = self.simulation_panel.pivot
+        if pivot == "gripper":
+            return None
+        with self.lock:
+            pts = np.asarray(self.session.record.points, dtype=float).copy()
+            classes = point_classes(self.session.state, len(pts))
+        touched = [i for i, c in enumerate(classes) if c is not None]
+        return pts[touched].mean(axis=0) if pivot == "contact" and touched else pts[-1]
+
+    def keys_held(self, held: str) -> None:
+        """The page reports the jog keys held down: a key just pressed moves one step at once."""
+        pressed = self.held.report(held, time.perf_counter())
+        jog = self.simulation_panel.jog
+        self.jog_keys(pressed, jog.step, jog.angle)
+
+    def _jog_tick(self) -> None:
+        """Keys held longer than a press move on at the set speed (called every published frame)."""
+        keys, dt = self.held.tick(time.perf_counter())
+        if keys and dt > 0:
+            jog = self.simulation_panel.jog
+            self.jog_keys(keys, jog.speed * dt, jog.turn * dt)
+
     def hold(self) -> None:
         """Stop the gripper where it is now (target := current gripper pose)."""
         p, q = self.session.gripper_pose()
@@ -238,13 +277,19 @@ class DemoServer:
         new = Session(load_checked_scene(scene), self.lock)
         with self.lock:
             self.recording_panel.finish()
+            old = self.session.scene.name
             self.session = new
             self._target.clear()
             self.view.clear()
+            self.run_panel.signals = None  # a run's detector signal belongs to the simulation it ran in
         if self.server is not None:
             self._build_scene()
             self.move_gizmo(*new.gripper_pose())
+            self.viewport.gizmo.visible = True
             self.timeline_panel.live_btn.visible = False
+            if new.scene.name != old:  # the last scene's program, notes and run are not this one's
+                self.recording_panel.forget()
+                self.run_panel.refresh()
 
     def start_recording(self, path: str | Path | None = None) -> Path:
         """Start recording to ``path`` (default: a new timestamped file in ``recordings_dir``)."""
@@ -323,27 +368,67 @@ class DemoServer:
                     self.state_panel.show_live(text)
             srv.flush()
             self.publish_count += 1
+        self._jog_tick()
         if slow:
             self._panels_at = now
+            self.status_panel.show(self.status_line())
+            self.simulation_panel.update(lambda: self.session.gripper_pose())
             self.timeline_panel.update()
             self.run_panel.update()
             self.network_panel.update()
             if not viewing:
                 self.force_panel.show_live()
 
+    def status_line(self) -> Status:
+        """What the status line at the top of the panel says now."""
+        with self.lock:
+            s = self.session
+            rec = s.recorder.path.name if s.recorder is not None else ""
+            force = float(np.linalg.norm(s.state.gripper_force)) if s.state is not None else 0.0
+            weight = float(s.scene.dlo.mass) * 9.81
+            prog = self.run_panel.program
+            run = prog.name if self.run_panel.runner is not None and prog is not None else ""
+            tl = self.view.timeline
+            viewing = tl.source if tl is not None and self.view.scene is not None else ""
+        elapsed = time.monotonic() - self.recording_panel.started if rec else 0.0
+        return Status(rec, elapsed, viewing, run, force, weight)
+
     # -- the GUI ----------------------------------------------------------------------------------
 
     def _build_gui(self) -> None:
+        """The panel, top to bottom: the status line and the controls a demonstrator needs (record,
+        pause, reset, scene), the situation and the force plot; the details in folders below."""
         assert self.server is not None, "the GUI is built on the started server"
         gui = self.server.gui
         self.viewport.build_gizmo()
+        self.status_panel.build(gui)
+        self.recording_panel.build_controls(gui)
+        self.simulation_panel.build_controls(gui)
         self.state_panel.build(gui)
         self.force_panel.build(gui)
-        self.recording_panel.build(gui)
         self.run_panel.build(gui)
-        self.network_panel.build(gui)
         self.timeline_panel.build(gui)
+        self.recording_panel.build(gui)
         self.simulation_panel.build(gui)
+        self.network_panel.build(gui)
+        self.legend_html = gui.add_folder("Legend", expand_by_default=False)
+        with self.legend_html:
+            gui.add_html(legend_html())
+        self._build_keys(gui)
+
+    def _build_keys(self, gui: viser.GuiApi) -> None:
+        """The jog keys: the page follows them (key down and up) and reports the set held to a hidden
+        text input; the status line installs that follower when it is drawn."""
+        keys = gui.add_text("Jog keys held", initial_value="", visible=False)
+        uuid = getattr(getattr(keys, "_impl", None), "uuid", None)
+
+        @keys.on_update
+        def _(event: Any) -> None:
+            if event.client is not None:
+                self.keys_held(str(keys.value))
+
+        if uuid is not None:
+            self.status_panel.script = keys_js(uuid)
 
     def _diverged(self) -> None:
         """A step diverged (the session restored the state before it): pause, the gripper held."""
@@ -366,7 +451,9 @@ class DemoServer:
             self.viewport.camera_update(client)
 
     def on_client_disconnect(self, client: Any) -> None:
-        """A tab went away: forget its camera and its hover; hold the gripper if it left mid-drag."""
+        """A tab went away: forget its camera, its hover and its keys; hold the gripper if it left
+        mid-drag."""
+        self.held.clear()
         self.viewport.camera_ready.pop(client.client_id, None)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation

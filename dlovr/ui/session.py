@@ -46,6 +46,7 @@ class Session:
         self._format_cache: dict[Any, str] = {}
         self._faces_cache: dict[Any, dict[str, Any]] = {}
         self._snapshot()
+        self.start_pose = self.gripper_pose()  # (m, world; wxyz): where "Back to start pose" goes
 
     @property
     def dt(self) -> float:
