@@ -39,6 +39,10 @@ KEY_HELP = (
 HOLD_DELAY = 0.3
 """Seconds a key is held before it moves on smoothly (a shorter press moves one step)."""
 
+REPORT_TIMEOUT = 0.6
+"""The page repeats its report every 0.2 s while keys are held; keys not reported for this long (s) are
+let go (a lost release, a page that went away)."""
+
 PIVOTS = ("gripper", "cable tip", "contact")
 """What a turn is about: the gripper itself, the cable's free end, or the middle of the current contacts
 with the obstacles (the tip when there is none)."""
@@ -83,41 +87,81 @@ def turn_about(pos: np.ndarray, quat: np.ndarray, rotvec: np.ndarray, pivot: np.
 
 
 class HeldKeys:
-    """The jog keys held down on the page: :meth:`report` takes what the page says is held and returns
-    the keys just pressed (a step each); :meth:`tick` returns the keys held long enough to move on and
-    the seconds since the last tick."""
+    """The jog keys held down on the page. :meth:`report` takes what the page says is held (and the
+    page's clock) and returns the keys just pressed (a step each) and, for the keys released, how many
+    seconds of smooth motion to add (or take back, when negative); :meth:`tick` returns the keys held
+    long enough to move on and the seconds since the last tick.
+
+    The smooth motion follows the server's clock, tick by tick; a release corrects it to what the
+    page's clock says the key was held (its press and release may reach a busy server late, or
+    together), so that a tap moves exactly one step and a hold exactly ``speed * (held - HOLD_DELAY)``.
+    """
 
     def __init__(self) -> None:
         self.down: dict[str, float] = {}  # key -> when it was pressed (time.perf_counter())
+        self._page_down: dict[str, float] = {}  # key -> when it was pressed (s, the page's clock)
+        self.applied: dict[str, float] = {}  # key -> seconds of smooth motion applied so far
         self._tick = 0.0
+        self._seen = 0.0
 
-    def report(self, held: str, now: float) -> list[str]:
-        keys = {k for k in held.upper() if k in JOG_KEYS}
+    def report(self, held: str, now: float) -> tuple[list[str], dict[str, float]]:
+        """``held``: ``"<keys>#<count>@<page ms>"`` (count and time optional)."""
+        self._seen = now
+        head, _, stamp = held.partition("@")
+        keys = {k for k in head.partition("#")[0].upper() if k in JOG_KEYS}
+        try:
+            page_t = float(stamp) / 1000.0 if stamp else None
+        except ValueError:
+            page_t = None
         pressed = sorted(keys - set(self.down))
+        fix: dict[str, float] = {}
+        for k in (set(self.down) | set(self._page_down)) - keys:
+            t0 = self._page_down.pop(k, None)
+            if page_t is not None and t0 is not None:
+                fix[k] = max(0.0, page_t - t0 - HOLD_DELAY) - self.applied.get(k, 0.0)
+            self.applied.pop(k, None)
+        for k in pressed:
+            if page_t is not None:
+                self._page_down[k] = page_t
         self.down = {k: self.down.get(k, now) for k in keys}
-        return pressed
+        return pressed, fix
 
     def clear(self) -> None:
-        self.down = {}
+        self.down, self._page_down, self.applied = {}, {}, {}
+
+    @property
+    def idle(self) -> bool:
+        """No key held, none whose release is still to come."""
+        return not self.down and not self._page_down
 
     def tick(self, now: float) -> tuple[list[str], float]:
         dt = min(max(now - self._tick, 0.0), 0.1) if self._tick else 0.0
         self._tick = now
-        return [k for k, t in self.down.items() if now - t >= HOLD_DELAY], dt
+        if self.down and now - self._seen > REPORT_TIMEOUT:
+            self.down = {}  # stop; a late release still corrects the motion by the page's clock
+        keys = [k for k, t in self.down.items() if now - t >= HOLD_DELAY]
+        for k in keys:
+            self.applied[k] = self.applied.get(k, 0.0) + dt
+        return keys, dt
 
 
-KEYS_JS = """(function(){if(window.__dlovrKeys)return;window.__dlovrKeys=1;var held={};
-function send(){var s=Object.keys(held).sort().join('');if(!window.__viserMutable)return;
+KEYS_JS = """(function(){if(window.__dlovrKeys)return;window.__dlovrKeys=1;var held={},n=0;
+function send(t){var s=Object.keys(held).sort().join('')+'#'+(n++)+'@'+(t||performance.now()).toFixed(1);
+if(!window.__viserMutable)return;
 window.__viserMutable.sendMessage({type:'GuiUpdateMessage',uuid:'UUID',updates:{value:s}});}
 function typing(e){var t=e.target;
 return t&&(t.tagName==='INPUT'||t.tagName==='TEXTAREA'||t.isContentEditable);}
 document.addEventListener('keydown',function(e){var k=(e.key||'').toUpperCase();
-if(e.repeat||e.ctrlKey||e.metaKey||e.altKey||typing(e)||KEYS.indexOf(k)<0)return;held[k]=1;send();},true);
-document.addEventListener('keyup',function(e){var k=(e.key||'').toUpperCase();
-if(held[k]){delete held[k];send();}},true);
-window.addEventListener('blur',function(){if(Object.keys(held).length){held={};send();}});})()"""
-"""The page's key follower: sends the jog keys held (sorted, e.g. ``"JU"``) to the text input ``UUID``
-whenever they change; keys typed into an input and key repeats are ignored; leaving the window lets go."""
+if(e.repeat||e.ctrlKey||e.metaKey||e.altKey||typing(e)||KEYS.indexOf(k)<0)return;held[k]=1;send(e.timeStamp);},
+true);document.addEventListener('keyup',function(e){var k=(e.key||'').toUpperCase();
+if(held[k]){delete held[k];send(e.timeStamp);}},true);
+window.addEventListener('blur',function(){if(Object.keys(held).length){held={};send();}});
+setInterval(function(){if(Object.keys(held).length)send();},200);})()"""
+"""The page's key follower: sends the jog keys held (sorted, then ``#`` and a count that makes every
+report a new value, then ``@`` and the page's clock in ms, e.g. ``"JU#7@5123.4"``: a key event's own
+time stamp, when the key went down or up, not when a busy page got round to handling it) to the text
+input ``UUID`` whenever they change and every 0.2 s while any is held; keys typed into an input and
+key repeats are ignored; leaving the window lets go."""
 
 
 def keys_js(uuid: str) -> str:

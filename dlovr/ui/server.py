@@ -241,10 +241,13 @@ class DemoServer:
         return pts[touched].mean(axis=0) if pivot == "contact" and touched else pts[-1]
 
     def keys_held(self, held: str) -> None:
-        """The page reports the jog keys held down: a key just pressed moves one step at once."""
-        pressed = self.held.report(held, time.perf_counter())
+        """The page reports the jog keys held down: a key just pressed moves one step at once; a key
+        released corrects its smooth motion to the time the page held it (:class:`HeldKeys`)."""
+        pressed, fix = self.held.report(held, time.perf_counter())
         jog = self.simulation_panel.jog
         self.jog_keys(pressed, jog.step, jog.angle)
+        for key, seconds in fix.items():  # a release: exactly as long as the page held the key
+            self.jog_keys([key], jog.speed * seconds, jog.turn * seconds)
 
     def _jog_tick(self) -> None:
         """Keys held longer than a press move on at the set speed (called every published frame)."""
@@ -423,7 +426,7 @@ class DemoServer:
         uuid = getattr(getattr(keys, "_impl", None), "uuid", None)
 
         @keys.on_update
-        def _(event: Any) -> None:
+        async def _(event: Any) -> None:  # async: the reports are handled in order (a release last)
             if event.client is not None:
                 self.keys_held(str(keys.value))
 

@@ -212,3 +212,114 @@ def test_a_scene_switch_and_an_opened_recording_leave_nothing_of_the_last_scene(
     page.get_by_role("button", name="Back to live").click()
     wait_for(lambda: scene_nodes(page).get("/gripper", False), timeout=5, what="the gizmo back")
     assert page.get_by_text("Viewing recording").count() == 0
+
+
+# -- What is shown, and what a demonstrator expects ----------------------------------------------
+
+
+def test_the_essentials_are_on_the_first_screen_and_the_legend_explains(demo: DemoServer, page):
+    fresh(demo, "table")
+    page.evaluate("() => document.activeElement && document.activeElement.blur()")
+    essentials = [
+        page.locator(".dlovr-status").first,
+        page.get_by_role("button", name="Start recording"),
+        page.get_by_role("button", name="Pause"),
+        page.get_by_role("button", name="Reset", exact=True),
+        page.get_by_text("Discrete:").first,
+    ]
+    for loc in essentials:
+        box = loc.bounding_box()
+        assert box is not None and box["y"] + box["height"] <= HEIGHT, (loc, box)
+    page.get_by_text("Legend", exact=True).click()
+    legend = page.locator(".dlovr-legend")
+    legend.wait_for(timeout=5_000)
+    text = legend.inner_text()
+    for words in ("V/G", "establishing", "instable", "free", "risky", "Timeline", "detector"):
+        assert words in text, words
+    page.get_by_text("Legend", exact=True).click()
+
+
+def held_z(demo: DemoServer) -> float:
+    return float(demo.target()[0][2])
+
+
+def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, page):
+    fresh(demo, "table")
+    page.evaluate("() => document.activeElement && document.activeElement.blur()")
+    x0 = float(demo.target()[0][0])
+    # a tap: one step along +x (dispatched by the page: Playwright's own press waits for the busy page
+    # between down and up, which the page then rightly reads as a key held)
+    page.evaluate(
+        "() => { for (const t of ['keydown', 'keyup']) document.dispatchEvent("
+        "new KeyboardEvent(t, {key: 'l', bubbles: true})); }"
+    )
+    wait_for(lambda: float(demo.target()[0][0]) > x0 + 1e-4, timeout=5, what="the tap's step")
+    wait_for(lambda: demo.held.idle, timeout=5, what="the key's release")
+    step = demo.simulation_panel.jog.step
+    assert float(demo.target()[0][0]) == pytest.approx(x0 + step, abs=1e-6)
+    z0 = held_z(demo)
+    page.keyboard.down("u")  # held: smooth motion at the set speed
+    time.sleep(1.0)
+    page.keyboard.up("u")
+    wait_for(lambda: demo.held.idle, timeout=5, what="the key's release")
+    moved = held_z(demo) - z0
+    speed = demo.simulation_panel.jog.speed
+    # held 1 s (the page may see the release later when busy: as long as it saw the key held)
+    assert step + 0.5 * speed < moved < step + 3.0 * speed, (moved, step, speed)
+    z1 = held_z(demo)
+    time.sleep(0.3)
+    assert held_z(demo) == z1  # released: it stops
+
+
+def test_recording_shows_a_red_dot_and_time_and_reset_asks_first(demo: DemoServer, page):
+    fresh(demo, "table")
+    page.get_by_role("button", name="Start recording").click()
+    page.locator(".dlovr-status [data-recording]").wait_for(timeout=5_000)
+    wait_for(lambda: "REC" in page.title(), timeout=5, what="the page title")
+    page.get_by_role("button", name="Reset", exact=True).click()
+    page.get_by_role("button", name="Confirm reset (ends the recording)").wait_for(timeout=5_000)
+    assert demo.status()["recording"] is not None
+    t = demo.status()["t"]
+    page.get_by_role("button", name="Confirm reset (ends the recording)").click()
+    wait_for(lambda: demo.status()["recording"] is None and demo.status()["t"] < t, what="the reset")
+    wait_for(lambda: "REC" not in page.title(), timeout=5, what="the title without REC")
+    assert page.locator(".dlovr-status [data-recording]").count() == 0
+
+
+def test_a_program_run_says_manual_control_is_locked(demo: DemoServer, page):
+    fresh(demo, "table")
+    demo.run_panel.run(TABLE_PROGRAM, detect="oracle")
+    page.locator(".dlovr-status [data-running]").wait_for(timeout=5_000)
+    assert "manual control locked" in page.locator(".dlovr-status").inner_text()
+    demo.run_panel.cancel()
+    wait_for(lambda: page.locator(".dlovr-status [data-running]").count() == 0, timeout=5, what="unlocked")
+
+
+def test_status_warns_of_a_force_that_may_break_the_cable():
+    from dlovr.ui.panels.status import Status, status_html
+
+    weight = 0.06 * 9.81
+    assert "data-force-warning" not in status_html(Status(force=3.0, weight=weight))
+    warn = status_html(Status(force=7.0, weight=weight))
+    assert "data-force-warning" in warn and "7.0 N" in warn and "12x" in warn
+
+
+def test_a_turn_about_the_tip_keeps_the_tip_in_place():
+    from dlovr.ui.jog import HeldKeys, key_motion, turn_about
+
+    p, q = np.array([0.0, 0.0, 0.5]), np.array([1.0, 0.0, 0.0, 0.0])
+    tip = np.array([0.0, 0.0, 0.1])
+    dp, rv = key_motion(["T"], 0.005, np.radians(10))
+    assert np.allclose(dp, 0) and np.allclose(rv, [np.radians(10), 0, 0])
+    p2, q2 = turn_about(p, q, rv, tip)
+    assert np.isclose(np.linalg.norm(p2 - tip), 0.4) and not np.allclose(p2, p)
+    assert np.isclose(abs(q2[1]), np.sin(np.radians(5)))
+    keys = HeldKeys()
+    assert keys.report("ju#1@1000", 0.0) == (["J", "U"], {})
+    assert keys.report("J#2@1100", 0.1) == ([], {"U": 0.0})  # U released at once: no smooth motion
+    assert keys.tick(0.2)[0] == [] and keys.tick(0.45)[0] == ["J"] and keys.tick(0.5)[0] == ["J"]
+    # held 0.4 s by the page's clock: 0.1 s of smooth motion, 0.15 s were applied by the server's ticks
+    assert keys.report("#3@1400", 0.55) == ([], {"J": pytest.approx(0.1 - 0.15)})
+    assert keys.report("J#4@2000", 0.6) == (["J"], {})
+    assert keys.tick(0.7)[0] == [] and keys.tick(1.3)[0] == [] and keys.down == {}  # not reported: let go
+    assert keys.report("#5@2310", 1.4) == ([], {"J": pytest.approx(0.01)})  # the late release corrects
