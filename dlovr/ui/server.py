@@ -36,7 +36,6 @@ from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
-from dlovr.ui.jog import HeldKeys, key_motion, keys_js, turn_about
 from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
     ForcePanel,
@@ -48,8 +47,10 @@ from dlovr.ui.panels import (
     TimelinePanel,
     status_markdown,
 )
-from dlovr.ui.panels.status import Status, StatusPanel, legend_html
+from dlovr.ui.panels.keys import KeysPanel
+from dlovr.ui.panels.status import StatusPanel, current_status
 from dlovr.ui.session import Session
+from dlovr.ui.starting import StartingServer
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
 
@@ -128,7 +129,6 @@ class DemoServer:
             verbose=verbose,
         )
         self.viewport = Viewport(self, face_labels=lambda: self.simulation_panel.face_labels)
-        self.held = HeldKeys()
         self.status_panel = StatusPanel()
         self.state_panel = StatePanel()
         self.run_panel = RunPanel(self)
@@ -137,6 +137,7 @@ class DemoServer:
         self.timeline_panel = TimelinePanel(self, self.viewport, self.state_panel, self.force_panel)
         self.simulation_panel = SimulationPanel(self, self.viewport, self.timeline_panel)
         self.network_panel = NetworkPanel(self)
+        self.keys = KeysPanel(self, self.simulation_panel, self.status_panel)
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -149,8 +150,14 @@ class DemoServer:
         host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
         return f"http://{host}:{self.port}"
 
-    def start(self) -> DemoServer:
-        srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
+    def start(self, early: StartingServer | None = None) -> DemoServer:
+        """Build the page and start the simulation thread, in a new viser server or in ``early``'s,
+        which has been showing what the command waits for (:mod:`dlovr.ui.starting`)."""
+        if early is not None:
+            early.done()
+            srv = early.server
+        else:
+            srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
         self.server = srv
         srv.gui.configure_theme(show_share_button=False, control_width="large")
         srv.gui.main_panel.dock_right()  # the panel beside the 3D view, not over it (framing)
@@ -217,44 +224,6 @@ class DemoServer:
         if yaw:
             q = quat_mul(np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]), q)
         self.set_target(p + np.array([dx, dy, dz]), q)
-
-    def jog_keys(self, keys: list[str], linear: float, angular: float) -> None:
-        """Move the target as the jog keys ``keys`` say (:mod:`dlovr.ui.jog`): ``linear`` m along
-        and ``angular`` rad about their axes, turns about the simulation panel's pivot."""
-        if not keys:
-            return
-        dp, rv = key_motion(keys, linear, angular)
-        p, q = self.target()
-        p, q = turn_about(p + dp, q, rv, self.pivot_point() if np.any(rv) else None)
-        self.set_target(p, q)
-
-    def pivot_point(self) -> np.ndarray | None:
-        """The point turns are about (m, world): None for the gripper itself, the cable's tip, or the
-        middle of the points in contact with the obstacles (the tip when none is)."""
-        pivot = self.simulation_panel.pivot
-        if pivot == "gripper":
-            return None
-        with self.lock:
-            pts = np.asarray(self.session.record.points, dtype=float).copy()
-            classes = point_classes(self.session.state, len(pts))
-        touched = [i for i, c in enumerate(classes) if c is not None]
-        return pts[touched].mean(axis=0) if pivot == "contact" and touched else pts[-1]
-
-    def keys_held(self, held: str) -> None:
-        """The page reports the jog keys held down: a key just pressed moves one step at once; a key
-        released corrects its smooth motion to the time the page held it (:class:`HeldKeys`)."""
-        pressed, fix = self.held.report(held, time.perf_counter())
-        jog = self.simulation_panel.jog
-        self.jog_keys(pressed, jog.step, jog.angle)
-        for key, seconds in fix.items():  # a release: exactly as long as the page held the key
-            self.jog_keys([key], jog.speed * seconds, jog.turn * seconds)
-
-    def _jog_tick(self) -> None:
-        """Keys held longer than a press move on at the set speed (called every published frame)."""
-        keys, dt = self.held.tick(time.perf_counter())
-        if keys and dt > 0:
-            jog = self.simulation_panel.jog
-            self.jog_keys(keys, jog.speed * dt, jog.turn * dt)
 
     def hold(self) -> None:
         """Stop the gripper where it is now (target := current gripper pose)."""
@@ -371,30 +340,16 @@ class DemoServer:
                     self.state_panel.show_live(text)
             srv.flush()
             self.publish_count += 1
-        self._jog_tick()
+        self.keys.tick()
         if slow:
             self._panels_at = now
-            self.status_panel.show(self.status_line())
+            self.status_panel.show(current_status(self, self.run_panel, self.recording_panel.started))
             self.simulation_panel.update(lambda: self.session.gripper_pose())
             self.timeline_panel.update()
             self.run_panel.update()
             self.network_panel.update()
             if not viewing:
                 self.force_panel.show_live()
-
-    def status_line(self) -> Status:
-        """What the status line at the top of the panel says now."""
-        with self.lock:
-            s = self.session
-            rec = s.recorder.path.name if s.recorder is not None else ""
-            force = float(np.linalg.norm(s.state.gripper_force)) if s.state is not None else 0.0
-            weight = float(s.scene.dlo.mass) * 9.81
-            prog = self.run_panel.program
-            run = prog.name if self.run_panel.runner is not None and prog is not None else ""
-            tl = self.view.timeline
-            viewing = tl.source if tl is not None and self.view.scene is not None else ""
-        elapsed = time.monotonic() - self.recording_panel.started if rec else 0.0
-        return Status(rec, elapsed, viewing, run, force, weight)
 
     # -- the GUI ----------------------------------------------------------------------------------
 
@@ -414,24 +369,8 @@ class DemoServer:
         self.recording_panel.build(gui)
         self.simulation_panel.build(gui)
         self.network_panel.build(gui)
-        self.legend_html = gui.add_folder("Legend", expand_by_default=False)
-        with self.legend_html:
-            gui.add_html(legend_html())
-        self._build_keys(gui)
-
-    def _build_keys(self, gui: viser.GuiApi) -> None:
-        """The jog keys: the page follows them (key down and up) and reports the set held to a hidden
-        text input; the status line installs that follower when it is drawn."""
-        keys = gui.add_text("Jog keys held", initial_value="", visible=False)
-        uuid = getattr(getattr(keys, "_impl", None), "uuid", None)
-
-        @keys.on_update
-        async def _(event: Any) -> None:  # async: the reports are handled in order (a release last)
-            if event.client is not None:
-                self.keys_held(str(keys.value))
-
-        if uuid is not None:
-            self.status_panel.script = keys_js(uuid)
+        self.status_panel.build_legend(gui)
+        self.keys.build(gui)
 
     def _diverged(self) -> None:
         """A step diverged (the session restored the state before it): pause, the gripper held."""
@@ -456,7 +395,7 @@ class DemoServer:
     def on_client_disconnect(self, client: Any) -> None:
         """A tab went away: forget its camera, its hover and its keys; hold the gripper if it left
         mid-drag."""
-        self.held.clear()
+        self.keys.held.clear()
         self.viewport.camera_ready.pop(client.client_id, None)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation
@@ -487,15 +426,22 @@ def exposure_warning(host: str, port: int) -> str | None:
 
 
 def serve(
-    scene: str | Path | Scene, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings"
+    scene: str | Path | Scene,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    recordings_dir: str = "recordings",
+    early: StartingServer | None = None,
 ) -> None:
     """Run the server on ``scene`` (loaded, or a name or path) until Ctrl-C or SIGTERM (used by
     ``dlovr serve``; SIGTERM exits with 143 once the server stopped, a recording in progress finished
-    and the temporary folders removed); warns on stderr when ``host`` is not loopback."""
+    and the temporary folders removed); warns on stderr when ``host`` is not loopback (unless
+    ``early``, the page already up, was given: its starter warned)."""
     from dlovr.recording import finish_on_sigterm
 
-    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
-    warning = exposure_warning(host, srv.port)
+    if early is not None:
+        early.say(f"loading scene {scene if not isinstance(scene, Scene) else scene.name}")
+    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start(early)
+    warning = exposure_warning(host, srv.port) if early is None else None
     if warning is not None:
         print(warning, file=sys.stderr, flush=True)
     try:

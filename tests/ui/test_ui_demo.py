@@ -254,14 +254,14 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
         "new KeyboardEvent(t, {key: 'l', bubbles: true})); }"
     )
     wait_for(lambda: float(demo.target()[0][0]) > x0 + 1e-4, timeout=5, what="the tap's step")
-    wait_for(lambda: demo.held.idle, timeout=5, what="the key's release")
+    wait_for(lambda: demo.keys.held.idle, timeout=5, what="the key's release")
     step = demo.simulation_panel.jog.step
     assert float(demo.target()[0][0]) == pytest.approx(x0 + step, abs=1e-6)
     z0 = held_z(demo)
     page.keyboard.down("u")  # held: smooth motion at the set speed
     time.sleep(1.0)
     page.keyboard.up("u")
-    wait_for(lambda: demo.held.idle, timeout=5, what="the key's release")
+    wait_for(lambda: demo.keys.held.idle, timeout=5, what="the key's release")
     moved = held_z(demo) - z0
     speed = demo.simulation_panel.jog.speed
     # held 1 s (the page may see the release later when busy: as long as it saw the key held)
@@ -323,3 +323,19 @@ def test_a_turn_about_the_tip_keeps_the_tip_in_place():
     assert keys.report("J#4@2000", 0.6) == (["J"], {})
     assert keys.tick(0.7)[0] == [] and keys.tick(1.3)[0] == [] and keys.down == {}  # not reported: let go
     assert keys.report("#5@2310", 1.4) == ([], {"J": pytest.approx(0.01)})  # the late release corrects
+
+
+def test_the_starting_page_needs_viser_alone():
+    """`dlovr serve` puts its page up and prints the URL before the simulation is imported and its
+    kernels compiled (30-40 s on a fresh install): the starting page imports no simulation module."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, dlovr.cli.serve, dlovr.ui.starting\n"
+        "heavy = sorted(m for m in sys.modules if m.split('.')[0] in ('mujoco', 'numba', 'trimesh')"
+        " or m.startswith(('dlovr.sim', 'dlovr.ui.server')))\n"
+        "print(heavy)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]", out.stdout

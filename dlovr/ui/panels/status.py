@@ -5,12 +5,18 @@ what the server is still waiting for at start."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from html import escape
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 if TYPE_CHECKING:
     import viser
+
+    from dlovr.ui.app import App
+    from dlovr.ui.panels.run import RunPanel
 
 FORCE_WARN_WEIGHTS = 10.0
 """The gripper wrench (in cable weights) above which the status warns: pushing the tip into an obstacle
@@ -65,6 +71,22 @@ def status_html(s: Status) -> str:
     return f'<div class="dlovr-status" style="font-size:12px">{"".join(parts)}</div>'
 
 
+def current_status(app: App, run: RunPanel, rec_started: float) -> Status:
+    """What the status line says now: ``run`` is the run panel, ``rec_started`` when the recording in
+    progress started (``time.monotonic()``)."""
+    with app.lock:
+        s = app.session
+        rec = s.recorder.path.name if s.recorder is not None else ""
+        force = float(np.linalg.norm(s.state.gripper_force)) if s.state is not None else 0.0
+        weight = float(s.scene.dlo.mass) * 9.81
+        prog = run.program
+        running = prog.name if run.runner is not None and prog is not None else ""
+        tl = app.view.timeline
+        viewing = tl.source if tl is not None and app.view.scene is not None else ""
+    elapsed = time.monotonic() - rec_started if rec else 0.0
+    return Status(rec, elapsed, viewing, running, force, weight)
+
+
 def page_title(s: Status) -> str:
     """The browser tab's title: a red dot and the elapsed time while recording."""
     if s.recording:
@@ -83,6 +105,11 @@ class StatusPanel:
 
     def build(self, gui: viser.GuiApi) -> None:
         self.html = gui.add_html(status_html(self.status))
+
+    def build_legend(self, gui: viser.GuiApi) -> None:
+        """The folded *Legend* (:func:`legend_html`)."""
+        with gui.add_folder("Legend", expand_by_default=False):
+            gui.add_html(legend_html())
 
     def show(self, status: Status) -> None:
         self.status = status
