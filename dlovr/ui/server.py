@@ -320,7 +320,8 @@ class DemoServer:
             text = None
             if slow:
                 text = status_markdown(
-                    st, s.last_class(), t=rec.time, rtf=self.loop.rtf, paused=self._paused, note=s.note
+                    st, s.last_class(), t=rec.time, rtf=self.loop.rtf, paused=self._paused, note=s.note,
+                    contact_force=s.contact_force,
                 )
             viewing = self.view.timeline is not None
         if not viewing:

@@ -20,6 +20,10 @@ from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
 
+CONTACT_FORCE_S = 0.1
+"""Seconds over which the panel's contact normal force is averaged (exponentially)."""
+
+
 class Session:
     """One scene's simulation with its contact tracker, optional recorder and live timeline.
 
@@ -42,6 +46,7 @@ class Session:
         self._kept_seen = 0
         self._last_snap_t = -1.0
         self.note = ""
+        self.contact_force = 0.0  # sum of the contact normal forces (N), averaged over CONTACT_FORCE_S
         self._class_cache: dict[Any, tuple[str, ...]] = {}
         self._format_cache: dict[Any, str] = {}
         self._faces_cache: dict[Any, dict[str, Any]] = {}
@@ -103,6 +108,8 @@ class Session:
             self.recorder.step(rec)
         self.record, self.state = rec, rec.state  # the simulator tracks the contacts (track=True)
         self.forces.add(rec.time, rec.gripper_force)
+        a = min(1.0, self.dt / CONTACT_FORCE_S)  # the contact normal force, averaged over ~0.1 s
+        self.contact_force += a * (float(sum(rec.state.forces)) - self.contact_force)
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept

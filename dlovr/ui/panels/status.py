@@ -24,6 +24,11 @@ built up 30 weights (7 N) before the table cable snapped through, with no warnin
 
 REC_COLOR = "#d62728"
 
+KEYS_LINE = (
+    "Keys: <b>J/L</b> x, <b>I/K</b> y, <b>U/O</b> z, <b>T/G Y/H N/M</b> turn, <b>R</b> record, "
+    "<b>P</b> pause (hold to move; step, speed and pivot in <i>Gripper, keys and view</i>)"
+)
+
 
 @dataclass(frozen=True)
 class Status:
@@ -68,6 +73,7 @@ def status_html(s: Status) -> str:
         )
     if not parts:
         parts.append('<div style="color:#555">not recording</div>')
+    parts.append(f'<div class="dlovr-keys-line" style="color:#555;font-size:11px">{KEYS_LINE}</div>')
     return f'<div class="dlovr-status" style="font-size:12px">{"".join(parts)}</div>'
 
 
