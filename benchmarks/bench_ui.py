@@ -97,7 +97,7 @@ def send(page, kind: str, **fields) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--scene", default="table")
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--trials", type=int, default=20)

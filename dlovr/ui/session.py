@@ -19,7 +19,6 @@ from dlovr.ui.drawing import point_classes, point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
-
 CONTACT_FORCE_S = 0.1
 """Seconds over which the panel's contact normal force is averaged (exponentially)."""
 

@@ -84,7 +84,7 @@ def network(srv: DemoServer, page, out: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "img")
     args = ap.parse_args()
     exe = shutil.which("chromium") or "/usr/bin/chromium"
