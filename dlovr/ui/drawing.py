@@ -19,11 +19,11 @@ COLOR_BY_CLASS = {
     Stability.SEMI: (235, 195, 0),
     Stability.INSTABLE: (215, 30, 30),
 }
-# the faces touched, in pale tints of the same hues, so that a cable lying on one stays visible
+# the faces touched, in lighter tints of the same hues, so that a cable lying on one stays visible
 FACE_COLOR_BY_CLASS = {
-    Stability.STABLE: (150, 230, 160),
-    Stability.SEMI: (255, 235, 150),
-    Stability.INSTABLE: (255, 160, 160),
+    Stability.STABLE: (100, 210, 120),
+    Stability.SEMI: (245, 225, 100),
+    Stability.INSTABLE: (245, 125, 125),
 }
 
 

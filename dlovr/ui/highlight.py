@@ -1,5 +1,5 @@
 """The faces in contact, drawn over the obstacles and coloured by the stability class of the contact
-that touches them (pale green stable, pale yellow semi-stable, pale red instable), and the face
+that touches them (light green stable, light yellow semi-stable, light red instable), and the face
 labels (the *Face labels* option) that name every face and say which ones are touched."""
 
 from __future__ import annotations

@@ -52,6 +52,7 @@ class SimulationPanel:
         s = app.session
         self.pause_btn = gui.add_button("Pause", hint="Pause / resume the simulation (key P)")
         self.reset_btn = gui.add_button("Reset", hint="Restart the scene")
+        self.frame_btn = gui.add_button("Frame scene", hint="Point the camera at the whole workspace")
         names = [n for n, _ in builtin_scenes()]
         cur = s.scene.name if s.scene.name in names else None
         self.scene_dd = gui.add_dropdown(
@@ -88,7 +89,9 @@ class SimulationPanel:
     def build(self, gui: viser.GuiApi) -> None:
         """The gripper, keys and view folder."""
         app = self.app
-        with gui.add_folder("Gripper, keys and view", expand_by_default=False):
+        with gui.add_folder("Gripper, keys and view"):
+            self.labels_cb = gui.add_checkbox("Face labels", initial_value=False)
+            self.camera_bg = gui.add_button_group("Camera", CAMERA_PRESETS)
             self.pose_md = gui.add_markdown("")
             self.pose_in = gui.add_vector3("Go to [mm]", initial_value=(0.0, 0.0, 0.0), step=1.0)
             go_btn = gui.add_button("Go to pose")
@@ -103,9 +106,6 @@ class SimulationPanel:
                 '<div class="dlovr-keys" style="font-size:11px">Drag the gizmo, or hold a key (a tap '
                 "moves one step). Turns are about the pivot.<table>" + rows + "</table></div>"
             )
-            self.frame_btn = gui.add_button("Frame scene", hint="Point the camera at the whole workspace")
-            self.camera_bg = gui.add_button_group("Camera", CAMERA_PRESETS)
-            self.labels_cb = gui.add_checkbox("Face labels", initial_value=False)
         self.frame_btn.on_click(lambda e: self.viewport.frame(e.client))
         self.camera_bg.on_click(lambda e: self.viewport.preset(str(self.camera_bg.value), e.client))
         go_btn.on_click(lambda _e: app.set_target(np.asarray(self.pose_in.value, dtype=float) / 1000.0))

@@ -26,7 +26,7 @@ REC_COLOR = "#d62728"
 
 KEYS_LINE = (
     "Keys: <b>J/L</b> x, <b>I/K</b> y, <b>U/O</b> z, <b>T/G Y/H N/M</b> turn, <b>R</b> record, "
-    "<b>P</b> pause (hold to move; step, speed and pivot in <i>Gripper, keys and view</i>)"
+    "<b>P</b> pause (hold to move; step, speed and pivot: the folder Gripper, keys and view)"
 )
 
 
@@ -161,7 +161,7 @@ def legend_html() -> str:
         "points (<code>E9</code>) as well.<br>"
         f"<b>Transition classes</b><ul style='margin:0;padding-left:14px'>{classes}</ul>"
         f"<b>Cable</b>: {_swatch(COLOR_FREE)} free {cable}; blue arrows: contact vectors.<br>"
-        f"<b>Faces touched</b> (pale): {faces}.<br>"
+        f"<b>Faces touched</b> (lighter): {faces}.<br>"
         f"<b>Program risk</b>: {risks} (caution: a T, risky: an I or S transition).<br>"
         "<b>Timeline</b>: each contact situation has its own colour (no meaning beyond telling them "
         "apart); a black edge: a transition, with its class.<br>"
