@@ -173,7 +173,9 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
         if axis_end(demo.status()["t"]) == axis:
             break
     after = band_boxes(page)[:2]
-    assert np.allclose(before, after, atol=0.5), (before, after)
+    # the hovered band stays where it is and as wide; the live one (the last) only grows at its end
+    still = np.allclose(before[0], after[0], atol=0.5) and abs(before[1][0] - after[1][0]) <= 0.5
+    assert still, (before, after)
     page.mouse.move(x + 1, y)  # the hand trembles: still the same situation
     time.sleep(0.2)
     assert faces.shown == {} and faces.pinned == {}
