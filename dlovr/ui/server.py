@@ -355,8 +355,7 @@ class DemoServer:
     # -- the GUI ----------------------------------------------------------------------------------
 
     def _build_gui(self) -> None:
-        """The panel, top to bottom: the status line and the controls a demonstrator needs (record,
-        pause, reset, scene), the situation and the force plot; the details in folders below."""
+        """The panel: status and the essential controls at the top, the details in folders below."""
         assert self.server is not None, "the GUI is built on the started server"
         gui = self.server.gui
         self.viewport.build_gizmo()
