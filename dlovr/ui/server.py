@@ -440,7 +440,8 @@ def serve(
 
     if early is not None:
         early.say(f"loading scene {scene if not isinstance(scene, Scene) else scene.name}")
-    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start(early)
+    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir)
+    srv = srv.start(early) if early is not None else srv.start()
     warning = exposure_warning(host, srv.port) if early is None else None
     if warning is not None:
         print(warning, file=sys.stderr, flush=True)
