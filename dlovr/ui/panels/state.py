@@ -28,7 +28,7 @@ def status_markdown(
     torque); *Contact normal force (sum)* is the sum over the cable's contacts of their normal
     forces (N), a different quantity (a cable lying still on a table carries its weight there while
     the gripper feels only the hanging part), given as ``contact_force`` averaged over the last 0.1 s
-    (one step's value flickers with the stiff contacts)."""
+    (one step's value can flicker with the stiff contacts)."""
     if state is None:
         return "Situation: (starting)"
     fx, fy, fz = state.gripper_force
@@ -47,8 +47,8 @@ def status_markdown(
 
 
 def _contact(state: ContactState, mean: float | None) -> str:
-    """The contact normal force: the mean over the last 0.1 s where given (a step's own value flickers
-    between 0 and several times the weight with the stiff contacts), else the step's."""
+    """The contact normal force: the mean over the last 0.1 s where given (a step's own value can
+    flicker with the stiff contacts), else the step's."""
     if mean is None:
         return f"{sum(state.forces):.2f} N"
     if all(c.state.stability_class is None for c in state.discrete.contacts):  # free and gripper only
