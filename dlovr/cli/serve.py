@@ -1,13 +1,21 @@
-"""``dlovr serve``: the browser teleoperation UI (registered on the main group by :mod:`dlovr.cli`)."""
+"""``dlovr serve``: the browser teleoperation UI (registered on the main group by :mod:`dlovr.cli`).
+
+The page is up, and its URL printed, before anything slow: the kernels compile (a fresh install) and
+the scene loads while the page says so (:mod:`dlovr.ui.starting`)."""
 
 from __future__ import annotations
 
 import errno
 import socket
+import sys
+from typing import TYPE_CHECKING
 
 import click
 
-from dlovr.cli.common import UserError, load_scene_arg, warm_up
+from dlovr.cli.common import UserError
+
+if TYPE_CHECKING:
+    from dlovr.ui.starting import StartingServer
 
 
 @click.command("serve", short_help="Serve the browser teleoperation UI.")
@@ -31,12 +39,44 @@ from dlovr.cli.common import UserError, load_scene_arg, warm_up
 def serve_cmd(scene_ref: str, host: str, port: int, recordings_dir: str) -> None:
     """Serve the browser teleoperation UI (viser) with the simulation running in real time."""
     check_address(host, port)
+    from dlovr.ui.starting import StartingServer
+
+    try:
+        early = StartingServer(host, port)
+    except OSError as e:
+        raise UserError(f"cannot serve on {host}:{port}: {e.strerror or e}") from None
+    try:
+        _serve(early, scene_ref, host, recordings_dir)
+    except BaseException:
+        early.stop()  # a bad scene or the like: no server left behind (stopping twice is harmless)
+        raise
+
+
+def _serve(early: StartingServer, scene_ref: str, host: str, recordings_dir: str) -> None:
+    """Warn (off loopback), print the URL, then check the scene and compile the kernels while the page
+    says so, and serve."""
+    from dlovr.cli.common import load_scene_arg
+    from dlovr.ui.server import exposure_warning
+
+    port = early.server.get_port()
+    warning = exposure_warning(host, port)
+    if warning is not None:
+        print(warning, file=sys.stderr, flush=True)
+    url = f"http://{'127.0.0.1' if host in ('0.0.0.0', '::', '') else host}:{port}"
+    print(f"dlovr serve: starting at {url} (the page says what it waits for)", flush=True)
+    early.say("checking the scene")
     scene = load_scene_arg(scene_ref)
-    warm_up()
+    from dlovr.sim.warmup import warm_up
+
+    def notice(text: str) -> None:
+        click.echo(text, err=True)
+        early.say(f"{text}: about 30-40 s after a fresh install")
+
+    warm_up(notice)
     from dlovr.ui import serve
 
     try:
-        serve(scene, host=host, port=port, recordings_dir=recordings_dir)
+        serve(scene, host=host, port=port, recordings_dir=recordings_dir, early=early)
     except ValueError as e:
         raise UserError(f"{scene.path}: {e}") from None
     except OSError as e:

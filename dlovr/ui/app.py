@@ -72,6 +72,10 @@ class App(Protocol):
         """Command the gripper pose (m, world; quaternion wxyz; None: keep the orientation)."""
         ...
 
+    def target(self) -> tuple[Any, Any]:
+        """The gripper target last commanded (m, world; wxyz), else the simulator's."""
+        ...
+
     def move_gizmo(self, pos: Any, quat: Any) -> None:
         """Put the gizmo at a pose (m, world; wxyz) without commanding it (a program's target)."""
         ...

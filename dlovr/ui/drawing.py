@@ -11,12 +11,19 @@ import numpy as np
 from dlovr.model.discrete import Stability
 from dlovr.sim.tracker import ContactState
 
-# cable colours: free, then by stability class of the contact a point belongs to
-COLOR_FREE = (235, 140, 30)
+# cable colours: free, then by stability class of the contact a point belongs to. Free is a dark
+# neutral grey, like a real cable, which no class colour resembles (a pale orange read as yellow).
+COLOR_FREE = (55, 60, 75)
 COLOR_BY_CLASS = {
-    Stability.STABLE: (40, 170, 60),
-    Stability.SEMI: (230, 200, 20),
-    Stability.INSTABLE: (220, 40, 40),
+    Stability.STABLE: (20, 150, 45),
+    Stability.SEMI: (235, 195, 0),
+    Stability.INSTABLE: (215, 30, 30),
+}
+# the faces touched, in lighter tints of the same hues, so that a cable lying on one stays visible
+FACE_COLOR_BY_CLASS = {
+    Stability.STABLE: (100, 210, 120),
+    Stability.SEMI: (245, 225, 100),
+    Stability.INSTABLE: (245, 125, 125),
 }
 
 

@@ -1,6 +1,6 @@
 """The faces in contact, drawn over the obstacles and coloured by the stability class of the contact
-that touches them (green stable, yellow semi-stable, red instable), and the face labels (the *Face
-labels* option) that name every face and say which ones are touched."""
+that touches them (light green stable, light yellow semi-stable, light red instable), and the face
+labels (the *Face labels* option) that name every face and say which ones are touched."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from dlovr.geometry import SceneGeometry
 from dlovr.model.discrete import Stability
-from dlovr.ui.drawing import COLOR_BY_CLASS, STABILITY_WORDS
+from dlovr.ui.drawing import FACE_COLOR_BY_CLASS, STABILITY_WORDS
 
 if TYPE_CHECKING:
     import viser
@@ -88,8 +88,8 @@ class FaceHighlighter:
                 f"/contact_faces/{name}",
                 verts,
                 np.arange(len(verts), dtype=np.uint32).reshape(-1, 3),
-                color=COLOR_BY_CLASS[cls],
-                opacity=0.7,
+                color=FACE_COLOR_BY_CLASS[cls],
+                opacity=0.8,
                 flat_shading=True,
                 side="double",
             )

@@ -20,11 +20,27 @@ from dlovr.recording.network_html import CSS, network_svg
 
 LIVE_COLOR = "#1f77b4"
 FIT_CSS = """
-#network { width: 100%; height: auto; }
+#network { height: auto; max-width: none; }
 #network text { font-size: 20px; }
 #network .nid, #network .elabel { font-size: 17px; }
 """
-"""The drawing fits the panel's width (scaled down), its text enlarged to stay readable."""
+"""The drawing's text is enlarged to stay readable when the drawing is scaled down."""
+
+ZOOM = 0.5
+"""The drawing's scale in the panel at first (its text 10 px high): a long network scrolls sideways
+rather than being squeezed to the panel's width (peg-in-hole's 15 nodes were 16 px high)."""
+
+_SVG = "this.closest('.dlovr-network').querySelector('svg')"
+_ZOOM_JS = (
+    "var s=" + _SVG + ";var z=(window.__dlovrNetZoom||" + str(ZOOM) + ")*{f};"
+    "z=Math.min(3,Math.max(0.1,z));window.__dlovrNetZoom=z;"
+    "s.style.width=(s.width.baseVal.value*z)+'px';"
+)
+_FULL_JS = (
+    "var w=window.open('','dlovr-network');w.document.title='transition network';"
+    "w.document.body.innerHTML=this.closest('.dlovr-network').querySelector('style').outerHTML+"
+    + _SVG + ".outerHTML;w.document.querySelector('svg').style.width='';"
+)
 
 
 def scene_recordings(scene_name: str, folders: Sequence[Path]) -> list[Path]:
@@ -86,8 +102,30 @@ def network_view_html(net: Network, live: str | None, situation: str = "", note:
         f"{len(net.nodes)} situations, {len(net.edges)} transitions, start {net.start}, goal {net.goal}"
         f"{' (' + escape(note) + ')' if note else ''}<br>{where}"
     )
+    svg = network_svg(net)
+    sized = svg.replace("<svg ", f'<svg style="width:{ZOOM * _svg_width(svg):.0f}px" ', 1)
+    # the zoom a person chose survives the redraws (the live node moves): applied as the image loads
+    keep = _ZOOM_JS.format(f="1").replace(_SVG, "this.parentNode.querySelector('svg')")
+    buttons = "".join(
+        f'<button type="button" class="dlovr-net-{name}" title="{tip}" onclick="{js}" '
+        f'style="font-size:11px;margin-right:3px">{label}</button>'
+        for name, label, tip, js in (
+            ("out", "&minus;", "zoom out", _ZOOM_JS.format(f="0.8")),
+            ("in", "+", "zoom in", _ZOOM_JS.format(f="1.25")),
+            ("full", "full size", "open the drawing at full size in a new window", _FULL_JS),
+        )
+    )
     return (
         f'<div class="dlovr-network" data-live="{live or ""}" style="font-size:11px">'
-        f"<style>{css}</style>{head}"
-        f'<div style="border:1px solid #ddd">{network_svg(net)}</div></div>'
+        f"<style>{css}</style>{head}<div>{buttons}</div>"
+        f'<div class="dlovr-net-scroll" style="border:1px solid #ddd;overflow:auto;max-height:60vh">'
+        f"{sized}"
+        f'<img alt="" src="data:," style="display:none" onerror="{keep}"></div></div>'
     )
+
+
+def _svg_width(svg: str) -> float:
+    """The width attribute (px) of the drawing's ``<svg>``."""
+    head = svg[: svg.find(">")]
+    i = head.find('width="')
+    return float(head[i + 7 : head.index('"', i + 7)]) if i >= 0 else 800.0

@@ -16,7 +16,10 @@ from typing import Any
 
 from dlovr.model.transitions import CLASS_NAMES, format_classes
 
-RISK_COLORS = {"none": "#2e9e44", "caution": "#d9a400", "risky": "#d62728"}
+RISK_COLORS = {"none": "#8c8c8c", "caution": "#7b4fb0", "risky": "#c2185b"}
+"""Risk colours: grey, purple, magenta, and a shape each (:data:`RISK_SYMBOLS`), so that they are not
+read as the cable's stability colours (green, yellow, red)."""
+RISK_SYMBOLS = {"none": "&#9675;", "caution": "&#9650;", "risky": "&#9888;"}
 RISKY_CLASSES = ("I", "S")
 CAUTION_CLASSES = ("T",)
 WHY = {
@@ -120,6 +123,10 @@ def risk_reasons(program: Any) -> list[str]:
     return out
 
 
+_WRAP = "padding:1px 4px;overflow-wrap:anywhere;word-break:break-all"
+"""The change column breaks anywhere: a long face list (``V/VI[block.F3,block.F5,...]``) must not widen
+the table past the panel, which cannot scroll sideways (the risk column would be cut off)."""
+
 OUTCOME_MARKS = {"ok": ("&#10003;", "#2e9e44"), "failed": ("&#10007;", "#d62728")}
 CURRENT_BACKGROUND = "#ffe58a"
 
@@ -158,16 +165,18 @@ def program_html(
             f'<tr data-risk="{risk}"{attrs} title="{tip}">'
             f'<td style="padding:1px 4px;white-space:nowrap">{idx}{mark}</td>'
             f'<td style="padding:1px 4px"><b>{html.escape(macro_label(m))}</b></td>'
-            f'<td style="padding:1px 4px"><code>{html.escape(a)}</code> &rarr; '
+            f'<td style="{_WRAP}"><code>{html.escape(a)}</code> &rarr; '
             f"<code>{html.escape(b)}</code></td>"
-            f'<td style="padding:1px 4px;white-space:nowrap"><span style="display:inline-block;width:9px;'
-            f'height:9px;border-radius:50%;background:{RISK_COLORS[risk]}"></span> {risk}</td></tr>'
+            f'<td style="padding:1px 4px;white-space:nowrap"><span style="color:{RISK_COLORS[risk]};'
+            f'font-weight:bold">{RISK_SYMBOLS[risk]}</span> {risk}</td></tr>'
         )
     name = html.escape(str(getattr(program, "name", "program")))
     n_risky = sum(macro_risk(m) == "risky" for m in macros)
     head = f"<b>Program {name}</b>: {len(macros)} macros, {n_risky} risky"
     table = (
-        '<table class="dlovr-program" style="border-collapse:collapse;font-size:11px;width:100%">'
+        '<table class="dlovr-program" style="border-collapse:collapse;font-size:11px;width:100%;'
+        'table-layout:fixed"><colgroup><col style="width:26px"><col style="width:38px"><col>'
+        '<col style="width:60px"></colgroup>'
         '<tr style="text-align:left"><th>#</th><th>class</th><th>principal change (from &rarr; to)</th>'
         f"<th>risk</th></tr>{''.join(rows)}</table>"
     )

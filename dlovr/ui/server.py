@@ -48,7 +48,10 @@ from dlovr.ui.panels import (
     TimelinePanel,
     status_markdown,
 )
+from dlovr.ui.panels.keys import KeysPanel
+from dlovr.ui.panels.status import StatusPanel, current_status
 from dlovr.ui.session import Session
+from dlovr.ui.starting import StartingServer
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
 
@@ -129,6 +132,7 @@ class DemoServer:
             failed=self._failed,
         )
         self.viewport = Viewport(self, face_labels=lambda: self.simulation_panel.face_labels)
+        self.status_panel = StatusPanel()
         self.state_panel = StatePanel()
         self.run_panel = RunPanel(self)
         self.force_panel = ForcePanel(self, self.run_panel)
@@ -136,6 +140,7 @@ class DemoServer:
         self.timeline_panel = TimelinePanel(self, self.viewport, self.state_panel, self.force_panel)
         self.simulation_panel = SimulationPanel(self, self.viewport, self.timeline_panel)
         self.network_panel = NetworkPanel(self)
+        self.keys = KeysPanel(self, self.simulation_panel, self.status_panel)
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -148,8 +153,14 @@ class DemoServer:
         host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
         return f"http://{host}:{self.port}"
 
-    def start(self) -> DemoServer:
-        srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
+    def start(self, early: StartingServer | None = None) -> DemoServer:
+        """Build the page and start the simulation thread, in a new viser server or in ``early``'s,
+        which has been showing what the command waits for (:mod:`dlovr.ui.starting`)."""
+        if early is not None:
+            early.done()
+            srv = early.server
+        else:
+            srv = viser.ViserServer(host=self.host, port=self._port_wanted, verbose=self.verbose)
         self.server = srv
         srv.gui.configure_theme(show_share_button=False, control_width="large")
         srv.gui.main_panel.dock_right()  # the panel beside the 3D view, not over it (framing)
@@ -248,13 +259,19 @@ class DemoServer:
         new = Session(load_checked_scene(scene), self.lock)
         with self.lock:
             self.recording_panel.finish()
+            old = self.session.scene.name
             self.session = new
             self._target.clear()
             self.view.clear()
+            self.run_panel.signals = None  # a run's detector signal belongs to the simulation it ran in
         if self.server is not None:
             self._build_scene()
             self.move_gizmo(*new.gripper_pose())
+            self.viewport.gizmo.visible = True
             self.timeline_panel.live_btn.visible = False
+            if new.scene.name != old:  # the last scene's program, notes and run are not this one's
+                self.recording_panel.forget()
+                self.run_panel.refresh()
 
     def start_recording(self, path: str | Path | None = None) -> Path:
         """Start recording to ``path`` (default: a new timestamped file in ``recordings_dir``)."""
@@ -313,7 +330,8 @@ class DemoServer:
             text = None
             if slow:
                 text = status_markdown(
-                    st, s.last_class(), t=rec.time, rtf=self.loop.rtf, paused=self._paused, note=s.note
+                    st, s.last_class(), t=rec.time, rtf=self.loop.rtf, paused=self._paused, note=s.note,
+                    contact_force=s.contact_force,
                 )
             viewing = self.view.timeline is not None
         if not viewing:
@@ -333,8 +351,11 @@ class DemoServer:
                     self.state_panel.show_live(text)
             srv.flush()
             self.publish_count += 1
+        self.keys.tick()
         if slow:
             self._panels_at = now
+            self.status_panel.show(current_status(self, self.run_panel, self.recording_panel.started))
+            self.simulation_panel.update(lambda: self.session.gripper_pose())
             self.timeline_panel.update()
             self.run_panel.update()
             self.network_panel.update()
@@ -344,16 +365,22 @@ class DemoServer:
     # -- the GUI ----------------------------------------------------------------------------------
 
     def _build_gui(self) -> None:
+        """The panel: status and the essential controls at the top, the details in folders below."""
         assert self.server is not None, "the GUI is built on the started server"
         gui = self.server.gui
         self.viewport.build_gizmo()
+        self.status_panel.build(gui)
+        self.recording_panel.build_controls(gui)
+        self.simulation_panel.build_controls(gui)
         self.state_panel.build(gui)
         self.force_panel.build(gui)
-        self.recording_panel.build(gui)
         self.run_panel.build(gui)
-        self.network_panel.build(gui)
         self.timeline_panel.build(gui)
         self.simulation_panel.build(gui)
+        self.recording_panel.build(gui)
+        self.network_panel.build(gui)
+        self.status_panel.build_legend(gui)
+        self.keys.build(gui)
 
     def _failed(self, e: Exception) -> None:
         """The simulation thread met an error: reported, the simulation paused, the gripper held."""
@@ -381,7 +408,9 @@ class DemoServer:
             self.viewport.camera_update(client)
 
     def on_client_disconnect(self, client: Any) -> None:
-        """A tab went away: forget its camera and its hover; hold the gripper if it left mid-drag."""
+        """A tab went away: forget its camera, its hover and its keys; hold the gripper if it left
+        mid-drag."""
+        self.keys.held.clear()
         self.viewport.camera_ready.pop(client.client_id, None)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation
@@ -412,15 +441,23 @@ def exposure_warning(host: str, port: int) -> str | None:
 
 
 def serve(
-    scene: str | Path | Scene, host: str = "127.0.0.1", port: int = 8080, recordings_dir: str = "recordings"
+    scene: str | Path | Scene,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    recordings_dir: str = "recordings",
+    early: StartingServer | None = None,
 ) -> None:
     """Run the server on ``scene`` (loaded, or a name or path) until Ctrl-C or SIGTERM (used by
     ``dlovr serve``; SIGTERM exits with 143 once the server stopped, a recording in progress finished
-    and the temporary folders removed); warns on stderr when ``host`` is not loopback."""
+    and the temporary folders removed); warns on stderr when ``host`` is not loopback (unless
+    ``early``, the page already up, was given: its starter warned)."""
     from dlovr.recording import finish_on_sigterm
 
-    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir).start()
-    warning = exposure_warning(host, srv.port)
+    if early is not None:
+        early.say(f"loading scene {scene if not isinstance(scene, Scene) else scene.name}")
+    srv = DemoServer(scene, host=host, port=port, recordings_dir=recordings_dir)
+    srv = srv.start(early) if early is not None else srv.start()
+    warning = exposure_warning(host, srv.port) if early is None else None
     if warning is not None:
         print(warning, file=sys.stderr, flush=True)
     try:

@@ -20,6 +20,9 @@ from dlovr.ui.drawing import point_classes, point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
 from dlovr.ui.timeline import Band, Snapshot, Timeline
 
+CONTACT_FORCE_S = 0.1
+"""Seconds over which the panel's contact normal force is averaged (exponentially)."""
+
 
 class Session:
     """One scene's simulation with its contact tracker, optional recorder and live timeline.
@@ -44,10 +47,12 @@ class Session:
         self._last_snap_t = -1.0
         self.note = ""
         self.plausibility = monitor_of(self.sim)
+        self.contact_force = 0.0  # sum of the contact normal forces (N), averaged over CONTACT_FORCE_S
         self._class_cache: dict[Any, tuple[str, ...]] = {}
         self._format_cache: dict[Any, str] = {}
         self._faces_cache: dict[Any, dict[str, Any]] = {}
         self._snapshot()
+        self.start_pose = self.gripper_pose()  # (m, world; wxyz): where "Back to start pose" goes
 
     @property
     def dt(self) -> float:
@@ -106,6 +111,8 @@ class Session:
         self.forces.add(rec.time, rec.gripper_force)
         for ep in self.plausibility.update(rec):  # shown in the state panel (docs/recordings.md)
             self.note = f"implausible simulation: {ep.text()}"
+        a = min(1.0, self.dt / CONTACT_FORCE_S)  # the contact normal force, averaged over ~0.1 s
+        self.contact_force += a * (float(sum(rec.state.forces)) - self.contact_force)
 
     def _timeline_update(self) -> None:
         kept = self.tracker.kept

@@ -19,7 +19,23 @@ from dlovr.scene import Scene
 from dlovr.ui.drawing import point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
 
-BAND_COLORS = ("#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948", "#b07aa1", "#9c755f")
+BAND_COLORS = ("#4e79a7", "#a0cbe8", "#b07aa1", "#9c755f", "#76b7b2", "#d4a6c8", "#bab0ac", "#6b6ecf")
+"""The situations' colours on the timeline: categorical, and none green, yellow or red (those are the
+stability classes')."""
+
+
+MIN_BAND_PX = 6
+"""The narrowest a band is drawn (px), so that a short situation can still be hovered and clicked."""
+
+
+def axis_end(t: float) -> float:
+    """The end (s) of the live timeline's time axis at time ``t``: the next of 10, 20, 30, 60, 120, ...
+    s with a quarter of the span left free. The axis changes scale only when time reaches it, so the
+    bands under the mouse stay where they are while the timeline grows."""
+    for step in (10.0, 20.0, 30.0, 60.0, 120.0, 180.0, 300.0, 600.0, 900.0, 1800.0, 3600.0):
+        if t <= 0.75 * step:
+            return step
+    return 3600.0 * (int(t / 2700.0) + 1)
 
 
 @dataclass
@@ -87,7 +103,7 @@ class Timeline:
                 return b
         return self.bands[-1] if self.bands and t >= self.bands[-1].start else None
 
-    def html(self, pick_uuid: str | None = None) -> str:
+    def html(self, pick_uuid: str | None = None, axis_end: float | None = None) -> str:
         """Coloured bands, one per kept situation, transitions marked with their classes, and a list
         of the last situations.
 
@@ -96,18 +112,19 @@ class Timeline:
         the situation in :attr:`bands`); the server highlights its faces or scrubs to it.
         """
         t0, t1 = self.start, self.end
-        span = max(t1 - t0, 1e-9)
+        span = max((t1 if axis_end is None else max(axis_end, t1)) - t0, 1e-9)
         colors: dict[str, str] = {}
         cells = []
         for i, b in enumerate(self.bands):
             c = colors.setdefault(b.situation, BAND_COLORS[len(colors) % len(BAND_COLORS)])
-            w = max(0.5, 100.0 * (b.end - b.start) / span)
+            w = 100.0 * (b.end - b.start) / span
             label = format_classes(b.classes) if b.classes else ""
             tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
             border = "border-left:2px solid #000;" if b.classes else ""
             cells.append(
                 f'<div title="{tip}" data-situation="{i}" '
-                f'style="width:{w:.2f}%;background:{c};{border}cursor:pointer"></div>'
+                f'style="width:{w:.2f}%;min-width:{MIN_BAND_PX}px;background:{c};{border}'
+                'cursor:pointer"></div>'
             )
         bar = (
             '<div class="dlovr-timeline" style="display:flex;height:14px;width:100%;'

@@ -23,6 +23,13 @@ if TYPE_CHECKING:
     import viser
 
 
+CAMERA_PRESETS = ("top", "front", "side", "gripper", "contacts")
+"""The camera presets: looking down, from -y, from +x at the workspace; at the gripper; at the contacts
+(the cable's tip when there is none), each from the framing's distance."""
+
+_PRESET_DIRS = {"top": (0.0, -0.02, 1.0), "front": (0.0, -1.0, 0.25), "side": (1.0, 0.0, 0.25)}
+
+
 class Viewport:
     """The server's 3D scene elements; drawing happens under the server's ``draw_lock``.
 
@@ -168,7 +175,9 @@ class Viewport:
         s = self.app.session
         self.cable = None
         self.cable_n = -1
-        self.arrows = None
+        if self.arrows is not None:  # the last scene's contact vectors must not stay on screen
+            self.arrows.remove()
+            self.arrows = None
         self.show_obstacles(s.geometry, s.scene)
         p, q = s.gripper_pose()
         api = self._scene_api()
@@ -222,6 +231,42 @@ class Viewport:
                 cam.position = cast(Vec3, tuple(map(float, pos)))  # moves look_at along; set it after
                 cam.look_at = cast(Vec3, tuple(map(float, look)))
             self.camera_ready[c.client_id] = (aspect, pos)
+
+    def preset(self, name: str, client: Any = None) -> None:
+        """Point the camera of ``client`` (every connected one if None) as preset ``name`` says
+        (:data:`CAMERA_PRESETS`): the top, front and side views frame the workspace; *gripper* and
+        *contacts* look at those from where the camera is, at the framing's distance."""
+        srv = self.app.server
+        if srv is None or name not in CAMERA_PRESETS:
+            return
+        lo, hi = self.scene_box()
+        clients = [client] if client is not None else list(srv.get_clients().values())
+        for c in clients:
+            cam = c.camera
+            pos, look = frame_box(lo, hi, aspect=cam.aspect)
+            dist = float(np.linalg.norm(pos - look))
+            if name in _PRESET_DIRS:
+                d = np.asarray(_PRESET_DIRS[name], dtype=float)
+            else:
+                d = np.asarray(cam.position, dtype=float) - np.asarray(cam.look_at, dtype=float)
+                look = self._focus(name)
+                dist *= 0.6
+            d = d / max(float(np.linalg.norm(d)), 1e-9)
+            with c.atomic():
+                cam.fov = FOV
+                cam.position = cast(Vec3, tuple(map(float, look + dist * d)))
+                cam.look_at = cast(Vec3, tuple(map(float, look)))
+
+    def _focus(self, name: str) -> np.ndarray:
+        """The point the *gripper* or *contacts* preset looks at (m, world)."""
+        app = self.app
+        with app.lock:
+            rec, st = app.session.record, app.session.state
+            pts = np.asarray(rec.points, dtype=float)
+            if name == "gripper":
+                return np.asarray(rec.gripper_pos, dtype=float).copy()
+            touched = [i for i, c in enumerate(point_classes(st, len(pts))) if c is not None]
+        return pts[touched].mean(axis=0) if touched else pts[-1].copy()
 
     def camera_update(self, client: Any) -> None:
         """A client's camera reported: frame it the first time, and again when its view changed shape

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -23,14 +24,15 @@ class RecordingPanel:
     def __init__(self, app: App) -> None:
         self.app = app
         self.compile_thread: threading.Thread | None = None
+        self.started = 0.0  # time.monotonic() when the recording in progress started
 
-    def build(self, gui: viser.GuiApi) -> None:
+    def build_controls(self, gui: viser.GuiApi) -> None:
+        """The buttons, at the top of the panel, and the hotkey R that starts or stops a recording."""
         app = self.app
-        with gui.add_folder("Recording"):
-            self.rec_btn = gui.add_button("Start recording", icon=viser.Icon.PLAYER_RECORD)
-            self.stop_btn = gui.add_button("Stop recording", icon=viser.Icon.PLAYER_STOP, disabled=True)
-            self.rec_md = gui.add_markdown(f"Recordings go to `{app.recordings_dir}/`")
-            self.program_html = gui.add_html("")
+        self.rec_btn = gui.add_button("Start recording", icon=viser.Icon.PLAYER_RECORD, color="red",
+                                      hint="Record the demonstration (key R)")
+        self.stop_btn = gui.add_button("Stop recording", icon=viser.Icon.PLAYER_STOP, disabled=True,
+                                       hint="Stop, save and compile the program (key R)")
 
         @self.rec_btn.on_click
         def _(_e: Any) -> None:
@@ -39,6 +41,28 @@ class RecordingPanel:
         @self.stop_btn.on_click
         def _(_e: Any) -> None:
             app.stop_recording(wait=False)
+
+        cmd = gui.add_command("Start / stop recording", hotkey="R")
+        cmd.on_trigger(lambda _e: self.toggle())
+
+    def build(self, gui: viser.GuiApi) -> None:
+        """The folder with the last recording's file and program."""
+        with gui.add_folder("Recording"):
+            self.rec_md = gui.add_markdown(f"Recordings go to `{self.app.recordings_dir}/`")
+            self.program_html = gui.add_html("")
+
+    def toggle(self) -> None:
+        """Start a recording, or stop the one in progress (the hotkey)."""
+        if self.app.session.recorder is None:
+            self.app.start_recording()
+        else:
+            self.app.stop_recording(wait=False)
+
+    def forget(self) -> None:
+        """Another scene: clear the last recording's note and program (they belong to the old scene)."""
+        if self.app.server is not None:
+            self.rec_md.content = f"Recordings go to `{self.app.recordings_dir}/`"
+            self.program_html.content = ""
 
     def start(self, path: str | Path | None = None) -> Path:
         app = self.app
@@ -50,6 +74,7 @@ class RecordingPanel:
                 path = app.recordings_dir / f"{app.session.scene.name}-{stamp}-{k}.mcap"
                 k += 1
         out = app.session.start_recording(Path(path))
+        self.started = time.monotonic()
         if app.server is not None:
             self.rec_md.content = f"Recording to `{out}`"
             self.rec_btn.disabled = True
@@ -91,11 +116,13 @@ class RecordingPanel:
             self.rec_md.content = f"Saved `{path}`; compiling..."
             self.rec_btn.disabled = False
             self.stop_btn.disabled = True
-        self.compile_thread = threading.Thread(target=self._compile, args=(path,), daemon=True)
+        self.compile_thread = threading.Thread(
+            target=self._compile, args=(path, app.session.scene.name), daemon=True
+        )
         self.compile_thread.start()
         return path
 
-    def _compile(self, path: Path) -> None:
+    def _compile(self, path: Path, scene: str) -> None:
         """Compile the recording, write ``<stem>.program.json`` and ``.program.txt`` beside it (as
         ``dlovr compile`` names them) and show the program as a list of macros."""
         app = self.app
@@ -121,5 +148,7 @@ class RecordingPanel:
             app.last_program = None
             md = f"Saved `{path}`; compiling failed: {e}"
         if app.server is not None:
+            if app.session.scene.name != scene:  # the scene was switched meanwhile: name the file only
+                md, view = f"{md} (scene {scene})", ""
             self.rec_md.content = md
             self.program_html.content = view

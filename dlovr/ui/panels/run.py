@@ -47,6 +47,7 @@ class RunPanel:
         self.choices: dict[str, Path] = {}
         self._shown: tuple[Any, ...] = ()
         self._seen: tuple[str, int] = ("", 0)  # (scene, last program) the choices were made for
+        self._scene_shown = ""  # the scene whose run result is shown
 
     def build(self, gui: viser.GuiApi) -> None:
         with gui.add_folder("Run program"):
@@ -58,6 +59,12 @@ class RunPanel:
             self.view = gui.add_html("")
         self.run_btn.on_click(lambda _e: self._run_clicked())
         self.stop_btn.on_click(lambda _e: self.cancel("stopped"))
+
+        @self.choice.on_update
+        def _(_e: Any) -> None:
+            if self.runner is None:
+                self.preview()
+
         self.refresh()
 
     # -- the programs of the scene -----------------------------------------------------------------
@@ -99,6 +106,26 @@ class RunPanel:
         self.choice.options = options
         self.choice.value = keep
         self.run_btn.disabled = not self.choices
+        self.preview()
+
+    def preview(self) -> None:
+        """Show the macros of the program picked (no run): what *Run program* would execute. A run
+        shown before (another scene's, or the last result) is forgotten."""
+        if self.runner is not None:
+            return
+        path = self.choices.get(str(self.choice.value)) if self.app.server is not None else None
+        try:
+            program = Program.load(path) if path is not None else None
+        except (ProgramError, OSError):
+            program = None
+        self.program, self.outcomes, self._shown = program, {}, ()
+        if self.app.server is not None:
+            if self._seen[0] != self._scene_shown:
+                self.result = ""
+                self.result_md.content = ""
+            self._scene_shown = self._seen[0]
+            self.view.content = "" if program is None else program_html(program)
+            self._shown = (id(program), None, ())
 
     # -- running -----------------------------------------------------------------------------------
 

@@ -16,7 +16,7 @@ from dlovr.scene import SceneError
 from dlovr.ui.app import App
 from dlovr.ui.panels.forces import ForcePanel
 from dlovr.ui.panels.state import StatePanel
-from dlovr.ui.timeline import Snapshot, Timeline, recording_timeline, resimulated_forces
+from dlovr.ui.timeline import Snapshot, Timeline, axis_end, recording_timeline, resimulated_forces
 from dlovr.ui.viewport import Viewport
 
 if TYPE_CHECKING:
@@ -99,6 +99,7 @@ class TimelinePanel:
             if scene.name != app.session.scene.name:
                 self.viewport.frame()  # another scene: frame its workspace
             self.live_btn.visible = True
+            self.viewport.gizmo.visible = False  # it moves the live gripper, which is not shown
             self.update(force=True)
             app.scrub(tl.start)
         return tl
@@ -167,6 +168,7 @@ class TimelinePanel:
                 self.viewport.show_obstacles(app.session.geometry, app.session.scene)
                 if viewed.name != app.session.scene.name:
                     self.viewport.frame()
+            self.viewport.gizmo.visible = True
             self.live_btn.visible = False
 
     def picked(self, value: str) -> None:
@@ -201,7 +203,8 @@ class TimelinePanel:
         if not force and key == self._key:
             return
         self._key = key
-        self.timeline_html.content = tl.html(self.pick_uuid)
+        live = tl is app.session.timeline
+        self.timeline_html.content = tl.html(self.pick_uuid, axis_end(tl.end) if live else None)
         lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
         self.slider.min, self.slider.max = lo, hi
         # the number box shows the slider's value: keep it inside the range (live: the present)
