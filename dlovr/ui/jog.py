@@ -113,6 +113,8 @@ class HeldKeys:
             page_t = float(stamp) / 1000.0 if stamp else None
         except ValueError:
             page_t = None
+        if page_t is not None and not math.isfinite(page_t):
+            page_t = None  # a client's message is untrusted: no NaN or infinite time reaches the motion
         pressed = sorted(keys - set(self.down))
         fix: dict[str, float] = {}
         for k in (set(self.down) | set(self._page_down)) - keys:

@@ -135,3 +135,17 @@ def test_a_cleared_target_is_not_handed_over():
     assert target.wake.is_set()
     target.clear()
     assert target.take() == (False, None) and target.pose is None
+
+
+def test_a_jog_report_with_a_time_that_is_not_finite_moves_no_nan():
+    """The page's key report is untrusted input: a NaN or infinite time stamp is ignored, so a release
+    corrects nothing by it (no NaN motion reaches the gripper)."""
+    from dlovr.ui.jog import HeldKeys
+
+    held = HeldKeys()
+    held.report("J#0@nan", 1.0)
+    _, fix = held.report("#1@inf", 2.0)
+    assert all(v == v and abs(v) != float("inf") for v in fix.values())
+    held.report("J#2@1000", 3.0)
+    _, fix = held.report("#3@nan", 4.0)
+    assert fix == {}
