@@ -71,16 +71,23 @@ def handler(signum: int, frame: Any) -> None:
     imported: an interruption there can leave a dependency half-imported (trimesh then keeps a
     placeholder for an optional module, and a later ``placeholder | None`` fails with a ``TypeError``).
     The signal stays pending, and the command ends at its next check (:func:`check`, the recording
-    loop's stop request, or the command's return)."""
+    loop's stop request, or the command's return). The same holds inside numba's compiler, whose ctypes
+    callbacks drop an exception with a traceback on stderr."""
     note(signum)
-    if not _importing(frame):
+    if not _unsafe(frame):
         interrupt(signum)
 
 
-def _importing(frame: Any) -> bool:
-    """Whether ``frame`` or a frame it was called from runs Python's import machinery."""
+#: Where raising would do harm: Python's import machinery, and numba's compiler (llvmlite calls back
+#: into Python through ctypes, which prints and drops an exception raised there).
+_UNSAFE = ("<frozen importlib", "/llvmlite/", "/numba/")
+
+
+def _unsafe(frame: Any) -> bool:
+    """Whether ``frame`` or a frame it was called from is in :data:`_UNSAFE` code."""
     while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib"):
+        name = frame.f_code.co_filename
+        if name.startswith(_UNSAFE[0]) or any(part in name for part in _UNSAFE[1:]):
             return True
         frame = frame.f_back
     return False

@@ -139,3 +139,19 @@ def test_a_signal_during_an_import_is_remembered_not_raised(tmp_path, monkeypatc
                 signals.check()
     finally:
         signals.clear()
+
+
+def test_a_signal_inside_numba_s_compiler_is_remembered_not_raised():
+    """numba's compiler calls back into Python through ctypes (llvmlite), which prints and drops an
+    exception raised there: a signal arriving in such a frame stays pending instead."""
+    text = "import os, signal\nos.kill(os.getpid(), signal.SIGINT)\n"
+    code = compile(text, "/x/llvmlite/binding/fake.py", "exec")
+    signals.clear()
+    try:
+        with signals.installed():
+            exec(code, {})
+            assert signals.pending() == signal.SIGINT
+            with pytest.raises(KeyboardInterrupt):
+                signals.check()
+    finally:
+        signals.clear()

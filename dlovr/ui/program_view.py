@@ -174,7 +174,8 @@ def program_html(
     n_risky = sum(macro_risk(m) == "risky" for m in macros)
     head = f"<b>Program {name}</b>: {len(macros)} macros, {n_risky} risky"
     table = (
-        '<table class="dlovr-program" style="border-collapse:collapse;font-size:11px;width:100%;'
+        f'<table class="dlovr-program" data-program="{name}" '
+        'style="border-collapse:collapse;font-size:11px;width:100%;'
         'table-layout:fixed"><colgroup><col style="width:26px"><col style="width:38px"><col>'
         '<col style="width:60px"></colgroup>'
         '<tr style="text-align:left"><th>#</th><th>class</th><th>principal change (from &rarr; to)</th>'

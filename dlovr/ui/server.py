@@ -294,26 +294,9 @@ class DemoServer:
         self.timeline_panel.live()
 
     def status(self) -> dict[str, Any]:
+        """The live state, copied (:func:`session_status`)."""
         with self.lock:
-            s = self.session
-            st = s.state
-            return {
-                "scene": s.scene.name,
-                "t": s.record.time,
-                "step": s.record.step,
-                "gripper_pos": s.record.gripper_pos.copy(),
-                "target_pos": s.sim.target_pos.copy(),
-                "points": np.asarray(s.record.points).copy(),
-                "discrete": st.discrete.format(),
-                "topological": st.topological.format(),
-                "last_class": s.last_class(),
-                "force": float(sum(st.forces)),
-                "gripper_force": list(st.gripper_force),
-                "recording": s.recorder.path if s.recorder else None,
-                "paused": self._paused,
-                "rtf": self.loop.rtf,
-                "kept": len(s.tracker.kept),
-            }
+            return session_status(self.session, paused=self._paused, rtf=self.loop.rtf)
 
     def _publish(self) -> None:
         """One frame of the live view: the cable and the gripper body every time (the real-time loop
@@ -472,3 +455,26 @@ def serve(
         if path is not None:
             print(f"dlovr serve: finished recording {path}", flush=True)
         print("dlovr serve: stopped", flush=True)
+
+
+def session_status(s: Session, *, paused: bool, rtf: float) -> dict[str, Any]:
+    """What :meth:`DemoServer.status` tells of ``s`` (positions in m, world frame; forces in N); the
+    caller holds the session lock."""
+    st = s.state
+    return {
+        "scene": s.scene.name,
+        "t": s.record.time,
+        "step": s.record.step,
+        "gripper_pos": s.record.gripper_pos.copy(),
+        "target_pos": s.sim.target_pos.copy(),
+        "points": np.asarray(s.record.points).copy(),
+        "discrete": st.discrete.format(),
+        "topological": st.topological.format(),
+        "last_class": s.last_class(),
+        "force": float(sum(st.forces)),
+        "gripper_force": list(st.gripper_force),
+        "recording": s.recorder.path if s.recorder else None,
+        "paused": paused,
+        "rtf": rtf,
+        "kept": len(s.tracker.kept),
+    }

@@ -63,27 +63,30 @@ def fresh(demo: DemoServer, scene: str = "table") -> None:
 
 def test_the_macro_list_of_a_long_program_fits_the_panel_with_its_risk_column(demo: DemoServer, page):
     fresh(demo, "peg_in_hole")
-    table = page.locator("table.dlovr-program").first
-    page.locator("table.dlovr-program tr[data-risk]").first.wait_for(timeout=20_000)
-    assert "V/VI[" in table.inner_text()  # the long face lists that used to widen the table
+    # the long face lists that used to widen the table: wait for peg-in-hole's program (not the last's)
+    page.locator("table.dlovr-program", has_text="V/VI[").first.wait_for(timeout=20_000)
+    name = page.locator("table.dlovr-program", has_text="V/VI[").first.get_attribute("data-program")
+    sel = f'table.dlovr-program[data-program="{name}"]'
+    table = page.locator(sel).first
     table.scroll_into_view_if_needed()
     fit = page.evaluate(
-        """() => { const t = document.querySelector('table.dlovr-program');
+        """(sel) => { const t = document.querySelector(sel);
         const box = t.parentElement.getBoundingClientRect();
         const dots = [...t.querySelectorAll('tr[data-risk] td:last-child span')];
         return {box: box.right, table: t.getBoundingClientRect().right,
-                dots: dots.map((d) => d.getBoundingClientRect().right)}; }"""
+                dots: dots.map((d) => d.getBoundingClientRect().right)}; }""",
+        sel,
     )
     assert fit["table"] <= fit["box"] + 1, fit
     assert fit["dots"] and max(fit["dots"]) <= fit["box"], fit
     # the risk dot of the first row is what is under its own centre: not clipped, not covered
-    dot = page.locator("table.dlovr-program tr[data-risk] td:last-child span").first
+    dot = page.locator(f"{sel} tr[data-risk] td:last-child span").first
     box = dot.bounding_box()
     assert box is not None
     hit = page.evaluate(
-        "([x, y]) => document.elementFromPoint(x, y) === "
-        "document.querySelector('table.dlovr-program tr[data-risk] td:last-child span')",
-        [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2],
+        "([x, y, sel]) => document.elementFromPoint(x, y) === "
+        "document.querySelector(sel + ' tr[data-risk] td:last-child span')",
+        [box["x"] + box["width"] / 2, box["y"] + box["height"] / 2, sel],
     )
     assert hit, box
 

@@ -324,7 +324,7 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     time.sleep(0.3)
     path = server.status()["recording"]
     page.get_by_role("button", name="Stop recording").click()
-    table = page.locator(".dlovr-program").first
+    table = page.locator(f'.dlovr-program[data-program="{path.stem}"]')  # not the run panel's program
     table.wait_for(timeout=30_000)
     prog = server.last_program
     assert prog is not None and len(prog.macros) >= 2
