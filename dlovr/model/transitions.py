@@ -444,7 +444,8 @@ def classify_sequence(situations: Sequence[DiscreteSituation], rules: Sequence[R
 
 
 class _KeptLike(Protocol):
-    situation: Any
+    @property
+    def situation(self) -> Any: ...  # read-only: frozen dataclasses (TimedSituation) are kept too
 
 
 def kept_classes(kept: Sequence[_KeptLike]) -> list[tuple[str, ...]]:

@@ -383,7 +383,8 @@ def test_a_refreshed_situation_is_the_one_made_from_the_points_again():
     first = situation_from_points(env, pts[1:] - pts[:-1], normals.__getitem__, gripper_z=(0.0, 0.0, 1.0))
     for _ in range(20):
         moved = pts + rng.normal(0.0, 1e-4, pts.shape)
-        z = tuple(float(x) for x in rng.normal(0.0, 1.0, 3))
+        zx, zy, zz = (float(x) for x in rng.normal(0.0, 1.0, 3))
+        z = (zx, zy, zz)
         want = situation_from_points(env, moved[1:] - moved[:-1], normals.__getitem__, gripper_z=z)
         got = _refreshed(first, moved, z)
         assert got == want and ann(got) == ann(want)

@@ -9,16 +9,21 @@ import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, cast
 
 import msgspec
 import numpy as np
 import pytest
 import viser
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
 from dlovr.ui import DemoServer
 from dlovr.ui.guard import checked_pose, message_problem
 from dlovr.ui.loop import RealtimeLoop
+
+#: viser's websocket subprotocol: what its own page asks for.
+PROTOCOLS = [Subprotocol(f"viser-v{viser.__version__}")]
 
 NAN, INF = float("nan"), float("inf")
 
@@ -60,7 +65,7 @@ def hostile_server(tmp_path_factory) -> Iterator[DemoServer]:
 def test_hostile_messages_are_refused_and_the_simulation_goes_on(hostile_server: DemoServer):
     srv = hostile_server
     assert wait_for(lambda: srv.status()["t"] > 0.1)
-    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=PROTOCOLS) as ws:
         for msg in HOSTILE:
             ws.send(msgspec.msgpack.encode(msg))
         time.sleep(0.5)
@@ -74,15 +79,15 @@ def test_hostile_messages_are_refused_and_the_simulation_goes_on(hostile_server:
         ws.send(msgspec.msgpack.encode(gizmo([0.05, 0.02, 0.6])))  # a valid one still moves it
         assert wait_for(lambda: np.allclose(srv.target()[0], [0.05, 0.02, 0.6]))
     # a message viser cannot even decode closes that tab's connection (only that one)
-    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=PROTOCOLS) as ws:
         ws.send(msgspec.msgpack.encode(gizmo(["a", 0.0, 0.6])))
         time.sleep(0.3)
-    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=PROTOCOLS) as ws:
         ws.send(msgspec.msgpack.encode({"type": "NoSuchMessage", "x": 1}))
         time.sleep(0.3)
     t = srv.status()["t"]
     assert wait_for(lambda: srv.status()["t"] > t + 0.2), "the simulation stopped"
-    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=[f"viser-v{viser.__version__}"]) as ws:
+    with connect(f"ws://127.0.0.1:{srv.port}", subprotocols=PROTOCOLS) as ws:
         ws.send(msgspec.msgpack.encode(gizmo([0.04, 0.0, 0.6])))
         assert wait_for(lambda: np.allclose(srv.target()[0], [0.04, 0.0, 0.6]))
 
@@ -101,7 +106,7 @@ def test_a_failing_step_is_reported_and_the_loop_lives_on():
         def advance(self, *a, **k):
             raise FloatingPointError("boom")
 
-    session = Broken()
+    session = cast(Any, Broken())  # a stand-in for a Session
     loop = RealtimeLoop(lambda: session, __import__("dlovr.ui.loop", fromlist=["x"]).TargetCommand(),
                         paused=lambda: False, publish=lambda: None, diverged=lambda: None,
                         publish_hz=60.0, failed=failures.append)
