@@ -4,6 +4,7 @@ at the set speed every published frame, and turns are about the simulation panel
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -28,6 +29,7 @@ class KeysPanel:
         self.simulation = simulation
         self.status = status
         self.held = HeldKeys()
+        self._moving = threading.Lock()  # one move at a time: no step lost between two threads
 
     def build(self, gui: viser.GuiApi) -> None:
         keys = gui.add_text("Jog keys held", initial_value="", visible=False)
@@ -47,9 +49,11 @@ class KeysPanel:
         if not keys:
             return
         dp, rv = key_motion(keys, linear, angular)
-        p, q = self.app.target()
-        p, q = turn_about(p + dp, q, rv, self.pivot_point() if np.any(rv) else None)
-        self.app.set_target(p, q)
+        pivot = self.pivot_point() if np.any(rv) else None
+        with self._moving:  # reports (viser's thread) and ticks (the loop's) read, add and write
+            p, q = self.app.target()
+            p, q = turn_about(p + dp, q, rv, pivot)
+            self.app.set_target(p, q)
 
     def pivot_point(self) -> np.ndarray | None:
         """The point turns are about (m, world): None for the gripper itself, the cable's tip, or the
