@@ -92,17 +92,13 @@ def compile_cmd(
         paths = [p.resolve() for p in paths]
         output_dir = str(Path(output_dir).resolve()) if output_dir else None
     force = force or bool(sensor_noise)
-    tasks = [Task(str(p), (str(p), output_dir, force)) for p in paths]
+    tasks = [Task(str(p), (str(p), output_dir, force, sensor_noise)) for p in paths]
     done = sorted(
         run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),
         key=lambda d: d.index,
     )
     results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
-    if sensor_noise:
-        for r in results:
-            if r.error is None and r.json_path is not None:
-                for_sensor_noise(r.json_path, sensor_noise)
-    record_compiled(results, output_dir)
+    record_compiled(results, output_dir, sensor_noise)
     if _report(results, summarize(done).retried):
         raise SystemExit(EXIT_BAD_INPUT)
 
@@ -123,27 +119,3 @@ def _report(results: list[Any], retried: int) -> int:
     counts = [f"{compiled} compiled"] + ([f"{skipped} skipped (unchanged)"] if skipped else [])
     click.echo(", ".join([*counts, f"{len(failed)} failed", f"{retried} retried"]))
     return len(failed)
-
-
-def for_sensor_noise(json_path: str, sigma: float) -> None:
-    """Rewrite a compiled program (``.program.json`` and its ``.program.txt`` listing) with every
-    detection set for a sensor of white noise ``sigma`` N (:func:`dlovr.model.detection.for_sensor`;
-    the simulation's 2 ms samples)."""
-    from dataclasses import replace
-    from pathlib import Path
-
-    from dlovr.model.detection import for_sensor
-    from dlovr.model.program import Program
-
-    prog = Program.load(json_path)
-    macros = []
-    for m in prog.macros:
-        dets = []
-        for d in m.detection:
-            params, texts = for_sensor(d.cls, d.params, sigma)
-            dets.append(replace(d, params=params, derivation={**d.derivation, **texts}))
-        macros.append(replace(m, detection=tuple(dets)))
-    prog = replace(prog, macros=tuple(macros))
-    path = Path(json_path)
-    path.write_text(prog.dumps())
-    path.with_name(path.name.removesuffix(".json") + ".txt").write_text(prog.listing())

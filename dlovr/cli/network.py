@@ -12,14 +12,7 @@ import click
 
 from dlovr.batch import cluster_option
 from dlovr.cli.common import UserError, refuse_existing
-
-
-def _write_text(path: str, text: str, force: bool) -> None:
-    """Write ``text`` to ``path`` atomically (a full disk leaves the previous file whole); an existing
-    file is replaced only with ``force``."""
-    from dlovr.outputs import write_output
-
-    write_output(path, text, force=force)  # an OutputError: one line, exit 2
+from dlovr.outputs import write_output  # atomic: a full disk leaves the previous file whole
 
 
 @click.command("network", short_help="Merge recordings of one scene into a transition network.")
@@ -73,9 +66,9 @@ def network_cmd(
             done[0] = k
 
         net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
-    _write_text(out, net.dumps(), force)
+    write_output(out, net.dumps(), force=force)
     if html_out:
-        _write_text(html_out, network_html(net, NetworkProgram(net)), force)
+        write_output(html_out, network_html(net, NetworkProgram(net)), force=force)
     risky = sum(e.risk == "risky" for e in net.edges)
     click.echo(
         f"wrote {out}: {len(net.nodes)} situations, {len(net.edges)} transitions ({risky} risky) "
@@ -96,7 +89,7 @@ def compile_network(network_path: str, inputs: tuple[str, ...], out: str | None,
         raise UserError("--network needs -o PROGRAM.json")
     refuse_existing(out, force)
     prog = NetworkProgram(load_network(network_path), name=Path(out).stem, source=Path(network_path).name)
-    _write_text(out, prog.dumps(), force)
+    write_output(out, prog.dumps(), force=force)
     plan = prog.plan_from_start()
     reach = plan[0].reach_probability if plan else 0.0
     click.echo(

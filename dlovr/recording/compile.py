@@ -172,8 +172,34 @@ def check_unique_outputs(paths: Sequence[Path], out_dir: str | Path | None) -> l
     return out
 
 
-def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileResult:
-    """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job)."""
+def for_sensor_noise(prog: Any, sigma: float) -> Any:
+    """``prog`` with every detection set for a sensor of white noise ``sigma`` N
+    (:func:`dlovr.model.detection.for_sensor`; the simulation's 2 ms samples)."""
+    from dataclasses import replace
+
+    from dlovr.model.detection import for_sensor
+
+    macros = []
+    for m in prog.macros:
+        dets = []
+        for d in m.detection:
+            params, texts = for_sensor(d.cls, d.params, sigma)
+            dets.append(replace(d, params=params, derivation={**d.derivation, **texts}))
+        macros.append(replace(m, detection=tuple(dets)))
+    return replace(prog, macros=tuple(macros))
+
+
+def _cache_key(digest: str, sensor_noise: float | None) -> str:
+    """What the compile cache keeps of a recording: its content hash, and the sensor noise its
+    program was set for (a program for a sensor is not the plain one)."""
+    return f"{digest} sensor_noise={sensor_noise!r}" if sensor_noise else digest
+
+
+def compile_one(
+    path: str, out_dir: str | None, force: bool = False, sensor_noise: float | None = None
+) -> CompileResult:
+    """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job), its
+    detections set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`)."""
     p = Path(path)
     if p.exists() and not p.is_file():  # a device (/dev/zero) or a pipe: hashing it would never end
         why = "not a regular file (a device or a pipe), not a recording"
@@ -187,7 +213,8 @@ def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileR
     cache_file = out / CACHE_NAME
     try:
         cache = json.loads(cache_file.read_text()) if cache_file.is_file() else {}
-        if not force and cache.get(p.name) == digest and jpath.is_file() and tpath.is_file():
+        fresh = cache.get(p.name) == _cache_key(digest, sensor_noise)
+        if not force and fresh and jpath.is_file() and tpath.is_file():
             s = json.loads(jpath.read_text()).get("summary", {})
             return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
     except (OSError, ValueError, AttributeError):
@@ -196,6 +223,8 @@ def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileR
         prog, ended = _compile(p)
     except RecordingError as e:
         return CompileResult(str(p), None, error=str(e))
+    if sensor_noise:
+        prog = for_sensor_noise(prog, sensor_noise)
     out.mkdir(parents=True, exist_ok=True)
     jpath.write_text(prog.dumps())
     tpath.write_text(prog.listing())
@@ -203,13 +232,16 @@ def compile_one(path: str, out_dir: str | None, force: bool = False) -> CompileR
     return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"], warning=warning)
 
 
-def record_compiled(results: Sequence[CompileResult], out_dir: str | None) -> None:
-    """Remember the content hashes of successfully compiled recordings (in the parent process)."""
+def record_compiled(
+    results: Sequence[CompileResult], out_dir: str | None, sensor_noise: float | None = None
+) -> None:
+    """Remember the content hashes of successfully compiled recordings, with the sensor noise their
+    programs were set for (in the parent process)."""
     by_dir: dict[Path, dict[str, str]] = {}
     for r in results:
         if r.error is None and r.json_path is not None:
             d = Path(r.json_path).parent
-            by_dir.setdefault(d, {})[Path(r.path).name] = _sha256(Path(r.path))
+            by_dir.setdefault(d, {})[Path(r.path).name] = _cache_key(_sha256(Path(r.path)), sensor_noise)
     for d, entries in by_dir.items():
         f = d / CACHE_NAME
         try:
