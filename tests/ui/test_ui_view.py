@@ -226,17 +226,21 @@ def green_fraction(page) -> float:
     return float(((g > r + 40) & (g > b + 40)).mean())
 
 
-def hover_until(page, locator, pred, what: str, timeout: float = 10.0) -> None:
-    """Put the mouse on ``locator``'s element until ``pred`` holds. The live timeline is drawn again
-    whenever a situation is added, so an element may be replaced before the mouse reaches it (and a
-    hover that waits for a stable element can wait forever): each try moves the mouse off and onto
-    the element's place, as a person's hand would."""
+def hover_until(page, locator, pred, what: str, timeout: float = 10.0, *, click: bool = False) -> None:
+    """Put the mouse on ``locator``'s element (and ``click`` it) until ``pred`` holds. The live timeline
+    is drawn again whenever a situation is added, so an element may be replaced before the mouse
+    reaches it (and a hover or click that waits for a stable element can wait forever): each try
+    moves the mouse off and onto the element's place, as a person's hand would."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         box = locator.bounding_box()
         if box is not None:
             page.mouse.move(5, 300)
-            page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+            x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+            if click:
+                page.mouse.click(x, y)
+            else:
+                page.mouse.move(x, y)
             try:
                 wait_for(pred, timeout=1.0, what=what)
                 return
@@ -297,8 +301,7 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     wait_for(lambda: faces.shown == {}, timeout=10, what="the live faces (none) back")
 
     # clicking it scrubs the cable to that situation, its face highlighted
-    on_table.click()
-    wait_for(lambda: server.view.timeline is not None, timeout=10, what="the click to scrub")
+    hover_until(page, on_table, lambda: server.view.timeline is not None, "the click to scrub", click=True)
     page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
     band = server.view.timeline.bands[k]
     assert band.start - 0.01 <= server.timeline_panel.slider.value <= band.end + 0.01
