@@ -145,35 +145,37 @@ class Timeline:
         )
 
 
-def _pick_handlers(uuid: str | None) -> str:
-    """Inline mouse handlers of the timeline's outer element: send the index of the situation under
-    the mouse to the text input ``uuid`` through the page's viser connection (``GuiUpdateMessage``, as
-    an input edit does): ``h<i>`` when it changes, ``""`` when the mouse is over none, ``c<i>:<ms>`` on
-    a click. One copy of the code for the whole timeline (event delegation).
+PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0;
+function send(v){window.__viserMutable&&window.__viserMutable.sendMessage(
+{type:'GuiUpdateMessage',uuid:'UUID',updates:{value:v}});}
+function at(){var el=xy&&document.elementFromPoint(xy[0],xy[1]);
+var t=el&&el.closest&&el.closest('.dlovr-pick [data-situation]');return t?'h'+t.dataset.situation:'';}
+function decide(){var s=at();if(s!==hover){hover=s;send(s);}}
+var pick=function(e){if(e&&e.clientX!==undefined)xy=[e.clientX,e.clientY];
+if(e&&e.type==='click'){var c=at();if(c)send('c'+c.slice(1)+':'+Date.now());return;}clearTimeout(timer);
+if(at())decide();else timer=setTimeout(decide,LEAVE_MS);};
+document.addEventListener('mousemove',pick,true);
+document.documentElement.addEventListener('mouseleave',function(){xy=null;pick(null);});
+return pick;})()))"""
+"""The page's hover follower for the timeline (installed once, by the first ``mouseover``): the
+situation under the mouse is looked up at the mouse's place (``document.elementFromPoint``), so a
+band replaced under a still mouse (the live timeline is drawn again every second) is still the band
+hovered. Entering a band is sent at once as ``h<i>`` to the text input ``UUID``; being over no band
+is sent as ``""`` only once it has lasted :data:`LEAVE_MS` (a redraw's moment without bands is not a
+leave); a click sends ``c<i>:<ms>``."""
 
-    The mouse is followed on the document, not by ``mouseleave``: the live timeline is drawn again
-    every second, and an element replaced under the mouse never sees the mouse leave.
-    """
+LEAVE_MS = 150
+"""How long the mouse must be over no band before the timeline counts as left (ms)."""
+
+
+def _pick_handlers(uuid: str | None) -> str:
+    """Inline mouse handlers of the timeline's outer element, which install :data:`PICK_JS` for the
+    text input ``uuid`` (it reaches the server as a ``GuiUpdateMessage``, as an input edit does).
+    One copy of the code for the whole timeline (event delegation)."""
     if uuid is None or not all(ch.isalnum() or ch in "-_" for ch in uuid):
         return ""
-
-    def send(value: str) -> str:
-        return (
-            "window.__viserMutable&&window.__viserMutable.sendMessage("
-            f"{{type:'GuiUpdateMessage',uuid:'{uuid}',updates:{{value:{value}}}}})"
-        )
-
-    situation = "var t=e&&e.target&&e.target.closest&&e.target.closest('.dlovr-pick [data-situation]');"
-    follow = (
-        "(window.__dlovrPick||(window.__dlovrPick=function(e){" + situation
-        + "var s=t?'h'+t.dataset.situation:'';if(s!==(window.__dlovrHover||'')){window.__dlovrHover=s;"
-        + send("s") + "}},document.addEventListener('mousemove',window.__dlovrPick,true),"
-        "window.__dlovrPick))"
-    )
-    click = "var e=event;" + situation + "if(t){" + send("'c'+t.dataset.situation+':'+Date.now()") + "}"
-    # leaving comes after an entry, which installed the follower
-    leave = "window.__dlovrPick&&window.__dlovrPick(null)"
-    return f' onmouseover="{follow}(event)" onmouseleave="{leave}" onclick="{click}"'
+    pick = PICK_JS.replace("UUID", uuid).replace("LEAVE_MS", str(LEAVE_MS)).replace("\n", "")
+    return f' onmouseover="{pick}(event)" onmouseleave="{pick}(event)" onclick="{pick}(event)"'
 
 
 def recording_timeline(path: str | Path) -> tuple[Timeline, Scene, Any]:

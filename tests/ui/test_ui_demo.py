@@ -158,7 +158,18 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
     faces = demo.viewport.faces
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
     page.locator('.dlovr-timeline > div[data-situation="1"]').wait_for(timeout=10_000)
+    # the axis changes scale only when time reaches three quarters of it: hover with 5 s to spare
+    wait_for(lambda: axis_end(demo.status()["t"] + 5.0) == axis_end(demo.status()["t"]), timeout=20,
+             what="5 s before the axis's next scale")
     page.evaluate("() => document.querySelector('.dlovr-timeline').scrollIntoView({block: 'center'})")
+    panel = demo.timeline_panel
+
+    def redrawn() -> None:
+        html = panel.timeline_html.content
+        wait_for(lambda: panel.timeline_html.content != html, timeout=5, what="a redraw")
+        time.sleep(0.3)  # the page shows it
+
+    redrawn()
     widths = [w for _, w in band_boxes(page)]
     assert min(widths) >= 5.5, widths  # the shortest situation can still be hovered
     x0, w0 = band_boxes(page)[0]
@@ -167,18 +178,14 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
     x = x0 + w0 / 2
     page.mouse.move(x, y)
     wait_for(lambda: faces.shown == {}, timeout=5, what="the hovered free situation's faces (none)")
-    panel = demo.timeline_panel
-    for _ in range(3):  # the timeline is drawn again every second; its scale changes only rarely
-        before, axis = band_boxes(page)[:2], axis_end(demo.status()["t"])
-        for _ in range(2):
-            html = panel.timeline_html.content
-            wait_for(lambda h=html: panel.timeline_html.content != h, timeout=5, what="a redraw")
-        if axis_end(demo.status()["t"]) == axis:
-            break
+    before = band_boxes(page)[:2]
+    redrawn()
+    redrawn()
     after = band_boxes(page)[:2]
     # the hovered band stays where it is and as wide; the live one (the last) only grows at its end
     still = np.allclose(before[0], after[0], atol=0.5) and abs(before[1][0] - after[1][0]) <= 0.5
     assert still, (before, after)
+    assert faces.shown == {} and faces.pinned == {}  # redrawn under the mouse: still hovered
     page.mouse.move(x + 1, y)  # the hand trembles: still the same situation
     time.sleep(0.2)
     assert faces.shown == {} and faces.pinned == {}
