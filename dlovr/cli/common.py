@@ -186,6 +186,13 @@ def os_errors_as_user_errors(fn: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+def shown_dir(out: str) -> str:
+    """An output folder as printed: ``DIR/`` with one slash whatever ``-o`` ended with (``demos//``
+    and ``demos`` are both ``demos/``; ``/`` stays ``/``)."""
+    trimmed = out.rstrip("/")
+    return trimmed + "/" if trimmed else out
+
+
 def refuse_existing(out: str, force: bool) -> None:
     """One line, exit 2, if ``out`` exists and may not be overwritten."""
     if os.path.lexists(out) and not force:

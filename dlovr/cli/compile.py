@@ -25,7 +25,10 @@ from dlovr.cli.common import EXIT_BAD_INPUT, UserError, finishes_on_sigterm, os_
     help="Worker processes (default 1); with --cluster, tasks in flight (default: every CPU).",
 )
 @click.option(
-    "--force", is_flag=True, help="Recompile unchanged recordings too; with --network, overwrite -o FILE."
+    "--force",
+    is_flag=True,
+    help="Recompile unchanged recordings too, and overwrite programs compile did not write there; "
+    "with --network, overwrite -o FILE.",
 )
 @click.option(
     "--network",
@@ -36,7 +39,7 @@ from dlovr.cli.common import EXIT_BAD_INPUT, UserError, finishes_on_sigterm, os_
 @click.option(
     "--sensor-noise",
     type=click.FloatRange(0.0, 1.0),
-    help="White noise (N) of the robot's force sensor: detection thresholds respect it (implies --force).",
+    help="White noise (N) of the robot's force sensor: detection thresholds respect it.",
 )
 @cluster_option
 @finishes_on_sigterm
@@ -58,7 +61,9 @@ def compile_cmd(
     smoothing and a threshold of at least 4 standard deviations of what it measures; a transition
     whose step is too small for that ends its macro by motion (docs/programs.md, "The sensor"). Two
     recordings with the same name into one -o folder are refused (the message names both). Recordings
-    unchanged since they were last compiled there are skipped. A recording that cannot be read is
+    unchanged since they were last compiled there (with the same --sensor-noise) are skipped. An
+    existing program is replaced only when compile wrote it there (unchanged since) or with --force:
+    a program edited by hand is kept and its recording fails (one line). A recording that cannot be read is
     named and the others are compiled. Exit status: 0 all compiled or skipped; 2 any failed.
     """
     import os
@@ -91,7 +96,6 @@ def compile_cmd(
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
         paths = [p.resolve() for p in paths]
         output_dir = str(Path(output_dir).resolve()) if output_dir else None
-    force = force or bool(sensor_noise)
     tasks = [Task(str(p), (str(p), output_dir, force, sensor_noise)) for p in paths]
     done = sorted(
         run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),

@@ -21,6 +21,7 @@ from dlovr.cli.common import (
     refuse_existing,
     rounded_time,
     script_scene,
+    shown_dir,
     warm_up,
 )
 
@@ -250,8 +251,10 @@ def _record_trials(
         seed,
         str(Path(out).resolve()),
         SceneBundle.from_path(scene.path).digest,
+        force,
     )
-    existing = [demo_path(setup, k) for k in range(n) if demo_path(setup, k).exists()]
+    index = Path(setup.out_dir) / "demos.json"
+    existing = [p for p in [*(demo_path(setup, k) for k in range(n)), index] if os.path.lexists(p)]
     if existing and not force:
         raise UserError(f"{existing[0]}: exists; give --force to overwrite the demonstrations")
     check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
@@ -267,31 +270,29 @@ def _record_trials(
     retried = sum(d["attempts"] > 1 for d in demos)
     wrote = sum(d["path"] is not None for d in demos)
     click.echo(
-        f"wrote {wrote} recordings of {scene.name} to {_folder(out)} (demos.json): {len(bad)} diverged or "
+        f"wrote {wrote} recordings of {scene.name} to {shown_dir(out)} (demos.json): {len(bad)} diverged or "
         f"failed, {retried} retried"
     )
     if bad:
         raise SystemExit(EXIT_FAILED)
 
 
-def _folder(out: str) -> str:
-    """An output folder as printed: ``DIR/`` (one slash, whatever -o ended with)."""
-    return out.rstrip("/") + "/" if out.rstrip("/") else out
-
-
 def _write_index(setup: Any, demos: list[dict[str, Any]], out: str) -> None:
     """``DIR/demos.json`` (:func:`dlovr.execution.demo_sets.write_index`); a failed write is one line
     (the recordings themselves are on disk already)."""
     from dlovr.execution.demo_sets import write_index
-    from dlovr.outputs import describe_os_error
+    from dlovr.outputs import OutputError, describe_os_error
 
+    kept = sum(d["path"] is not None for d in demos)
     try:
         write_index(setup, demos)
+    except OutputError as e:
+        raise UserError(f"{e} ({kept} recordings kept in {shown_dir(out)})") from None
     except OSError as e:
-        where = e.filename or os.path.join(out, "demos.json")
-        kept = sum(d["path"] is not None for d in demos)
+        where = e.filename or shown_dir(out) + "demos.json"
         why = describe_os_error(e)
-        raise UserError(f"{where}: cannot write: {why} ({kept} recordings kept in {_folder(out)})") from None
+        kept_in = f"{kept} recordings kept in {shown_dir(out)}"
+        raise UserError(f"{where}: cannot write: {why} ({kept_in})") from None
 
 
 def _interrupted_demos(e: BaseException, setup: Any, n: int, out: str) -> None:
@@ -314,7 +315,7 @@ def _interrupted_demos(e: BaseException, setup: Any, n: int, out: str) -> None:
     if demos:
         _write_index(setup, demos, out)
     signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
-    listed = f"listed in {os.path.join(out, 'demos.json')}" if demos else "none listed"
+    listed = f"listed in {shown_dir(out)}demos.json" if demos else "none listed"
     click.echo(f"\ninterrupted ({signals.name(signum)}): {len(demos)} of {n} demonstrations finished, "
                f"{listed} (a recording in progress is kept, finished where it stopped)", err=True)
     signals.clear()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import signal
 import sys
 from dataclasses import dataclass
@@ -11,7 +12,7 @@ from typing import Any
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing, shown_dir
 from dlovr.outputs import rounded
 
 
@@ -93,7 +94,9 @@ _VARY_HELP = (
     help="With --trials: directory for the trials' results; without: record the run to this MCAP file.",
 )
 @click.option("--record", is_flag=True, help="With --trials: also record each trial as DIR/trial_KKK.mcap.")
-@click.option("-f", "--force", is_flag=True, help="Overwrite the -o run.mcap if it exists.")
+@click.option(
+    "-f", "--force", is_flag=True, help="Overwrite the -o run.mcap, or the results in -o DIR, if they exist."
+)
 @cluster_option
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON.")
 def run_cmd(**given: Any) -> None:
@@ -109,9 +112,10 @@ def run_cmd(**given: Any) -> None:
 
     With --trials N -o DIR: N runs in scenes perturbed by --vary (deterministic from --seed), with
     --baseline replay also the demonstration replayed open loop; DIR gets trial_KKK.json, trials.csv,
-    summary.json and plot.png. The trials run on --workers local processes, or with --cluster on Ray
-    (local: a Ray instance here; HOST:PORT: a running cluster, DIR on storage every node sees), with
-    the same results. Exit code 0 when the trials ran (their failures are results), 2 bad input.
+    summary.json and plot.png (results already there are refused unless --force). The trials run on
+    --workers local processes, or with --cluster on Ray (local: a Ray instance here; HOST:PORT: a
+    running cluster, DIR on storage every node sees), with the same results. Exit code 0 when the
+    trials ran (their failures are results), 2 bad input.
 
     Without --trials, -o run.mcap records the run like a demonstration (an existing file is refused
     unless --force) plus a channel of executor events (/dlovr/executor_events: macro start,
@@ -141,7 +145,7 @@ def run_cmd(**given: Any) -> None:
         return
     if a.registered:
         opts = _registered(program, scene, opts, a)
-    _single(program, scene, opts, track if use_track else None, a.out, a.as_json)
+    _single(program, scene, opts, track if use_track else None, a)
 
 
 def _registered(program: Any, scene: Any, opts: Any, a: RunArgs) -> Any:
@@ -295,26 +299,28 @@ def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
     return scene, track
 
 
-def _single(program: Any, scene: Any, opts: Any, track: Any, out: str | None, as_json: bool) -> None:
-    """One run of ``program`` (recorded to ``out`` when given); exit 0 when it reached the goal."""
+def _single(program: Any, scene: Any, opts: Any, track: Any, a: RunArgs) -> None:
+    """One run of ``program`` (recorded to ``a.out`` when given, replacing a file there only with
+    ``a.force``); exit 0 when it reached the goal."""
     import json
 
     from dlovr.execution.engine import format_result
 
+    out = a.out
     if out:
         from dlovr.execution.recorded import record_run
         from dlovr.outputs import output_error, prepare_output
 
         try:
             prepare_output(out)
-            res = record_run(program, scene, out, opts, track=track)
+            res = record_run(program, scene, out, opts, track=track, overwrite=a.force)
         except OSError as e:
             raise UserError(str(output_error(out, e))) from None
     else:
         from dlovr.execution.run import run_program
 
         res = run_program(program, scene, opts, track=track)
-    if as_json:
+    if a.as_json:
         click.echo(json.dumps(rounded(res.to_json()), indent=1))
     else:
         click.echo(format_result(res))
@@ -343,7 +349,7 @@ def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
         from dlovr.execution.recorded import record_run
 
         try:
-            res = record_run(nprog, scene, out, opts)
+            res = record_run(nprog, scene, out, opts, overwrite=a.force)
         except OSError as e:
             raise UserError(f"{out}: cannot write: {e.strerror}") from None
     else:
@@ -365,6 +371,7 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
     variations = parse_varies(a.varies, t.scene)
     if Path(out).exists() and not Path(out).is_dir():
         raise UserError(f"{out}: exists and is not a directory")
+    _refuse_results(out, trials, a)
     pieces = scene_pieces(t.scene)
     record_dir = str(Path(out).resolve()) if a.record else None
     setup = TrialSetup(
@@ -379,6 +386,7 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         use_track=t.use_track,
         record_dir=record_dir,
         registered=a.registered,
+        force=a.force,
     )
     check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
     try:
@@ -387,17 +395,32 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         _interrupted_trials(e, setup, trials, out)
         raise
     summary = summarize(results, setup)
-    _write_trials(out, results, summary)
+    _write_trials(out, results, summary, a.force)
     _print_summary(summary, trials, out)
 
 
-def _write_trials(out: str, results: list[dict[str, Any]], summary: dict[str, Any]) -> None:
-    """The trials' files (:func:`dlovr.execution.trials.write_outputs`); a failed write is one line."""
+def _refuse_results(out: str, trials: int, a: RunArgs) -> None:
+    """Before the batch: results already in ``out`` (a trial's JSON or recording, the summary, the
+    table, the plot) are one line, exit 2, unless --force."""
+    from dlovr.execution.trials import result_names
+
+    if a.force or not os.path.isdir(out):
+        return
+    there = [name for name in result_names(trials, a.record) if os.path.lexists(os.path.join(out, name))]
+    if there:
+        raise UserError(f"{os.path.join(out, there[0])}: exists; give --force to overwrite the results")
+
+
+def _write_trials(out: str, results: list[dict[str, Any]], summary: dict[str, Any], force: bool) -> None:
+    """The trials' files (:func:`dlovr.execution.trials.write_outputs`, atomic; existing ones replaced
+    only with ``force``); a failed write is one line."""
     from dlovr.execution.trials import write_outputs
-    from dlovr.outputs import describe_os_error
+    from dlovr.outputs import OutputError, describe_os_error
 
     try:
-        write_outputs(out, results, summary)
+        write_outputs(out, results, summary, force=force)
+    except OutputError as e:
+        raise UserError(f"{e} (the results of {len(results)} trials)") from None
     except OSError as e:
         where = e.filename or out
         why = describe_os_error(e)
@@ -417,9 +440,9 @@ def _interrupted_trials(e: BaseException, setup: Any, n: int, out: str) -> None:
     results = [{**(r.value if r.ok else lost_trial(setup, r.index, str(r.error))), "attempts": r.attempts}
                for r in done]
     if results:
-        _write_trials(out, results, summarize(results, setup))
+        _write_trials(out, results, summarize(results, setup), setup.force)
     signum = signals.pending() or (signal.SIGINT if isinstance(e, KeyboardInterrupt) else signal.SIGTERM)
-    where = f"their results in {out.rstrip('/') or out}/" if results else "no results written"
+    where = f"their results in {shown_dir(out)}" if results else "no results written"
     name = signals.name(signum)
     click.echo(f"\ninterrupted ({name}): {len(results)} of {n} trials finished, {where}", err=True)
     signals.clear()
@@ -442,4 +465,4 @@ def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
     if summary["retried_trials"] or summary["lost_trials"]:
         lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
         click.echo(lost)
-    click.echo(f"results in {out.rstrip('/') or out}/ (summary.json, trials.csv, plot.png, trial_*.json)")
+    click.echo(f"results in {shown_dir(out)} (summary.json, trials.csv, plot.png, trial_*.json)")

@@ -31,7 +31,8 @@ from dlovr.execution.variation import Variation, perturb
 class DemoSetup:
     """What each perturbed demonstration needs (picklable): the scene, its convex pieces (object
     frames: valid for every perturbation), the script, the variations, the seed, the output folder
-    (absolute) and the unperturbed scene's hash."""
+    (absolute) and the unperturbed scene's hash; ``force``: existing demonstrations and ``demos.json``
+    are replaced (else refused: nothing recorded is overwritten)."""
 
     scene: Any
     pieces: Any
@@ -40,6 +41,7 @@ class DemoSetup:
     seed: int
     out_dir: str
     base_sha256: str
+    force: bool = False
 
 
 def demo_path(setup: DemoSetup, trial: int) -> Path:
@@ -71,7 +73,10 @@ def record_demo(setup: DemoSetup, trial: int) -> dict[str, Any]:
     }
     if motion is not None:
         meta["demonstrator"] = json.dumps(dataclasses.asdict(motion))
-    with DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta) as rec:
+    bundle = scene_bundle(scene)
+    with DemoRecorder(
+        path, scene, sim, sim.tracker, bundle=bundle, extra_metadata=meta, overwrite=setup.force
+    ) as rec:
         error = play_script(sim, script, rec)
     return {**out, "path": path.name, "error": error, "situations": len(sim.tracker.kept)}
 
@@ -97,7 +102,11 @@ def record_demos(
 
 
 def write_index(setup: DemoSetup, demos: Sequence[dict[str, Any]]) -> Path:
-    """``DIR/demos.json``: the scene, the seed, the variations and each demonstration's summary."""
+    """``DIR/demos.json``: the scene, the seed, the variations and each demonstration's summary;
+    written atomically, an existing one replaced only with ``setup.force``
+    (:func:`dlovr.outputs.write_output`)."""
+    from dlovr.outputs import write_output
+
     index = {
         "scene": setup.scene.name,
         "base_scene_sha256": setup.base_sha256,
@@ -107,5 +116,5 @@ def write_index(setup: DemoSetup, demos: Sequence[dict[str, Any]]) -> Path:
         "demonstrations": list(demos),
     }
     path = Path(setup.out_dir) / "demos.json"
-    path.write_text(json.dumps(index, indent=1) + "\n", encoding="utf-8")
+    write_output(path, json.dumps(index, indent=1) + "\n", force=setup.force)
     return path

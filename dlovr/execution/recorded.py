@@ -109,6 +109,7 @@ def record_run(
     network: NetworkOptions | None = None,
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
+    overwrite: bool = False,
 ) -> RunResult: ...
 
 
@@ -123,6 +124,7 @@ def record_run(
     network: NetworkOptions | None = None,
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
+    overwrite: bool = False,
 ) -> NetworkRunResult: ...
 
 
@@ -136,9 +138,11 @@ def record_run(
     network: NetworkOptions | None = None,
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
+    overwrite: bool = False,
 ) -> RunResult | NetworkRunResult:
     """Run ``program`` (compiled or network) in ``scene`` like :func:`dlovr.execution.run.run_program`
-    while recording it to ``path``. A run that cannot start writes no file."""
+    while recording it to ``path`` (an existing file is replaced only with ``overwrite``, once the
+    new one is finished). A run that cannot start writes no file."""
     from dlovr.recording import DemoRecorder
 
     opts = opts if opts is not None else ExecOptions()
@@ -146,7 +150,9 @@ def record_run(
     if sim is None:  # the same failed result
         return not_started(program, scene, opts, str(why))
     meta = {"source": "dlovr run", "program": program.name, "detect": opts.detect, **(extra_metadata or {})}
-    rec = DemoRecorder(path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta)
+    rec = DemoRecorder(
+        path, scene, sim, sim.tracker, bundle=scene_bundle(scene), extra_metadata=meta, overwrite=overwrite
+    )
     with rec:
         rec.rec.add_channel(TOPIC_EVENTS, EVENT_SCHEMA_NAME, EVENT_SCHEMA)
 

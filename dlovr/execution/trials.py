@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import io
 import itertools
 import json
 import math
@@ -45,7 +46,8 @@ class TrialSetup:
     ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
     trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
     ``registered``: the program is told where the trial's objects are (their shifts from ``scene``,
-    :func:`dlovr.execution.variation.object_shifts`); else it runs blind.
+    :func:`dlovr.execution.variation.object_shifts`); else it runs blind. ``force``: an existing
+    ``trial_KKK.mcap`` is replaced (else the trial fails: its recording is kept).
     ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
     """
 
@@ -60,6 +62,7 @@ class TrialSetup:
     use_track: bool = True
     record_dir: str | None = None
     registered: bool = False
+    force: bool = False
 
     @property
     def name(self) -> str:
@@ -89,7 +92,8 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         path = Path(setup.record_dir) / f"trial_{trial:03d}.mcap"
         meta = _trial_metadata(setup, trial, values)
         res = record_run(
-            setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta
+            setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta,
+            overwrite=setup.force,
         )
     else:
         res = run_program(setup.program, scene, opts, track=track, pieces=setup.pieces)
@@ -259,35 +263,56 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
     }
 
 
+def result_names(n: int, record: bool = False) -> list[str]:
+    """The files ``n`` trials write into their output folder (:func:`write_outputs`; with ``record``
+    also their recordings ``trial_KKK.mcap``): what ``run --trials`` refuses to replace without
+    ``--force``."""
+    names = [f"trial_{k:03d}.json" for k in range(n)] + ["trials.csv", "summary.json", "plot.png"]
+    return names + ([f"trial_{k:03d}.mcap" for k in range(n)] if record else [])
+
+
 def write_outputs(
-    out_dir: str | Path, trials: Sequence[dict[str, Any]], summary: dict[str, Any]
+    out_dir: str | Path, trials: Sequence[dict[str, Any]], summary: dict[str, Any], *, force: bool = False
 ) -> list[Path]:
-    """Write the per-trial JSON, ``trials.csv``, ``summary.json`` and ``plot.png``; their paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the per-trial JSON, ``trials.csv``, ``summary.json`` and ``plot.png``; their paths.
+
+    Each file is written atomically (:func:`dlovr.outputs.write_output`: a temporary file renamed into
+    place); an existing one is replaced only with ``force`` (else :class:`dlovr.outputs.OutputError`,
+    and a file another writer made meanwhile is kept)."""
+    from dlovr.outputs import atomic_output, prepare_output_dir, write_output
+
+    out = prepare_output_dir(out_dir)
     paths = []
     for t in trials:
         p = out / f"trial_{t['trial']:03d}.json"
-        p.write_text(json.dumps(rounded(t), indent=1) + "\n", encoding="utf-8")
+        write_output(p, json.dumps(rounded(t), indent=1) + "\n", force=force)
         paths.append(p)
-    keys = sorted({k for t in trials for k in t["values"]})
-    with (out / "trials.csv").open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(["trial", *keys, "program_success", "failed_macro", "reason", "openloop_goal",
-                    "false_detections", "median_latency_s", "wall_time_s"])
-        for t in trials:
-            p = t["program"]
-            lat = [m["latency"] for m in p["macros"] if m["outcome"] == "ok" and m["latency"] is not None]
-            vals = [_cell(rounded(t["values"].get(k))) for k in keys]
-            w.writerow([t["trial"], *vals, p["success"], p["failed_macro"] or "", p["reason"],
-                        t["openloop"]["goal_reached"] if "openloop" in t else "",
-                        sum(m["outcome"] == "false" for m in p["macros"]),
-                        rounded(statistics.median(lat)) if lat else "", round(t["wall_time"], 3)])
+    write_output(out / "trials.csv", _csv_text(trials), force=force)
     paths.append(out / "trials.csv")
-    (out / "summary.json").write_text(json.dumps(rounded(summary), indent=1) + "\n", encoding="utf-8")
+    write_output(out / "summary.json", json.dumps(rounded(summary), indent=1) + "\n", force=force)
     paths.append(out / "summary.json")
-    paths.append(plot(summary, out / "plot.png"))
+    with atomic_output(out / "plot.png", force=force) as tmp:
+        plot(summary, tmp)
+    paths.append(out / "plot.png")
     return paths
+
+
+def _csv_text(trials: Sequence[dict[str, Any]]) -> str:
+    """``trials.csv``: one row per trial (its values, outcome, detections, latency, wall time)."""
+    keys = sorted({k for t in trials for k in t["values"]})
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow(["trial", *keys, "program_success", "failed_macro", "reason", "openloop_goal",
+                "false_detections", "median_latency_s", "wall_time_s"])
+    for t in trials:
+        p = t["program"]
+        lat = [m["latency"] for m in p["macros"] if m["outcome"] == "ok" and m["latency"] is not None]
+        vals = [_cell(rounded(t["values"].get(k))) for k in keys]
+        w.writerow([t["trial"], *vals, p["success"], p["failed_macro"] or "", p["reason"],
+                    t["openloop"]["goal_reached"] if "openloop" in t else "",
+                    sum(m["outcome"] == "false" for m in p["macros"]),
+                    rounded(statistics.median(lat)) if lat else "", round(t["wall_time"], 3)])
+    return buf.getvalue()
 
 
 def _cell(x: Any) -> Any:
@@ -336,6 +361,6 @@ def plot(summary: dict[str, Any], path: str | Path) -> Path:
     fig.suptitle(f"{summary['program']}: {summary['trials']} trials, seed {summary['seed']}, "
                  f"detection {summary['detect']}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, format="png")  # format: the path may be a temporary name
     plt.close(fig)
     return Path(path)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.outputs import OutputError, write_output
 from dlovr.recording.format import RecordingError, one_line
 from dlovr.recording.reader import Recording, kept_states
 
@@ -195,6 +197,36 @@ def _cache_key(digest: str, sensor_noise: float | None) -> str:
     return f"{digest} sensor_noise={sensor_noise!r}" if sensor_noise else digest
 
 
+def _file_sha256(path: Path) -> str | None:
+    """The sha256 of a file, None when it cannot be read."""
+    try:
+        return _sha256(path)
+    except OSError:
+        return None
+
+
+def _cache_entry(recording: Path, jpath: Path, tpath: Path, sensor_noise: float | None) -> dict[str, Any]:
+    """The compile cache's entry of a recording just compiled: what it was compiled from (its
+    :func:`_cache_key`) and the hashes of the two program files written (so that a later compile
+    knows them for its own: it replaces them without --force, unlike a file edited since)."""
+    return {
+        "recording": _cache_key(_sha256(recording), sensor_noise),
+        "json": _file_sha256(jpath),
+        "txt": _file_sha256(tpath),
+    }
+
+
+def _replaceable(entry: Any, jpath: Path, tpath: Path) -> Path | None:
+    """The first of the existing program files that compile may not replace without --force (not
+    the file its cache ``entry`` says it wrote there: edited since, or written by something else),
+    else None."""
+    known = entry if isinstance(entry, dict) else {}
+    for key, f in (("json", jpath), ("txt", tpath)):
+        if os.path.lexists(f) and (known.get(key) is None or _file_sha256(f) != known.get(key)):
+            return f
+    return None
+
+
 def compile_one(
     path: str, out_dir: str | None, force: bool = False, sensor_noise: float | None = None
 ) -> CompileResult:
@@ -211,23 +243,32 @@ def compile_one(
     jpath, tpath = program_paths(p, out_dir)
     out = jpath.parent
     cache_file = out / CACHE_NAME
+    entry: Any = None
     try:
         cache = json.loads(cache_file.read_text()) if cache_file.is_file() else {}
-        fresh = cache.get(p.name) == _cache_key(digest, sensor_noise)
+        entry = cache.get(p.name)
+        made_from = entry.get("recording") if isinstance(entry, dict) else entry  # a string: an older cache
+        fresh = made_from == _cache_key(digest, sensor_noise)
         if not force and fresh and jpath.is_file() and tpath.is_file():
             s = json.loads(jpath.read_text()).get("summary", {})
             return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
     except (OSError, ValueError, AttributeError):
         pass  # no usable cache or program: compile again
+    kept = None if force else _replaceable(entry, jpath, tpath)
+    if kept is not None:
+        why = "exists and is not the program compiled there before (edited since, or not compiled by dlovr)"
+        return CompileResult(str(p), None, error=f"{kept}: {why}; give --force to overwrite it")
     try:
         prog, ended = _compile(p)
     except RecordingError as e:
         return CompileResult(str(p), None, error=str(e))
     if sensor_noise:
         prog = for_sensor_noise(prog, sensor_noise)
-    out.mkdir(parents=True, exist_ok=True)
-    jpath.write_text(prog.dumps())
-    tpath.write_text(prog.listing())
+    try:  # atomic; a file that appeared meanwhile (another writer's) is kept, unless --force
+        write_output(jpath, prog.dumps(), force=force or os.path.lexists(jpath))  # checked: ours
+        write_output(tpath, prog.listing(), force=force or os.path.lexists(tpath))
+    except OutputError as e:
+        return CompileResult(str(p), None, error=str(e))
     warning = f"{p}: the recording ends early ({ended}): its program is partial" if ended else None
     return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"], warning=warning)
 
@@ -235,18 +276,24 @@ def compile_one(
 def record_compiled(
     results: Sequence[CompileResult], out_dir: str | None, sensor_noise: float | None = None
 ) -> None:
-    """Remember the content hashes of successfully compiled recordings, with the sensor noise their
-    programs were set for (in the parent process)."""
-    by_dir: dict[Path, dict[str, str]] = {}
+    """Remember what the recordings just compiled were compiled from (content hash, sensor noise) and
+    the hashes of the program files written (in the parent process; :func:`_cache_entry`). A skipped
+    recording's entry stays as it was (its program may have been edited since: not ours to replace)."""
+    by_dir: dict[Path, dict[str, Any]] = {}
     for r in results:
-        if r.error is None and r.json_path is not None:
-            d = Path(r.json_path).parent
-            by_dir.setdefault(d, {})[Path(r.path).name] = _cache_key(_sha256(Path(r.path)), sensor_noise)
+        if r.error is None and r.json_path is not None and not r.skipped:
+            jpath, tpath = program_paths(r.path, Path(r.json_path).parent)
+            by_dir.setdefault(jpath.parent, {})[Path(r.path).name] = _cache_entry(
+                Path(r.path), jpath, tpath, sensor_noise
+            )
     for d, entries in by_dir.items():
         f = d / CACHE_NAME
         try:
             cache = json.loads(f.read_text()) if f.is_file() else {}
         except (OSError, ValueError):
             cache = {}
-        cache.update(entries)
-        f.write_text(json.dumps(dict(sorted(cache.items())), indent=1) + "\n")
+        cache = {**(cache if isinstance(cache, dict) else {}), **entries}
+        try:  # a cache that cannot be written only means compiling again next time
+            write_output(f, json.dumps(dict(sorted(cache.items())), indent=1) + "\n", force=True)
+        except OutputError:
+            pass

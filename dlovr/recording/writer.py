@@ -135,7 +135,7 @@ class Recorder:
         frame_rate: float = 30.0,
         t0_ns: int | None = None,
         pieces: Mapping[str, tuple[Sequence[np.ndarray], bool]] | None = None,
-        overwrite: bool = True,
+        overwrite: bool = False,
     ):
         self.path = Path(path)
         self.dt = float(dt)

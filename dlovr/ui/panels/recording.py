@@ -12,6 +12,7 @@ from typing import Any
 
 import viser
 
+from dlovr.outputs import OutputError, write_output
 from dlovr.recording import compile_recording
 from dlovr.ui.app import App
 from dlovr.ui.program_view import program_html
@@ -66,20 +67,29 @@ class RecordingPanel:
 
     def start(self, path: str | Path | None = None) -> Path:
         app = self.app
-        if path is None:
-            stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-            path = app.recordings_dir / f"{app.session.scene.name}-{stamp}.mcap"
-            k = 1
-            while Path(path).exists():
-                path = app.recordings_dir / f"{app.session.scene.name}-{stamp}-{k}.mcap"
-                k += 1
-        out = app.session.start_recording(Path(path))
+        out = app.session.start_recording(Path(path)) if path is not None else self._start_new()
         self.started = time.monotonic()
         if app.server is not None:
             self.rec_md.content = f"Recording to `{out}`"
             self.rec_btn.disabled = True
             self.stop_btn.disabled = False
         return out
+
+    def _start_new(self) -> Path:
+        """Record to a new file ``SCENE-YYYYmmdd-HHMMSS[-K].mcap`` in the recordings folder: created
+        exclusively (another server's recording of the same second is never replaced: the next K)."""
+        app = self.app
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        for k in range(1000):
+            path = app.recordings_dir / f"{app.session.scene.name}-{stamp}{f'-{k}' if k else ''}.mcap"
+            if path.exists():
+                continue
+            try:
+                return app.session.start_recording(path)
+            except OutputError:
+                if not path.exists():  # not taken meanwhile: another problem (a full disk...)
+                    raise
+        raise OutputError(f"{app.recordings_dir}: 1000 recordings named {app.session.scene.name}-{stamp}")
 
     def start_safely(self) -> Path | None:
         """:meth:`start` for the button: a recording that cannot start (its folder not writable, the
@@ -136,12 +146,13 @@ class RecordingPanel:
             try:
                 jpath = path.with_name(f"{path.stem}.program.json")
                 tpath = path.with_name(f"{path.stem}.program.txt")
-                jpath.write_text(prog.dumps())
-                tpath.write_text(text)
+                write_output(jpath, prog.dumps(), force=False)  # atomic; never over another file
+                write_output(tpath, text, force=False)
                 files += [("program", jpath), ("listing", tpath)]
                 md = f"Saved `{path}` and its program"
-            except OSError as e:
-                md = f"Saved `{path}`; cannot write its program: {e.strerror or e}"
+            except (OSError, OutputError) as e:
+                why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+                md = f"Saved `{path}`; cannot write its program: {why}"
             view = program_html(prog, files)
         except Exception as e:  # shown to the user, not raised in a worker thread
             app.program_text = ""
