@@ -6,8 +6,8 @@ Run from the repository root::
     python examples/compile_recordings.py my_demos/ out/
 
 Writes ``<name>.program.json`` and ``<name>.program.txt`` per recording into the output folder
-(default: a temporary one) and prints each program's macros: index, transition class, risk, and the
-principal situation it leads to.
+(default: a temporary one, removed at the end) and prints each program's macros: index, transition
+class, risk, and the principal situation it leads to.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from dlovr.outputs import write_output
 from dlovr.recording import RecordingError, compile_recording, find_recordings
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,8 +31,8 @@ def main(folder: str, out_dir: str) -> None:
         except RecordingError as e:  # a damaged file is named, the others still compile
             print(f"{path.name}: {e}")
             continue
-        (out / f"{path.stem}.program.json").write_text(program.dumps())
-        (out / f"{path.stem}.program.txt").write_text(program.listing())
+        write_output(out / f"{path.stem}.program.json", program.dumps())  # atomic: never half a file
+        write_output(out / f"{path.stem}.program.txt", program.listing())
         n = len(program.macros)
         print(f"{path.name}: {n} macro{'' if n == 1 else 's'} -> {out / path.stem}.program.json")
         for m in program.macros:
@@ -40,4 +41,8 @@ def main(folder: str, out_dir: str) -> None:
 
 if __name__ == "__main__":
     src = sys.argv[1] if len(sys.argv) > 1 else str(ROOT / "recordings")
-    main(src, sys.argv[2] if len(sys.argv) > 2 else tempfile.mkdtemp(prefix="dlovr-programs-"))
+    if len(sys.argv) > 2:
+        main(src, sys.argv[2])
+    else:
+        with tempfile.TemporaryDirectory(prefix="dlovr-programs-") as tmp:
+            main(src, tmp)

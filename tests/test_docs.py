@@ -93,9 +93,16 @@ def test_docs_have_python_examples():
 
 
 @pytest.mark.parametrize("page,code", PYTHON, ids=[f"{p}-{i}" for i, (p, _) in enumerate(PYTHON)])
-def test_python_example_runs(page, code):
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+def test_python_example_runs(page, code, tmp_path):
+    """Each example runs as printed and leaves no temporary folder behind (TMPDIR stays empty)."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp)}
+    r = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env
+    )
     assert r.returncode == 0, f"{page}: {r.stderr[-2000:]}"
+    assert not list(tmp.iterdir()), f"{page}: left behind {sorted(p.name for p in tmp.iterdir())}"
 
 
 # The shell examples of `dlovr transitions` (they write their own input files): run as printed, in a

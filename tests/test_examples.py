@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -12,13 +13,14 @@ ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 
 
-def run(name: str, *args: str) -> str:
+def run(name: str, *args: str, env: dict[str, str] | None = None) -> str:
     r = subprocess.run(
         [sys.executable, str(ROOT / "examples" / name), *args],
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,
+        env=env,
     )
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
@@ -51,3 +53,14 @@ def test_compile_recordings_writes_programs(tmp_path, folder):
     assert sorted(p.name.removesuffix(".program.json") for p in tmp_path.glob("*.program.json")) == samples
     for stem in samples:
         assert f"{stem}.mcap:" in out
+
+
+def test_compile_recordings_without_an_output_folder_leaves_no_temporary_folder(tmp_path):
+    """Without an output folder the programs go to a temporary one, removed at the end."""
+    src, tmp = tmp_path / "src", tmp_path / "tmp"
+    src.mkdir()
+    tmp.mkdir()
+    (src / "table.mcap").symlink_to(ROOT / "recordings" / "table.mcap")
+    out = run("compile_recordings.py", str(src), env={**os.environ, "TMPDIR": str(tmp)})
+    assert "table.mcap: " in out and "-> " + str(tmp) in out
+    assert not list(tmp.iterdir())
