@@ -54,7 +54,8 @@ def generate_cmd(program_path: str, out: str, **given: Any) -> None:
     opts = export_options(**given)
     check_output(out, opts.fmt, opts.force)
     try:
-        setup = trial_setup(program_path, varies, seed, detect=detect, path_mode=path_mode)
+        setup = trial_setup(program_path, varies, seed, detect=detect, path_mode=path_mode,
+                            note=lambda line: click.echo(f"note: {line}", err=True))
     except ValueError as e:  # a scene or program problem the readers report as ValueError
         raise UserError(str(e)) from None
     res = generate(setup, episodes, out, opts, workers=workers, progress=True)

@@ -6,7 +6,7 @@ recorded; the runs that reached the goal re-simulated into episodes and written 
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -34,10 +34,12 @@ class GenerateResult:
 
 def trial_setup(
     program_path: str, varies: Sequence[str], seed: int, *, detect: str = "force", noise: float = 0.0,
-    path_mode: str = "auto",
+    path_mode: str = "auto", note: Callable[[str], None] | None = None,
 ) -> Any:
     """The :class:`dlovr.execution.trials.TrialSetup` that ``dlovr run PROGRAM --trials`` makes from
-    the same options (a compiled or a network program; ``path_mode``: auto, demo or program)."""
+    the same options (a compiled or a network program; ``path_mode``: auto, demo or program).
+    ``note`` is told when the macros cannot follow the demonstration (its recording not found), as
+    ``dlovr run`` says it: another way of moving, another result."""
     from dlovr.execution.executor import ExecOptions
     from dlovr.execution.network_run import network_scene
     from dlovr.execution.run import find_recording, load_track, resolve_scene
@@ -58,6 +60,9 @@ def trial_setup(
         scene = resolve_scene(program, None, rec)
         if rec is None and path_mode == "demo":
             raise DatasetError(f"{program_path}: its demonstration {program.source!r} was not found")
+        if rec is None and path_mode == "auto" and note is not None:
+            note(f"{program_path}: its demonstration {program.source!r} was not found, so the macros move "
+                 "along the program's poses (--path program)")
         track = load_track(rec) if rec is not None and path_mode != "program" else None
     return TrialSetup(
         program=program, scene=scene, pieces=scene_pieces(scene), track=track,

@@ -553,6 +553,8 @@ def network_scene(nprog: NetworkProgram, scene_ref: str | None) -> Any:
     """The scene to run a network program in: ``scene_ref`` or the network's scene; raises
     :class:`dlovr.model.program.ProgramError` when the scene lacks an object the network's
     contacts name, or ``dlovr.scene.SceneError``."""
+    if not (scene_ref or nprog.network.scene_name):
+        raise ProgramError(f"network program {nprog.name}: its network names no scene: give --scene")
     from dlovr.geometry.scene_checks import load_checked_scene
 
     scene = load_checked_scene(scene_ref or nprog.network.scene_name)

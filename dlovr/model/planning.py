@@ -378,8 +378,10 @@ class NetworkProgram:
         try:
             reach, name, source = float(data["reach_m"]), str(data["name"]), str(data["source"])
             net = data["network"]
-        except (KeyError, TypeError, ValueError) as e:
-            raise NetworkError(f"bad network program: {type(e).__name__}: {e}") from None
+        except KeyError as e:  # a key's name, never Python's "KeyError: 'reach_m'"
+            raise NetworkError(f"{e.args[0] if e.args else '?'}: missing") from None
+        except (TypeError, ValueError) as e:
+            raise NetworkError(f"reach_m: not a number: {str(e)[:80]}") from None
         return NetworkProgram(Network.from_json(net), reach, name, source)
 
     def listing(self) -> str:

@@ -86,7 +86,9 @@ def pieces_from_json(raw: bytes) -> dict[str, tuple[list[np.ndarray], bool]]:
         try:
             ps = [np.asarray(p, dtype=float) for p in entry["pieces"]]
             approx = bool(entry["approximate"])
-        except (KeyError, TypeError, ValueError) as e:
+        except KeyError as e:
+            raise ValueError(f"object {name}: {e.args[0]!r} missing") from None
+        except (TypeError, ValueError) as e:
             raise ValueError(f"object {name}: {e}") from None
         if not ps or any(
             p.ndim != 2 or p.shape[1] != 3 or len(p) < 4 or not np.all(np.isfinite(p)) for p in ps

@@ -10,7 +10,7 @@ import numpy as np
 
 from dlovr.model.network import Demonstration, Network, NetworkError, build_network
 from dlovr.model.program import PoseTrack
-from dlovr.recording.format import RecordingError
+from dlovr.recording.format import RecordingError, one_line
 from dlovr.recording.reader import Recording, kept_states
 
 
@@ -29,7 +29,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         quat = np.array([p.get("gripper_quat", [1.0, 0.0, 0.0, 0.0]) for p in payloads], dtype=float)
         poses = PoseTrack(t, pos, quat)
     except (KeyError, TypeError, ValueError) as e:
-        raise RecordingError(f"{rec.path}: bad gripper pose in the contact states: {e}") from None
+        raise RecordingError(f"{rec.path}: bad gripper pose in the contact states: {one_line(e)}") from None
     steps, cpos, cquat = rec.commands()
     commands = PoseTrack(steps * rec.dt, cpos, cquat)
     return Demonstration(

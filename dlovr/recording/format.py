@@ -91,7 +91,10 @@ readers turn them into one :class:`RecordingError` line naming the file."""
 
 
 def one_line(e: BaseException) -> str:
-    """An exception as one short line (its first line, or its type's name)."""
+    """An exception as one short line (its first line, or its type's name); a ``KeyError`` says which
+    field is missing (``field 't' missing``, not Python's bare ``'t'``)."""
+    if type(e) is KeyError:
+        return f"field {str(e.args[0])[:80]!r} missing" if e.args else "a field is missing"
     s = str(e).strip().splitlines()
     return (s[0] if s else type(e).__name__)[:200]
 

@@ -77,6 +77,9 @@ class Recording:
             raise RecordingError(
                 f"{p}: recording format {version}, this dlovr {__version__} reads format {FORMAT_VERSION}"
             )
+        if not self.metadata.get("scene_name"):  # every dlovr recording names its scene
+            why = "metadata scene_name: missing (not a recording dlovr wrote, or edited)"
+            raise RecordingError(f"{p}: {why}")
         self._counts = _message_counts(p, summary)
         self.scene = _embedded_scene(p, attachments)
         self.pieces: dict[str, tuple[list[np.ndarray], bool]] | None = _embedded_pieces(

@@ -21,7 +21,7 @@ import viser
 
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import Event, ExecOptions
-from dlovr.execution.run import check_program_scene, demo_track
+from dlovr.execution.run import check_program_scene, find_recording, load_track
 from dlovr.execution.scoring import RunResult
 from dlovr.model.program import Program, ProgramError
 from dlovr.ui.app import App
@@ -44,6 +44,7 @@ class RunPanel:
         self.signals: ForceTrace | None = None  # the detector signal (first component), 1 = fires
         self.outcomes: dict[int, str] = {}
         self.result = ""
+        self.note = ""  # why the run does not follow its demonstration ("" when it does)
         self.choices: dict[str, Path] = {}
         self._shown: tuple[Any, ...] = ()
         self._seen: tuple[str, int] = ("", 0)  # (scene, last program) the choices were made for
@@ -149,10 +150,7 @@ class RunPanel:
             path = self.choices[self.choice.value]
         program = Program.load(path)
         check_program_scene(program, app.session.scene)
-        try:
-            track = demo_track(program)
-        except Exception:  # an unreadable demonstration: repeat the program's own motions
-            track = None
+        track, self.note = demonstration(program)
         opts = ExecOptions(detect=detect or (self.detect.value if app.server is not None else "force"))
         recording = app.session.recorder is not None
         app.load(app.session.scene.path)
@@ -175,7 +173,9 @@ class RunPanel:
             self.runner = ses.runner = runner
         if app.server is not None:
             self.stop_btn.disabled = False
-            self.result_md.content = f"Running **{html.escape(program.name)}** (detection {opts.detect})..."
+            note = f" ({html.escape(self.note)})" if self.note else ""
+            what = f"**{html.escape(program.name)}** (detection {opts.detect}){note}"
+            self.result_md.content = f"Running {what}..."
         self._shown = ()
         self.update()
         return runner
@@ -231,7 +231,8 @@ class RunPanel:
                 text = f"**Goal reached** ({goal}) at t = {res.sim_time:.2f} s"
             else:
                 text = f"**Failed**: {res.reason}"
-            self._say(f"{html.escape(res.program)} ({res.detect}): {text}")
+            note = f" ({html.escape(self.note)})" if self.note else ""
+            self._say(f"{html.escape(res.program)} ({res.detect}): {text}{note}")
         app.hold()
 
     def _say(self, text: str) -> None:
@@ -261,3 +262,18 @@ class RunPanel:
         if runner.opts.detect != "force":
             return f"macro {runner.macro}: detection by the contact tracker (oracle); {line}"
         return f"detector of macro {runner.macro} (orange): {runner.signal:.2f}, fires at 1 (dashed); {line}"
+
+
+def demonstration(program: Program) -> tuple[Any, str]:
+    """The track of the demonstration ``program`` was compiled from (its macros follow it), and ""; or
+    None and why not, said with the run (another way of moving gives another result, as ``dlovr run``
+    says too): its recording was not found, or cannot be read."""
+    other = "the macros move along the program's poses"
+    try:
+        path = find_recording(program)
+        if path is None:
+            missing = f"its demonstration {program.source!r} was not found: {other}"
+            return None, missing if program.source else ""
+        return load_track(path), ""
+    except Exception as e:  # any unreadable demonstration: the program's own poses
+        return None, f"its demonstration cannot be read ({str(e)[:120]}): {other}"
