@@ -1,7 +1,6 @@
-from dlovr import signals
+"""``python -m dlovr``: the command line. SIGINT and SIGTERM were taken over already, by
+``dlovr/__init__.py`` (the package is imported first), before the command line's heavy imports."""
 
-signals.defer()  # a signal while the command line is imported ends the command once it is ready
-
-from dlovr.cli import main  # noqa: E402
+from dlovr.cli import main
 
 main()

@@ -96,7 +96,8 @@ def _unsafe(frame: Any) -> bool:
 def defer() -> None:
     """From now on SIGINT and SIGTERM are only remembered (:func:`pending`), nothing is raised: for
     the start of the program, before the command line is ready to end a command cleanly
-    (``dlovr/__main__.py`` and the ``dlovr`` script call it first)."""
+    (``dlovr/__init__.py`` calls it first when the process is the ``dlovr`` script or
+    ``python -m dlovr``)."""
     if threading.current_thread() is threading.main_thread():
         for sig in SIGNALS:
             signal.signal(sig, lambda signum, _frame: note(signum))

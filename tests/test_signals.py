@@ -86,7 +86,7 @@ def _record(out: Path) -> subprocess.Popen:
 
 
 def _wait_until_dlovr_runs(pid: int) -> None:
-    """Until the process catches SIGTERM (``dlovr/__main__.py`` has run :func:`signals.defer`): before
+    """Until the process catches SIGTERM (``dlovr/__init__.py`` has run :func:`signals.defer`): before
     that, Python itself is starting and a signal ends it the default way (status -2/-15)."""
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
@@ -155,3 +155,22 @@ def test_a_signal_inside_numba_s_compiler_is_remembered_not_raised():
                 signals.check()
     finally:
         signals.clear()
+
+
+@pytest.mark.parametrize("how", ["script", "-m"])
+def test_the_first_of_dlovr_s_code_takes_the_signals_over(how):
+    """``import dlovr`` in the ``dlovr`` script or ``python -m dlovr`` defers SIGINT and SIGTERM at
+    once, before the command line's heavy imports (numpy, mujoco...); as a library it leaves them
+    alone. A signal sent then is remembered (the command ends with it when it is ready)."""
+    fake = ("import sys, types; m = types.ModuleType('__main__'); m.__file__ = '/usr/bin/dlovr'; "
+            "sys.modules['__main__'] = m" if how == "script" else
+            "import sys; sys.orig_argv = [sys.executable, '-m', 'dlovr', 'scenes']")
+    code = (f"{fake}\nimport os, signal\nimport dlovr\nfrom dlovr import signals\n"
+            "assert 'numpy' not in sys.modules and 'dlovr.cli' not in sys.modules\n"
+            "os.kill(os.getpid(), signal.SIGTERM)\nprint(signals.pending())\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == str(int(signal.SIGTERM)), r.stderr
+    lib = "import signal, dlovr\nassert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL\n"
+    r = subprocess.run([sys.executable, "-c", lib], capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 0, r.stderr

@@ -8,15 +8,7 @@ with exit code 2 and no traceback: every reader's :class:`dlovr.inputs.InputErro
 
 from __future__ import annotations
 
-import os
-import sys
-
-from dlovr import signals
-
-if os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or "") == "dlovr":
-    signals.defer()  # the `dlovr` script: a signal while it imports ends the command once it is ready
-
-import click
+import click  # SIGINT/SIGTERM were taken over before (dlovr/__init__.py: signals.defer())
 
 from dlovr import __version__
 from dlovr.cli.common import Group
