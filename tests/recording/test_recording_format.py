@@ -130,7 +130,8 @@ def test_missing_channel_is_named(tmp_path):
         w.start(profile="dlovr")
         w.add_metadata(
             "dlovr",
-            {"scene_sha256": bundle().digest, "timestep": "0.002", "t0_ns": "0", "format_version": "2"},
+            {"scene_sha256": bundle().digest, "scene_name": "t", "timestep": "0.002", "t0_ns": "0",
+             "format_version": "2"},
         )
         w.add_attachment(0, 0, "scene/scene.toml", "application/toml", TOML)
         w.add_attachment(0, 0, "scene/meshes/m.obj", "application/octet-stream", b"v 0 0 0\n")
