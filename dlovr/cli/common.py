@@ -57,6 +57,9 @@ class Group(click.Group):
     is still pending when the command returns, and ends it then."""
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
+        from dlovr import cache
+
+        cache.set_reporter(lambda line: click.echo(line, err=True))  # a large mesh's first load...
         with signals.installed():
             if signals.pending() is not None:  # it came while the program started
                 interrupted(signals.pending())

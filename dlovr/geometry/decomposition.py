@@ -8,6 +8,7 @@ one and caches the result on disk by mesh content hash (``$DLOVR_CACHE_DIR``, el
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import os
@@ -16,9 +17,9 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from dlovr.cache import cache_dir
+from dlovr.cache import cache_dir, slow_step
 from dlovr.geometry.faces import _clean, object_faces
-from dlovr.geometry.mesh import _to_trimesh, to_manifold
+from dlovr.geometry.mesh import SLOW_TRIANGLES, _to_trimesh, to_manifold
 
 DECOMP_VERSION = "exact-v2"  # bump whenever decompose() may return other pieces for a mesh
 
@@ -179,6 +180,16 @@ def mesh_hash(mesh: trimesh.Trimesh) -> str:
 MAX_EXACT_FACES = 400  # more object faces than this: not polyhedral enough, use CoACD
 
 
+def _decompose(mesh: trimesh.Trimesh) -> tuple[list[np.ndarray], bool]:
+    """The exact decomposition, else CoACD's (approximate)."""
+    try:
+        if len(object_faces(mesh)) > MAX_EXACT_FACES:
+            raise DecompositionError("too many faces for an exact decomposition")
+        return decompose_exact(mesh), False
+    except DecompositionError:
+        return decompose_approx(mesh), True
+
+
 def decompose(mesh: trimesh.Trimesh, *, use_cache: bool = True) -> tuple[list[np.ndarray], bool]:
     """Convex pieces (vertex arrays, local frame) and whether they are approximate. Cached on disk."""
     key = mesh_hash(mesh)
@@ -190,13 +201,9 @@ def decompose(mesh: trimesh.Trimesh, *, use_cache: bool = True) -> tuple[list[np
                 return [z[f"p{i}"] for i in range(n)], bool(z["approximate"])
         except Exception:
             pass
-    approximate = False
-    try:
-        if len(object_faces(mesh)) > MAX_EXACT_FACES:
-            raise DecompositionError("too many faces for an exact decomposition")
-        pieces = decompose_exact(mesh)
-    except DecompositionError:
-        pieces, approximate = decompose_approx(mesh), True
+    what = f"convex decomposition of a mesh of {len(mesh.faces):,} triangles (once: then cached)"
+    with slow_step(what) if len(mesh.faces) > SLOW_TRIANGLES else contextlib.nullcontext():
+        pieces, approximate = _decompose(mesh)
     if use_cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -3,11 +3,16 @@ manifold3d, primitives (box, prism) and a scene object's mesh in its own frame."
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
+
+from dlovr.cache import cache_dir, slow_step
 
 if TYPE_CHECKING:
     from dlovr.scene import SceneObject
@@ -44,8 +49,43 @@ def _self_intersects(mesh: trimesh.Trimesh) -> bool:
     return False
 
 
-def check_mesh(mesh: trimesh.Trimesh) -> str | None:
-    """Why a mesh cannot be an environment object (None when it is fine)."""
+#: Meshes of more triangles than this remember that they passed the self-intersection test (its cost
+#: grows with the square of the triangles: 5 s CPU for 5,120), in the cache directory by content.
+CHECK_CACHE_TRIANGLES = 500
+CHECK_VERSION = "self-intersection-v1"  # bump whenever _self_intersects may answer otherwise
+#: Meshes of more triangles than this say what is done while they are prepared (seconds to minutes
+#: for their first load: :func:`dlovr.cache.slow_step`).
+SLOW_TRIANGLES = 2000
+
+
+def _checked_marker(mesh: trimesh.Trimesh) -> Path:
+    """The cache file that says this mesh (vertices and triangles, exactly) is not self-intersecting."""
+    h = hashlib.sha256(CHECK_VERSION.encode())
+    h.update(np.ascontiguousarray(mesh.vertices, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, dtype="<i8").tobytes())
+    return cache_dir() / f"meshcheck-{h.hexdigest()}.ok"
+
+
+def _not_self_intersecting(mesh: trimesh.Trimesh, use_cache: bool) -> bool:
+    """:func:`_self_intersects` is False; a large mesh's pass is remembered (never a failure)."""
+    if not use_cache or len(mesh.faces) <= CHECK_CACHE_TRIANGLES:
+        return not _self_intersects(mesh)
+    marker = _checked_marker(mesh)
+    if marker.is_file():
+        return True
+    what = f"self-intersection test of a mesh of {len(mesh.faces):,} triangles (once: then cached)"
+    with slow_step(what) if len(mesh.faces) > SLOW_TRIANGLES else contextlib.nullcontext():
+        if _self_intersects(mesh):
+            return False
+    with contextlib.suppress(OSError):  # no cache: checked again next time
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    return True
+
+
+def check_mesh(mesh: trimesh.Trimesh, *, use_cache: bool = True) -> str | None:
+    """Why a mesh cannot be an environment object (None when it is fine). The self-intersection test
+    of a large mesh that passed it is remembered in the cache directory (``use_cache``)."""
     if len(mesh.faces) == 0:
         return "mesh has no triangles"
     if not mesh.is_watertight:
@@ -54,7 +94,7 @@ def check_mesh(mesh: trimesh.Trimesh) -> str | None:
         return "mesh triangles are not consistently oriented"
     if mesh.volume <= 0:
         return "mesh is inside out or has no volume"
-    if _self_intersects(mesh):
+    if not _not_self_intersecting(mesh, use_cache):
         return "mesh is self-intersecting"
     return None
 

@@ -9,9 +9,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import trimesh
 
+from dlovr.cache import slow_step
 from dlovr.geometry.decomposition import decompose
 from dlovr.geometry.faces import object_faces
-from dlovr.geometry.mesh import object_local_mesh
+from dlovr.geometry.mesh import SLOW_TRIANGLES, object_local_mesh
 from dlovr.geometry.pieces import Piece, _build_piece
 
 if TYPE_CHECKING:
@@ -94,6 +95,21 @@ def build_object(
     ``pieces``: its convex decomposition (local frame, approximate?) if already known (e.g. the one a
     recording was made with); else :func:`decompose` computes it.
     """
+    n = len(local_mesh.faces)
+    if n <= SLOW_TRIANGLES:
+        return _build_object(name, local_mesh, transform, use_cache=use_cache, pieces=pieces)
+    with slow_step(f"faces and convex pieces of object {name!r} ({n:,} triangles)"):
+        return _build_object(name, local_mesh, transform, use_cache=use_cache, pieces=pieces)
+
+
+def _build_object(
+    name: str,
+    local_mesh: trimesh.Trimesh,
+    transform: np.ndarray | None,
+    *,
+    use_cache: bool,
+    pieces: tuple[list[np.ndarray], bool] | None,
+) -> GeomObject:
     transform = np.eye(4) if transform is None else np.asarray(transform, dtype=float)
     faces = object_faces(local_mesh)
     pieces_local, approximate = pieces if pieces is not None else decompose(local_mesh, use_cache=use_cache)
