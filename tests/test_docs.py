@@ -227,6 +227,16 @@ def test_public_names_import(module):
         assert f"`{name}`" in paragraph, f"docs/architecture.md's public names no longer list {name}"
 
 
+def test_the_docs_say_who_writes_the_trial_files_and_when():
+    """``trial_KKK.json`` and the other result files are written by the command after the batch
+    (execution.trials.write_outputs, called by cli/run.py once run_trials returned), not by the
+    workers as they finish: the docs say so and claim nothing else."""
+    rows = [line for line in (DOCS / "scaling.md").read_text().splitlines() if "`trial_KKK.json`" in line]
+    assert rows and all("the command, after the batch" in row for row in rows)
+    text = " ".join(p.read_text() for p in [*PAGES, ROOT / "README.md"])
+    assert not re.search(r"trial_KKK\.json[^.|]*as (they|each) finish", text)
+
+
 def test_every_example_script_is_listed():
     listed = set(re.findall(r"`examples/(\w+\.py)`", ARCH))
     assert listed == {p.name for p in (ROOT / "examples").glob("*.py")}
