@@ -105,3 +105,40 @@ def test_compile_replaces_only_its_own_programs(tmp_path):
     assert r.exit_code == 2 and "exists and is not the program compiled" in r.output, r.output
     assert foreign.read_text().endswith(" ")
     assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+def _panel(tmp_path):
+    from dlovr.ui.panels.recording import RecordingPanel
+
+    session = SimpleNamespace(scene=SimpleNamespace(name="table"))
+    app = SimpleNamespace(server=None, session=session, recordings_dir=tmp_path, program_text="",
+                          last_program=None)
+    return RecordingPanel(app), session  # type: ignore[arg-type]
+
+
+def test_the_browser_writes_a_recording_s_program_only_as_a_new_file(tmp_path):
+    rec = tmp_path / "table-1.mcap"
+    rec.symlink_to(SAMPLE)
+    (tmp_path / "table-1.program.json").write_text("precious")
+    panel, _ = _panel(tmp_path)
+    panel._compile(rec, "table")
+    assert panel.app.program_text  # compiled, shown; not written over the file there
+    assert (tmp_path / "table-1.program.json").read_text() == "precious"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_the_browser_s_new_recording_takes_the_next_name_when_another_took_it(tmp_path):
+    panel, session = _panel(tmp_path)
+    tried: list[Path] = []
+
+    def start_recording(path: Path) -> Path:
+        tried.append(path)
+        if len(tried) == 1:  # another server created it between the look and the creation
+            path.write_bytes(b"another server's")
+            raise OutputError(f"{path}: exists; give --force to overwrite it")
+        return path
+
+    session.start_recording = start_recording
+    got = panel._start_new()
+    assert got == tried[1] and got.name == tried[0].name.replace(".mcap", "-1.mcap")
+    assert tried[0].read_bytes() == b"another server's"
