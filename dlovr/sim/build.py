@@ -329,9 +329,10 @@ def export_xml(built: BuiltModel, path: str | Path) -> Path:
     The file is loadable by plain MuJoCo (``mujoco.MjModel.from_xml_path``) and gives the same model.
     Intended for ``dlovr scene export NAME -o model.xml``.
     """
+    from dlovr.outputs import write_output
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(built.spec.to_xml())
+    write_output(path, built.spec.to_xml())  # atomic: never half a file (replaces: the caller checks)
     return path
 
 
