@@ -85,7 +85,7 @@ def test_the_gripped_ends_contact_is_a_contact_of_the_first_segment(held_across_
 
 PUSHED_60_BOUND = 0.0012
 """The deepest a stiff cable pushed 40 mm along a 60° V may sink (m): 0.95 mm with the contacts'
-impedance ``CONTACT_SOLIMP`` rising to 0.999 (docs/recordings.md, "Reducing it"); 6.2 mm and a
+impedance ``CONTACT_SOLIMP`` rising to 0.999 (docs/recordings.md, "Reducing jams"); 6.2 mm and a
 divergence while it rose to 0.99 only."""
 
 
