@@ -31,7 +31,7 @@ def speed_bound(length: float, max_speed: float, max_angular_speed: float) -> fl
     """The point-speed bound (m/s) of a cable ``length`` (m) held by a gripper of top speed
     ``max_speed`` (m/s) and turn rate ``max_angular_speed`` (rad/s): :data:`SPEED_FACTOR` times
     ``max_speed + max_angular_speed * length`` (4.35 m/s for the 0.6 m table cable at the simulator's
-    0.25 m/s and 2 rad/s, 1.47 m/s for a 12 cm one). The built-in demonstrations reach at most 0.58 of
+    0.25 m/s and 2 rad/s, 1.47 m/s for a 12 cm one). The built-in demonstrations reach at most 0.32 of
     it (the table cable turned over while it swings), so perturbed ones keep a margin."""
     return SPEED_FACTOR * (float(max_speed) + float(max_angular_speed) * float(length))
 

@@ -55,7 +55,11 @@ GRIPPER = "gripper"
 
 TIMESTEP = 0.002
 CONTACT_SOLREF = (0.004, 1.0)
-CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+#: Impedance of the cable's contacts: 0.95 at the surface rising to 0.999 at 1 mm deep. The 0.999
+#: (0.99 before) keeps a loaded contact from giving way: a stiff cable pushed 40 mm along a 60° V sank
+#: 6.2 mm and diverged, now 0.95 mm (docs/recordings.md, "Reducing jams", measured there with other
+#: settings that did not help). A narrower width (0.5 mm) sank 0.65 mm but lost a corner state.
+CONTACT_SOLIMP = (0.95, 0.999, 0.001, 0.5, 2.0)
 #: Detect-only band (no force) beyond the surface: cuts contact flicker.
 CONTACT_GAP = 0.001
 EQ_SOLREF = (0.004, 1.0)

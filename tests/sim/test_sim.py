@@ -194,8 +194,11 @@ def test_divergence_overstretch() -> None:
 
 def test_a_tip_pushed_onto_the_table_at_top_speed_is_no_divergence() -> None:
     """Lowering the gripper at its top speed until the tip strikes the table squeezes the segments
-    behind the tip by about 11% for a few steps (the rod's edges are soft constraints): ordinary
-    motion, which the default bound lets through (a 10% bound stopped browser demos)."""
+    behind the tip by about 9% for a few steps (the rod's edges are soft constraints; 11% while the
+    contacts' impedance rose to 0.99 only, docs/recordings.md): ordinary motion, which the default
+    bound lets through, and the tip sinks into the table less than the plausibility bound (1.4 mm,
+    1.7 mm before)."""
+    from dlovr.plausibility import PENETRATION_BOUND
     from dlovr.scene import load_scene
     from dlovr.sim import DEFAULT_MAX_STRETCH
 
@@ -203,19 +206,23 @@ def test_a_tip_pushed_onto_the_table_at_top_speed_is_no_divergence() -> None:
     zs = np.linspace(0.7, 0.3, 6)
     at = dict(zip([19, 33, 150, 160, 314, 333], zs.tolist(), strict=True))  # targets as a drag sent them
 
-    def push(sim: Simulator) -> float:
-        worst = 0.0
+    def push(sim: Simulator) -> tuple[float, float]:
+        worst = deepest = 0.0
         for k in range(700):
             if k in at:
                 sim.set_target((0.0, 0.0, at[k]))
-            pts = sim.step().points
-            worst = max(worst, stretch(pts, sim.built.seg_length))
-        return worst
+            rec = sim.step()
+            worst = max(worst, stretch(rec.points, sim.built.seg_length))
+            if len(rec.contact_arrays):
+                deepest = max(deepest, -float(rec.contact_arrays.dist.min()))
+        return worst, deepest
 
     assert DEFAULT_MAX_STRETCH >= 0.2
-    assert 0.10 < push(Simulator(scene)) < DEFAULT_MAX_STRETCH
-    with pytest.raises(SimulationDiverged, match=r"length off by 1[01]"):
-        push(Simulator(scene, max_stretch=0.10))
+    worst, deepest = push(Simulator(scene))
+    assert 0.05 < worst < 0.10 < DEFAULT_MAX_STRETCH
+    assert 0.0 < deepest < PENETRATION_BOUND * scene.dlo.radius
+    with pytest.raises(SimulationDiverged, match=r"length off by [5-9]\.\d% \(bound 5%\)"):
+        push(Simulator(scene, max_stretch=0.05))
 
 
 def test_bad_target_rejected() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from dlovr import plausibility
 from dlovr.cli import main
 from dlovr.geometry import prism_mesh
 from dlovr.recording import Recording, kept_states
@@ -82,26 +83,48 @@ def test_the_gripped_ends_contact_is_a_contact_of_the_first_segment(held_across_
     assert payload["topological"].startswith("VS/G & E1/v.F")
 
 
+PUSHED_60_BOUND = 0.0012
+"""The deepest a stiff cable pushed 40 mm along a 60° V may sink (m): 0.95 mm with the contacts'
+impedance ``CONTACT_SOLIMP`` rising to 0.999 (docs/recordings.md, "Reducing jams"); 6.2 mm and a
+divergence while it rose to 0.99 only."""
+
+
 @pytest.fixture(scope="module")
 def pushed_into_60(tmp_path_factory) -> tuple[Path, str]:
-    """A stiff cable (E = 1 GPa) along a 60° V, its held end pushed 25 mm into it: the wedge makes
-    MuJoCo's soft contacts give way, the cable sinks about 3.4 mm (more than half its radius)."""
+    """A stiff cable (E = 1 GPa) along a 60° V, its held end pushed 40 mm into it: a wedge that made
+    MuJoCo's soft contacts give way (the cable sank 6.2 mm and the run diverged while the contacts'
+    impedance rose to 0.99 only). Recorded with the penetration bound lowered to 0.06 of the radius
+    (0.3 mm), so that the push's penetration is a warning episode whose peak is the deepest the cable
+    sank."""
     tmp = tmp_path_factory.mktemp("v60")
     out = tmp / "v60.mcap"
-    script = v_groove(tmp, 60.0, 1e9, -0.06, 0.025, 0.3, pose="along")
-    r = CliRunner().invoke(main, ["record", "--script", str(script), "-o", str(out)])
-    assert r.exit_code == 0, r.output
+    script = v_groove(tmp, 60.0, 1e9, -0.06, 0.040, 0.3, pose="along")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plausibility, "PENETRATION_BOUND", 0.06)
+        r = CliRunner().invoke(main, ["record", "--script", str(script), "-o", str(out)])
+    assert r.exit_code == 0, r.output  # no divergence
     return out, r.output
 
 
-def test_a_cable_jammed_into_a_narrow_v_is_reported_as_implausible(pushed_into_60):
-    """docs/recordings.md, plausibility warnings (issue 27, item 5): the penetration beyond its bound
-    is one warning event in the recording, said by `record` and by `dlovr states` (on stderr: the table
-    on stdout stays as it is)."""
+def test_a_cable_pushed_into_a_narrow_v_sinks_about_a_millimetre_only(pushed_into_60):
+    """The jam reduced with MuJoCo's contact settings (issue 27, item 5): the 40 mm push into the
+    60° V sinks less than :data:`PUSHED_60_BOUND`, far within the plausibility bound (2.5 mm)."""
+    out, _ = pushed_into_60
+    eps = Recording(out).warnings()
+    assert eps and {ep.kind for ep in eps} == {"penetration"}
+    assert max(ep.peak for ep in eps) < PUSHED_60_BOUND < plausibility.PENETRATION_BOUND * 0.005
+
+
+def test_a_penetration_beyond_its_bound_is_reported_as_implausible(pushed_into_60):
+    """docs/recordings.md, plausibility warnings (issue 27, item 5): a stretch of steps beyond the
+    penetration bound is one warning event in the recording, said by `record` and by `dlovr states`
+    (on stderr: the table on stdout stays as it is). The bound is lowered here (see the fixture): no
+    built-in case sinks beyond the real one any more."""
     out, said = pushed_into_60
-    [ep] = Recording(out).warnings()
+    eps = Recording(out).warnings()
+    ep = max(eps, key=lambda e: e.peak)
     assert ep.kind == "penetration" and ep.where == "v"
-    assert ep.peak > ep.bound == pytest.approx(0.0025) and ep.end >= ep.start > 0.3
+    assert ep.peak > ep.bound == pytest.approx(0.0003) and ep.end >= ep.start > 0.3
     assert f"warning: implausible simulation: {ep.text()}" in said
     r = CliRunner().invoke(main, ["states", str(out)])
     assert r.exit_code == 0 and "warning: implausible simulation: penetration" in r.output
