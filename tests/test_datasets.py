@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -304,3 +305,14 @@ def test_generate_checks_its_numbers_first(tmp_path):
                           (["--episodes", "2", "--size", "10x10"], "--size: image size 10x10")):
         r = cli("generate", program, *args, "-o", tmp_path / "o")
         assert r.exit_code == 2 and message in r.output, r.output
+
+
+def test_generate_on_a_cluster_without_ray_is_one_line_exit_2(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError, as where it is not installed
+    program = ROOT / "recordings" / "programs" / "l_block.program.json"
+    r = cli("generate", program, "--episodes", "2", "--cluster", "local", "-o", tmp_path / "o")
+    assert r.exit_code == 2, r.output
+    assert r.output.strip() == "Error: --cluster needs Ray, which is not installed: pip install 'dlovr[ray]'"
+    r = cli("generate", program, "--episodes", "2", "--cluster", "nowhere", "-o", tmp_path / "o")
+    assert r.exit_code == 2 and "--cluster nowhere: expected local, auto or HOST:PORT" in r.output
+    assert not (tmp_path / "o").exists()
