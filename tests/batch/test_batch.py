@@ -222,8 +222,8 @@ def _hdf5_items(path: Path) -> dict[str, Any]:
 
 def test_generate_on_ray_writes_the_dataset_of_a_local_run(ray_instance, tmp_path):
     """``dlovr generate --cluster``: the trials and their re-simulation on Ray give the local run's
-    dataset bit for bit (a one-second demonstration compiled, 2 perturbed episodes), and its
-    temporary recordings beside the output are gone."""
+    dataset bit for bit (a one-second demonstration compiled, one perturbed episode: the suite's
+    time is short), and its temporary recordings beside the output are gone."""
     from dlovr.datasets import ExportOptions
     from dlovr.datasets.generate import generate, trial_setup
 
@@ -234,12 +234,12 @@ def test_generate_on_ray_writes_the_dataset_of_a_local_run(ray_instance, tmp_pat
     here, out = tmp_path / "here.hdf5", tmp_path / "ray" / "gen.hdf5"
     out.parent.mkdir()
     setup = trial_setup(str(program), vary[1::2], 3)
-    local = generate(setup, 2, here, ExportOptions(fmt="robomimic", fps=10))
+    local = generate(setup, 1, here, ExportOptions(fmt="robomimic", fps=10))
     assert local.kept, "no successful trial to compare"
-    r = cli("generate", program, "--episodes", 2, "--seed", 3, *vary, "--format", "robomimic", "-o", out,
+    r = cli("generate", program, "--episodes", 1, "--seed", 3, *vary, "--format", "robomimic", "-o", out,
             "--fps", 10, "--cluster", "local", "--workers", 2)
     assert r.exit_code == 0, r.output
-    assert f"kept {len(local.kept)} of 2 runs" in r.output
+    assert "kept 1 of 1 runs" in r.output
     assert _hdf5_items(out) == _hdf5_items(here)
     assert [p.name for p in out.parent.iterdir()] == ["gen.hdf5"]
 
