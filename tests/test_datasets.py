@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +141,77 @@ def test_lerobot_reads_back_with_pyarrow_and_pyav(exported):
             img = frame.to_ndarray(format="rgb24")
         assert img.shape == (H, W, 3) and img.std() > 1  # a picture, not a blank
         assert eps[0][f"videos/{key}/to_timestamp"] == pytest.approx(len(steps) / FPS)
+
+
+#: LeRobot's own reader, run in a child interpreter: this one if it imports ``lerobot``, else the one
+#: ``DLOVR_LEROBOT_PYTHON`` names (lerobot pins torch and numpy: it may live in its own venv).
+LEROBOT_READ = """
+import json, sys
+import numpy as np
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+root, out, fps = sys.argv[1], sys.argv[2], float(sys.argv[3])
+ahead = {"action": [0.0, 1 / fps]}  # each frame's action and the next one's
+ds = LeRobotDataset("local/dlovr", root=root, video_backend="pyav", delta_timestamps=ahead)
+picks = sorted({0, len(ds) // 2, len(ds) - 1})
+items = [ds[i] for i in picks]
+arrays = {"state": np.stack([f["observation.state"].numpy() for f in items]),
+          "action": np.stack([f["action"].numpy() for f in items]),
+          "action_is_pad": np.stack([f["action_is_pad"].numpy() for f in items])}
+for cam in ds.meta.camera_keys:
+    arrays[cam] = np.stack([f[cam].numpy() for f in items])
+np.savez(out, picks=np.array(picks), **arrays)
+print(json.dumps({"frames": ds.num_frames, "episodes": ds.num_episodes, "fps": ds.fps,
+                  "cameras": sorted(ds.meta.camera_keys),
+                  "timestamps": [float(f["timestamp"]) for f in items]}))
+"""
+
+
+@pytest.fixture(scope="module")
+def lerobot_python() -> str:
+    """An interpreter that imports ``lerobot`` (see :data:`LEROBOT_READ`); skips where there is none."""
+    import importlib.util
+    import os
+    import subprocess
+
+    if importlib.util.find_spec("lerobot") is not None:
+        return sys.executable
+    other = os.environ.get("DLOVR_LEROBOT_PYTHON")
+    if other and subprocess.run([other, "-c", "import lerobot"], capture_output=True).returncode == 0:
+        return other
+    pytest.skip("lerobot is not installed (optional: DLOVR_LEROBOT_PYTHON may name a python that has it)")
+
+
+@pytest.mark.slow  # shares one recorded and exported demonstration (~15 s CPU); imports torch
+def test_lerobots_own_reader_loads_the_dataset(lerobot_python, exported, tmp_path):
+    """LeRobot's ``LeRobotDataset`` (optional, docs/datasets.md) reads the exported folder: frames,
+    fps, cameras, states, actions with a look-ahead, and the decoded camera images equal PyAV's."""
+    import subprocess
+
+    import av
+
+    _, lr, _ = exported
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"HF_HUB_OFFLINE": "1"}
+    r = subprocess.run([lerobot_python, "-c", LEROBOT_READ, str(lr), str(tmp_path / "got.npz"), str(FPS)],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    seen = json.loads(r.stdout.strip().splitlines()[-1])
+    table = pq.read_table(lr / "data" / "chunk-000" / "file-000.parquet")
+    got = np.load(tmp_path / "got.npz")
+    picks = got["picks"]
+    assert seen["frames"] == table.num_rows and seen["episodes"] == 1 and seen["fps"] == FPS
+    assert seen["cameras"] == ["observation.images.gripper", "observation.images.scene"]
+    np.testing.assert_allclose(seen["timestamps"], picks / FPS, atol=1e-6)
+    state = np.array(table.column("observation.state").to_pylist(), dtype=np.float32)
+    action = np.array(table.column("action").to_pylist(), dtype=np.float32)
+    assert np.array_equal(got["state"], state[picks])
+    nxt = np.minimum(picks + 1, len(action) - 1)  # past the last frame LeRobot pads with the last
+    assert np.array_equal(got["action"], np.stack([action[picks], action[nxt]], axis=1))
+    assert got["action_is_pad"][:, 1].tolist() == [bool(p == len(action) - 1) for p in picks]
+    for key in seen["cameras"]:
+        with av.open(str(lr / "videos" / key / "chunk-000" / "file-000.mp4")) as c:
+            frames = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
+        want = np.stack([frames[p] for p in picks]).transpose(0, 3, 1, 2) / 255.0  # CHW, 0..1
+        assert np.abs(got[key] - want).max() < 1e-6, key
 
 
 @pytest.mark.slow  # shares one recorded and exported demonstration (~15 s CPU)
@@ -304,3 +377,14 @@ def test_generate_checks_its_numbers_first(tmp_path):
                           (["--episodes", "2", "--size", "10x10"], "--size: image size 10x10")):
         r = cli("generate", program, *args, "-o", tmp_path / "o")
         assert r.exit_code == 2 and message in r.output, r.output
+
+
+def test_generate_on_a_cluster_without_ray_is_one_line_exit_2(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError, as where it is not installed
+    program = ROOT / "recordings" / "programs" / "l_block.program.json"
+    r = cli("generate", program, "--episodes", "2", "--cluster", "local", "-o", tmp_path / "o")
+    assert r.exit_code == 2, r.output
+    assert r.output.strip() == "Error: --cluster needs Ray, which is not installed: pip install 'dlovr[ray]'"
+    r = cli("generate", program, "--episodes", "2", "--cluster", "nowhere", "-o", tmp_path / "o")
+    assert r.exit_code == 2 and "--cluster nowhere: expected local, auto or HOST:PORT" in r.output
+    assert not (tmp_path / "o").exists()

@@ -15,7 +15,8 @@ writing a recording finishes it), and the exception carries the results finished
 (:func:`finished`), for the caller to write. Workers also end when this process dies.
 
 If this process is already connected to Ray (``ray.is_initialized()``), any ``cluster`` uses that
-connection and leaves it open. Ray is imported only when a cluster is asked for.
+connection and leaves it open; :func:`cluster_session` holds one connection over several batches (a
+private ``local`` instance is started once). Ray is imported only when a cluster is asked for.
 
 Same seeds, same results: the engine adds no randomness and passes each task its own arguments, so a
 task's value depends on its arguments only, not on where it ran. A task whose worker died is run again
@@ -30,6 +31,7 @@ process, worker processes), :mod:`dlovr.batch.on_ray` (Ray).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 from collections.abc import Callable, Generator, Iterator, Sequence
@@ -57,6 +59,7 @@ __all__ = [
     "TaskResult",
     "check_cluster",
     "cluster_option",
+    "cluster_session",
     "finished",
     "ray_installed",
     "run_batch",
@@ -120,6 +123,22 @@ def run_batch(
         raise
     finally:
         inner.close()
+
+
+@contextlib.contextmanager
+def cluster_session(cluster: str | None, workers: int | None = None) -> Iterator[None]:
+    """Within the block, every :func:`run_batch` on ``cluster`` uses one connection to Ray, made here
+    (a ``local`` instance with ``workers`` CPUs, or the cluster at an address) and closed at the end,
+    instead of one per batch. Nothing to do when ``cluster`` is None or Ray is already connected.
+    Raises :class:`BatchError` when the cluster cannot be used."""
+    if cluster is None:
+        yield
+        return
+    check_cluster(cluster)
+    from dlovr.batch.on_ray import ray_session
+
+    with ray_session(cluster, workers):
+        yield
 
 
 #: The attribute of the ``KeyboardInterrupt`` or ``SystemExit`` (a signal) that ends a batch: the

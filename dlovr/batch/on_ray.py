@@ -99,6 +99,18 @@ def connect(ray: Any, cluster: str, workers: int | None) -> bool:
     return True
 
 
+@contextlib.contextmanager
+def ray_session(cluster: str, workers: int | None) -> Iterator[None]:
+    """Connected to Ray for the whole block (see :func:`dlovr.batch.cluster_session`)."""
+    ray = _import_ray()
+    own = connect(ray, cluster, workers)
+    try:
+        yield
+    finally:
+        if own:
+            ray.shutdown()
+
+
 def run_on_ray(
     fn: Callable[..., Any],
     tasks: Sequence[Task],

@@ -6,6 +6,7 @@ from typing import Any
 
 import click
 
+from dlovr.batch import cluster_option
 from dlovr.cli.common import UserError
 from dlovr.cli.export import dataset_options, export_options
 
@@ -31,13 +32,17 @@ def _int(name: str, raw: str, minimum: int) -> int:
               help="End macros by force detection, or by the contact tracker (oracle).")
 @click.option("--path", "path_mode", metavar="auto|demo|program", default="auto", show_default=True,
               help="Follow the demonstration's motion (demo) or the program's poses (program).")
-@click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True, help="Processes.")
+@click.option("--workers", "workers_raw", metavar="K", default="1", show_default=True,
+              help="Processes (with --cluster: tasks in flight, and a local instance's CPUs).")
+@cluster_option
 @dataset_options
-def generate_cmd(program_path: str, out: str, **given: Any) -> None:
+def generate_cmd(program_path: str, out: str, cluster: str | None, **given: Any) -> None:
     """Run PROGRAM.json (compiled or network) in N scenes perturbed by --vary, exactly as the trials
     of `dlovr run PROGRAM.json --trials N --seed S --vary ...` (the same runs, the same successes),
     each recorded; re-simulate the runs that reached the goal and write them as one dataset (see
     `dlovr export` and docs/datasets.md). Prints how many were kept and why the others failed.
+    --cluster runs the trials and their re-simulation on Ray (local: a Ray instance here; auto or
+    HOST:PORT: a running cluster, -o on storage every node sees): the same dataset as locally.
     Exit code 0 (also when no run succeeded: then nothing is written), 2 bad input.
     """
     from dlovr.datasets import check_output
@@ -58,7 +63,7 @@ def generate_cmd(program_path: str, out: str, **given: Any) -> None:
                             note=lambda line: click.echo(f"note: {line}", err=True))
     except ValueError as e:  # a scene or program problem the readers report as ValueError
         raise UserError(str(e)) from None
-    res = generate(setup, episodes, out, opts, workers=workers, progress=True)
+    res = generate(setup, episodes, out, opts, workers=workers, cluster=cluster, progress=True)
     failed = episodes - len(res.kept)
     click.echo(f"kept {len(res.kept)} of {episodes} runs (reached the goal), {failed} failed")
     for why, n in sorted(res.failures.items(), key=lambda kv: -kv[1]):

@@ -72,19 +72,28 @@ def trial_setup(
 
 def generate(
     setup: Any, episodes: int, out: str | Path, opts: ExportOptions, *, workers: int = 1,
-    progress: bool = False,
+    cluster: str | None = None, progress: bool = False,
 ) -> GenerateResult:
-    """Run ``episodes`` trials of ``setup`` on ``workers`` processes, record them in a temporary
-    folder and write those that reached the goal to ``out`` (``opts``: format, fps, cameras)."""
+    """Run ``episodes`` trials of ``setup`` on ``workers`` processes, or on Ray (``cluster``: ``local``,
+    ``auto`` or an address; ``workers`` then caps the tasks in flight), record them in a temporary
+    folder and write those that reached the goal to ``out`` (``opts``: format, fps, cameras). The
+    result is the same wherever the trials ran. On a cluster the trials and their re-simulation run
+    on its workers, through one connection, and the temporary folder is made beside ``out`` (storage
+    every node must see)."""
+    from dlovr.batch import cluster_session
     from dlovr.execution.trials import run_trials
 
-    check_output(out, opts.fmt, opts.force)
-    with tempfile.TemporaryDirectory(prefix="dlovr-generate-") as tmp:
-        trials = run_trials(replace(setup, record_dir=tmp), episodes, workers=workers, progress=progress)
+    dest = check_output(out, opts.fmt, opts.force)
+    where = str(dest.resolve().parent) if cluster is not None else None
+    with cluster_session(cluster, workers if cluster is not None else None), \
+            tempfile.TemporaryDirectory(prefix=".dlovr-generate-", dir=where) as tmp:
+        trials = run_trials(replace(setup, record_dir=tmp), episodes, workers=workers, cluster=cluster,
+                            progress=progress)
         kept = [t["trial"] for t in trials if t["program"]["success"]]
         paths = [str(Path(tmp) / f"trial_{k:03d}.mcap") for k in kept]
         if paths:
-            write_dataset(iter_episodes(paths, opts, workers=workers, progress=progress), out, opts.fmt)
+            eps = iter_episodes(paths, opts, workers=workers, cluster=cluster, progress=progress)
+            write_dataset(eps, out, opts.fmt)
     failures: dict[str, int] = {}
     for t in trials:
         p = t["program"]
@@ -95,19 +104,23 @@ def generate(
 
 
 def iter_episodes(
-    paths: Sequence[str], opts: ExportOptions, *, workers: int = 1, progress: bool = False
+    paths: Sequence[str], opts: ExportOptions, *, workers: int = 1, cluster: str | None = None,
+    progress: bool = False,
 ) -> Iterator[Episode]:
-    """:func:`dlovr.datasets.frames.gather_episode` of each recording, on ``workers`` processes, in order."""
+    """:func:`dlovr.datasets.frames.gather_episode` of each recording, in order: on ``workers``
+    processes, or on Ray (``cluster``, as :func:`dlovr.batch.run_batch`)."""
     from dlovr.batch import Task, run_batch
 
-    if workers <= 1 or len(paths) <= 1:
+    if cluster is None and (workers <= 1 or len(paths) <= 1):
         for p in paths:
             yield gather_episode(p, opts.fps, opts.cameras, opts.size)
         return
     tasks = [Task(p, (p, opts.fps, opts.cameras, opts.size)) for p in paths]
     waiting: dict[int, Episode] = {}
     nxt = 0
-    for r in run_batch(gather_episode, tasks, workers=workers, progress=progress, label="episodes"):
+    batch = run_batch(gather_episode, tasks, workers=workers, cluster=cluster, progress=progress,
+                      label="episodes")
+    for r in batch:
         if not r.ok:
             raise DatasetError(f"{r.key}: cannot re-simulate: {r.error}")
         waiting[r.index] = r.value

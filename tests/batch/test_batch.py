@@ -40,8 +40,8 @@ def seed_tasks(*extra, **kwargs):
 @pytest.fixture(scope="module")
 def ray_instance():
     """One Ray instance for the module: 2 CPUs, no dashboard, bound to 127.0.0.1 (dlovr's own local
-    start); its workers import this dlovr and the task module."""
-    import ray
+    start); its workers import this dlovr and the task module. Skips only where Ray is not installed."""
+    ray = pytest.importorskip("ray")
 
     from dlovr.batch.on_ray import connect
 
@@ -201,6 +201,47 @@ def test_ray_and_local_processes_draw_the_progress_bar(ray_instance, capsys):
         res = list(run_batch(seeded, seed_tasks(), label="seeding the walks", **kw))
         assert len(res) == len(SEEDS)
         assert "seeding the walks" in capsys.readouterr().err, kw
+
+
+def _hdf5_items(path: Path) -> dict[str, Any]:
+    """Every dataset's bytes and every attribute of an HDF5 file, by path."""
+    import h5py
+
+    out: dict[str, Any] = {}
+
+    def visit(name: str, obj: Any) -> None:
+        out[name] = obj[()].tobytes() if isinstance(obj, h5py.Dataset) and obj.dtype.kind == "f" else (
+            obj[()].tolist() if isinstance(obj, h5py.Dataset) else None)
+        out.update({f"{name}@{k}": str(v) for k, v in obj.attrs.items()})
+
+    with h5py.File(path, "r") as f:
+        f.visititems(visit)
+        out.update({f"@{k}": str(v) for k, v in f.attrs.items()})
+    return out
+
+
+def test_generate_on_ray_writes_the_dataset_of_a_local_run(ray_instance, tmp_path):
+    """``dlovr generate --cluster``: the trials and their re-simulation on Ray give the local run's
+    dataset bit for bit (a one-second demonstration compiled, one perturbed episode: the suite's
+    time is short), and its temporary recordings beside the output are gone."""
+    from dlovr.datasets import ExportOptions
+    from dlovr.datasets.generate import generate, trial_setup
+
+    script = Path(__file__).parents[1] / "data" / "touch_press.script.toml"
+    assert cli("record", "--script", script, "-o", tmp_path / "touch.mcap").exit_code == 0
+    assert cli("compile", tmp_path / "touch.mcap", "-o", tmp_path).exit_code == 0
+    program, vary = tmp_path / "touch.program.json", ("--vary", "dlo.length=5%")
+    here, out = tmp_path / "here.hdf5", tmp_path / "ray" / "gen.hdf5"
+    out.parent.mkdir()
+    setup = trial_setup(str(program), vary[1::2], 3)
+    local = generate(setup, 1, here, ExportOptions(fmt="robomimic", fps=10))
+    assert local.kept, "no successful trial to compare"
+    r = cli("generate", program, "--episodes", 1, "--seed", 3, *vary, "--format", "robomimic", "-o", out,
+            "--fps", 10, "--cluster", "local", "--workers", 2)
+    assert r.exit_code == 0, r.output
+    assert "kept 1 of 1 runs" in r.output
+    assert _hdf5_items(out) == _hdf5_items(here)
+    assert [p.name for p in out.parent.iterdir()] == ["gen.hdf5"]
 
 
 HEAD = """
