@@ -109,7 +109,10 @@ class ContactTracker:
 
     ``tip_band_deg`` is the hysteresis of the end-vertex rule (docs/model.md, section 2): a tip that
     touches keeps touching until its last segment points into the surface by less than the tip angle
-    minus this band (degrees); one that does not must pass the tip angle itself.
+    minus this band (degrees); one that does not must pass the tip angle itself. ``line_band_deg`` is
+    the hysteresis of the point-or-line decision on an edge (docs/model.md, section 3.2): an edge
+    contact that is a line contact stays one until its DLO vector is more than the parallel tolerance
+    plus this band (degrees) from the edge (:class:`dlovr.model.discrete.Discretizer`).
 
     ``hold`` (s) is the flicker hold time and ``flight`` (s) the flight time of the debouncing
     (docs/model.md, :class:`dlovr.model.transitions.Debouncer`). ``changes`` lists every step at
@@ -130,6 +133,7 @@ class ContactTracker:
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
     tip_band_deg: float = 3.0
+    line_band_deg: float = 3.0
     changes: list[ContactState] = field(default_factory=list)
     reuse: bool = True
 
@@ -159,7 +163,12 @@ class ContactTracker:
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
         self._tip_held = False  # the tip's own contact at the last step (the rule's hysteresis)
+        if self._disc is not None:
+            self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
+        # whether no discrete state of the situation depends on its DLO vectors (else, with an E
+        # contact on an edge, its vectors are refreshed at every step for the point-or-line decision)
+        self._fixed = True
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -182,8 +191,9 @@ class ContactTracker:
         situation is made again) is the gripper's z axis.
 
         The situation is made again whenever the kept hits or the tip's decision change (which also
-        refreshes its DLO vectors and the gripper's z). When no point's primitives changed, it is
-        the last one with those annotations refreshed (:func:`_refreshed`): what
+        refreshes its DLO vectors and the gripper's z), and at every step while it has an E contact
+        on an edge (whose point-or-line decision follows the DLO vector). When no point's primitives
+        changed, it is the last one with those annotations refreshed (:func:`_refreshed`): what
         ``situation_from_points`` makes of the same primitives, without contracting them again."""
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
@@ -202,7 +212,7 @@ class ContactTracker:
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         last = self._signature
-        if signature == last and self._situation is not None:
+        if signature == last and self._situation is not None and self._fixed:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
@@ -221,6 +231,7 @@ class ContactTracker:
                 tip_angle_deg=angle,
                 gripper_z=z,
             )
+            self._fixed = _vector_independent(sit)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
         return sit
 
@@ -372,8 +383,9 @@ class ContactTracker:
     def _discretizer(self) -> Discretizer:
         """The scene's :class:`dlovr.model.discrete.Discretizer` for the current parameters."""
         d, book = self._disc, self.geometry.fact_book()
-        if d is None or d.book is not book or d.params is not self.params:
-            d = self._disc = Discretizer(book, self.params)
+        band = self.line_band_deg
+        if d is None or d.book is not book or d.params is not self.params or d.line_band_deg != band:
+            d = self._disc = Discretizer(book, self.params, line_band_deg=band)
         return d
 
     def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
