@@ -173,17 +173,13 @@ def _is_chatter(t0: float, t1: float, poses: PoseTrack, rules: ChatterRules) -> 
 
 
 def _return(out: Sequence[TimedSituation], i: int, poses: PoseTrack, rules: ChatterRules) -> int | None:
-    """The last ``j > i`` at which the situation before ``i``, or its principal contacts, come back
-    after an excursion ``out[i:j]`` that is chatter (:func:`_is_chatter`), or None. The principal
-    contacts come back when the step from ``out[i - 1]`` straight to ``out[j]`` has no class
-    (``-``: what a program sees, the principal contacts, is where it was)."""
+    """The last ``j > i`` at which the situation before ``i`` comes back after an excursion
+    ``out[i:j]`` that is chatter (:func:`_is_chatter`), or None."""
     a, found = out[i - 1], None
     for j in range(i + 1, len(out)):
         if out[j].t - out[i].t >= rules.max_s:
             break
-        c = out[j]
-        back = c.situation == a.situation or not classify_step(a.situation, c.situation, c.through_free)
-        if back and _is_chatter(out[i].t, c.t, poses, rules):
+        if out[j].situation == a.situation and _is_chatter(out[i].t, out[j].t, poses, rules):
             found = j
     return found
 
@@ -203,11 +199,8 @@ def remove_chatter(
     """``states`` with every chattering ``A -> B -> A`` (:class:`ChatterRules`; ``B`` may be several
     situations, ``A -> B1 -> ... -> Bk -> A``, the whole excursion within the rules' time and motion)
     made one ``A`` (it begins when the first began and holds through all), repeated until none is left: a flip
-    back and forth is a hand at a threshold, not two transitions. The same holds for an excursion
-    that comes back to another situation ``A'`` of ``A``'s principal contacts (``A -> A'`` has no
-    class, ``-``): ``A`` holds until ``A'`` begins, as if the excursion had not been. Anything else is
-    kept: ``A -> B -> C`` with a classed ``A -> C`` always, and ``E, C, C, E`` (laid down, dragged,
-    lifted) whenever the drag is real motion.
+    back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
+    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion.
     A landing after a flight that settles within ``rules.settle_s`` into another contact situation
     (a bounce, or a change of the landed contact without a new one, :func:`_settles`) lands there
     (``S,E`` into the settled situation, not ``S,E`` then ``C``); the other way round, a brief
@@ -219,14 +212,11 @@ def remove_chatter(
     while i + 1 < len(out):
         a, b, c = out[i - 1], out[i], out[i + 1]
         j = _return(out, i, poses, r)
-        if j is not None and out[j].situation == a.situation:
+        if j is not None:
             c = out[j]
             merged = TimedSituation(a.t, round(c.t + c.duration - a.t, 9), a.situation, a.topological,
                                     max(x.force or 0.0 for x in (a, c)), a.through_free)
             out[i - 1 : j + 1] = [merged]
-            i = max(i - 1, 1)
-        elif j is not None:  # back to other situations of the same principal contacts: A, then C
-            out[i - 1 : j] = [replace(a, duration=round(out[j].t - a.t, 9))]
             i = max(i - 1, 1)
         elif c.through_free and b.duration < r.settle_s and is_instable(a.situation.contacts) \
                 and is_instable(b.situation.contacts):

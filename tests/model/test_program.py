@@ -314,23 +314,3 @@ def test_an_excursion_through_several_situations_that_comes_back_at_once_is_chat
     kept = remove_chatter(states, straight_track(8))
     assert [k.situation.format() for k in kept] == [_N, _EF, _VF]
     assert kept[1].duration == pytest.approx(4.076)
-
-
-def test_an_excursion_back_to_the_same_principal_contacts_is_chatter():
-    """docs/model.md section 6: the cable on an edge and the side face swings off both for 0.6 s and
-    comes back to the side face alone. The principal contact (the face) is where it was (the step
-    from before to after has no class): not a release and an establishment, ``E, E``."""
-    from dlovr.model.program import remove_chatter
-
-    ep_f = "V/G & E/N & E/E^P[b.F1,b.F3] & E/F[b.F3] & E/N & V/N"
-    f = "V/G & E/N & E/F[b.F3] & V/N"
-    groove = "V/G & E/N & V/E^LS[b.F3,h.F2]"
-    states = _seq((0, 1, _N), (1, 1, ep_f), (2, 0.6, _N), (2.6, 2, f), (4.6, 1, groove))
-    kept = remove_chatter(states, straight_track(8))
-    assert [k.situation.format() for k in kept] == [_N, ep_f, f, groove]
-    assert kept[1].duration == pytest.approx(1.6) and kept[2].t == 2.6
-    assert [m.label for m in compile_program(states, straight_track(8)).macros] == ["E", "E", "end"]
-    # a swing that lands on another face is a path of its own: released, established (E, E)
-    other = "V/G & E/N & E/F[b.F5] & V/N"
-    states = _seq((0, 1, _N), (1, 1, ep_f), (2, 0.6, _N), (2.6, 2, other))
-    assert len(remove_chatter(states, straight_track(8))) == 4
