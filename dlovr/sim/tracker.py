@@ -14,6 +14,7 @@ the steps where the hits or the tip's decision change.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar, cast
@@ -167,8 +168,9 @@ class ContactTracker:
             self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
         # whether no discrete state of the situation depends on its DLO vectors (else, with an E
-        # contact on an edge, its vectors are refreshed at every step for the point-or-line decision)
+        # contact on an edge, its vectors are refreshed once they turn, for the point-or-line decision)
         self._fixed = True
+        self._edge_vectors: list[tuple[int, list[float]]] = []  # (DLO index, vector) of its edge contacts
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -191,8 +193,9 @@ class ContactTracker:
         situation is made again) is the gripper's z axis.
 
         The situation is made again whenever the kept hits or the tip's decision change (which also
-        refreshes its DLO vectors and the gripper's z), and at every step while it has an E contact
-        on an edge (whose point-or-line decision follows the DLO vector). When no point's primitives
+        refreshes its DLO vectors and the gripper's z), and whenever the DLO vector of one of its E
+        contacts on an edge has turned by more than ``TURN_DEG`` (the point-or-line decision follows
+        it). When no point's primitives
         changed, it is the last one with those annotations refreshed (:func:`_refreshed`): what
         ``situation_from_points`` makes of the same primitives, without contracting them again."""
         n = len(pts) - 1
@@ -212,7 +215,7 @@ class ContactTracker:
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         last = self._signature
-        if signature == last and self._situation is not None and self._fixed:
+        if signature == last and self._situation is not None and (self._fixed or not self._turned(pts)):
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
@@ -233,7 +236,25 @@ class ContactTracker:
             )
             self._fixed = _vector_independent(sit)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
+        if not self._fixed:
+            self._edge_vectors = [
+                (cast(int, c.dlo.index), list(cast(Vec3, c.dlo.vector))) for c in sit.contacts
+                if c.dlo.kind == "E" and any(e.type == "E" for e in c.env) and c.dlo.vector is not None
+            ]
         return sit
+
+    def _turned(self, pts: np.ndarray) -> bool:
+        """Has the DLO vector of an edge contact of the last situation turned by more than
+        ``TURN_DEG`` since the situation was made (its point-or-line decision may then change)?"""
+        n = len(pts) - 1
+        for i, v in self._edge_vectors:
+            a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+            d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+            dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2]
+            nn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            if nn <= 0.0 or dot * dot < _COS2_TURN * nn or dot < 0.0:
+                return True
+        return False
 
     def _normal(self, face: str) -> list[float]:
         """A face's outward unit normal (world frame) as Python floats, kept per face."""
@@ -486,6 +507,10 @@ def _table_of(arrays: Any) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+#: An edge contact's DLO vector is looked at again (its point-or-line decision made again) once it has
+#: turned by more than this since the last time (degrees): well inside the decision's 3° band.
+TURN_DEG = 0.25
+_COS2_TURN = math.cos(math.radians(TURN_DEG)) ** 2
 _KEPT, _GROW = tk.KEPT, tk.GROW
 _track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))
