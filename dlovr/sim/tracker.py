@@ -215,8 +215,9 @@ class ContactTracker:
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         last = self._signature
-        if signature == last and self._situation is not None and (self._fixed or not self._turned(pts)):
-            return self._situation
+        if signature == last and self._situation is not None:
+            if self._fixed or not _turned(self._edge_vectors, pts):
+                return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
         if (
@@ -242,19 +243,6 @@ class ContactTracker:
                 if c.dlo.kind == "E" and any(e.type == "E" for e in c.env) and c.dlo.vector is not None
             ]
         return sit
-
-    def _turned(self, pts: np.ndarray) -> bool:
-        """Has the DLO vector of an edge contact of the last situation turned by more than
-        ``TURN_DEG`` since the situation was made (its point-or-line decision may then change)?"""
-        n = len(pts) - 1
-        for i, v in self._edge_vectors:
-            a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
-            d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-            dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2]
-            nn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-            if nn <= 0.0 or dot * dot < _COS2_TURN * nn or dot < 0.0:
-                return True
-        return False
 
     def _normal(self, face: str) -> list[float]:
         """A face's outward unit normal (world frame) as Python floats, kept per face."""
@@ -468,6 +456,20 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     obj = object.__new__(cls)
     obj.__dict__.update(fields)
     return obj
+
+
+def _turned(edge_vectors: list[tuple[int, list[float]]], pts: np.ndarray) -> bool:
+    """Has the DLO vector of an edge contact (DLO index, vector when the situation was made) turned
+    by more than ``TURN_DEG`` since (its point-or-line decision may then change)?"""
+    n = len(pts) - 1
+    for i, v in edge_vectors:
+        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+        d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+        dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2]
+        nn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if nn <= 0.0 or dot < 0.0 or dot * dot < _COS2_TURN * nn:
+            return True
+    return False
 
 
 def _vector_independent(topo: Situation) -> bool:
