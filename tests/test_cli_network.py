@@ -65,6 +65,16 @@ def test_network_of_three_copies_counts_every_transition_three_times(built):
 
 
 @pytest.mark.slow
+def test_network_without_chatter_merges_each_recordings_path_to_its_goal(three, tmp_path):
+    """--without-chatter: each recording's chatter removed before merging, said so in the file; the
+    scripted sample has none, so its network keeps its shape (docs/networks.md)."""
+    r = cli("network", three / "peg0.mcap", "--without-chatter", "-o", tmp_path / "net.json")
+    assert r.exit_code == 0, r.output
+    assert "15 situations, 14 transitions (2 risky) from 1 recordings" in r.output
+    net = json.loads((tmp_path / "net.json").read_text())
+    assert "removed" in net["chatter"] and net["start"] != net["goal"]
+
+
 def test_network_program_replays_the_demonstration_macro_for_macro(built, tmp_path):
     r = cli("compile", "--network", built[0], "-o", tmp_path / "prog.json")
     assert r.exit_code == 0, r.output

@@ -153,6 +153,11 @@ def test_model_doc_gives_the_parameters_with_the_codes_defaults():
     assert _parameter(doc, "parallel tolerance") == f"{p.parallel_tol_deg:g}°"
     assert _parameter(doc, "hold time") == f"{DEFAULT_HOLD_S:g} s"
     assert _parameter(doc, "flight time") == f"{DEFAULT_FLIGHT_S:g} s"
+    from dlovr.sim.tracker import ContactTracker
+
+    bands = {k: f.default for k, f in ContactTracker.__dataclass_fields__.items() if k.endswith("_band_deg")}
+    assert _parameter(doc, "tip angle band") == f"{bands['tip_band_deg']:g}°"
+    assert _parameter(doc, "parallel tolerance band") == f"{bands['line_band_deg']:g}°"
 
 
 # --------------------------------------------------------------------------------------------------

@@ -28,6 +28,11 @@ from dlovr.outputs import write_output  # atomic: a full disk leaves the previou
     type=click.IntRange(1, 64),
     help="Read the recordings on this many worker processes (default: one after the other here).",
 )
+@click.option(
+    "--without-chatter",
+    is_flag=True,
+    help="Merge each recording's path to its goal: its chatter removed first, as `compile` removes it.",
+)
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output files if they exist.")
 @cluster_option
 def network_cmd(
@@ -35,6 +40,7 @@ def network_cmd(
     out: str,
     html_out: str | None,
     workers: int | None,
+    without_chatter: bool,
     force: bool,
     cluster: str | None,
 ) -> None:
@@ -43,6 +49,7 @@ def network_cmd(
 
     Existing output files are refused unless --force."""
     from dlovr.model.planning import NetworkProgram
+    from dlovr.model.program import ChatterRules
     from dlovr.recording import find_recordings
     from dlovr.recording.demonstrations import network_from_recordings
     from dlovr.recording.network_html import network_html
@@ -65,7 +72,10 @@ def network_cmd(
             bar.update(k - done[0])
             done[0] = k
 
-        net = network_from_recordings(paths, progress=progress, workers=workers, cluster=cluster)
+        chatter = ChatterRules() if without_chatter else None
+        net = network_from_recordings(
+            paths, progress=progress, workers=workers, cluster=cluster, chatter=chatter
+        )
     write_output(out, net.dumps(), force=force)
     if html_out:
         write_output(html_out, network_html(net, NetworkProgram(net)), force=force)

@@ -368,13 +368,15 @@ _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contac
 
 
 def _point_or_line(
-    stab: StabilityLetter, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams
+    stab: StabilityLetter, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams, band_deg: float = 0.0
 ) -> DiscreteState:
     """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
-    ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease."""
+    ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease;
+    ``band_deg`` (degrees) widens that tolerance for a contact that was a line contact a moment ago
+    (the decision's hysteresis, :class:`Discretizer`)."""
     d = _required(unit(dlo_vector))
     angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
-    if angle <= params.parallel_tol_deg:
+    if angle <= params.parallel_tol_deg + band_deg:
         return DiscreteState("E", "E^L", stab)
     return DiscreteState("E", "E^P")
 
@@ -482,14 +484,17 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
     return st, crease, real, vec, axis
 
 
-def _from_parts(parts: _Parts, contact: Contact, params: ModelParams) -> DiscreteContact:
-    """The discrete contact of ``contact`` from its :data:`_Parts`."""
+def _from_parts(
+    parts: _Parts, contact: Contact, params: ModelParams, band_deg: float = 0.0
+) -> DiscreteContact:
+    """The discrete contact of ``contact`` from its :data:`_Parts` (``band_deg``: the point or line
+    decision's band, for a contact that was a line contact a moment ago; see :func:`_point_or_line`)."""
     st, crease, real, vec, axis = parts
     if not isinstance(st, DiscreteState):  # an E contact on an edge: its stability class and crease
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
         assert crease is not None
-        st = _point_or_line(st, crease, contact.dlo.vector, params)
+        st = _point_or_line(st, crease, contact.dlo.vector, params, band_deg)
     return DiscreteContact(st, real, vec, contact.dlo.span, axis)
 
 
@@ -538,17 +543,43 @@ class Discretizer:
     primitives and the gripper's z axis, an annotation of ``G`` that its contact vector takes), so a
     contact seen before costs only its span and, on an edge, the point or line decision from its DLO
     vector; a contact that comes out as the last one of its topology did is that one again. At most
-    ``size`` topologies are kept (then forgotten all at once). Same results as :func:`discretize`."""
+    ``size`` topologies are kept (then forgotten all at once). Same results as :func:`discretize`
+    when ``line_band_deg`` is 0.
 
-    def __init__(self, book: FactBook, params: ModelParams = ModelParams(), size: int = 4096):
-        self.book, self.params, self.size = book, params, size
+    ``line_band_deg`` is the hysteresis of the point-or-line decision (docs/model.md, section 3.2):
+    an E contact on an edge that was a line contact in the last situation given (the same edge,
+    the same DLO kind) stays one until its DLO vector is more than the parallel tolerance plus this
+    band (degrees) from the crease; one that was not must come within the tolerance itself. The
+    decisions are remembered from one call to the next, the way a simulation's steps come;
+    :meth:`forget` starts afresh."""
+
+    def __init__(
+        self, book: FactBook, params: ModelParams = ModelParams(), size: int = 4096,
+        line_band_deg: float = 0.0,
+    ):
+        if not 0.0 <= line_band_deg < 90.0:
+            raise ValueError(f"line_band_deg must be in [0, 90), got {line_band_deg}")
+        self.book, self.params, self.size, self.line_band_deg = book, params, size, line_band_deg
         self._memo: dict[tuple[Any, ...], list[Any]] = {}  # key -> [parts, last discrete contact]
+        self._lines: frozenset[tuple[Any, ...]] = frozenset()  # edge contacts that were line contacts
+        self._now: set[tuple[Any, ...]] | None = None  # those of the situation being made
 
     def __call__(self, situation: Situation) -> DiscreteSituation:
-        return DiscreteSituation(tuple(self.contact(c) for c in situation.contacts))
+        self._now = set()
+        try:
+            out = DiscreteSituation(tuple(self.contact(c) for c in situation.contacts))
+            self._lines = frozenset(self._now)
+        finally:
+            self._now = None
+        return out
+
+    def forget(self) -> None:
+        """Forget the last situation's point-or-line decisions (the next situation starts afresh)."""
+        self._lines = frozenset()
 
     def contact(self, contact: Contact) -> DiscreteContact:
-        """:func:`discretize_contact` of ``contact`` with this scene's facts and parameters."""
+        """:func:`discretize_contact` of ``contact`` with this scene's facts and parameters (and, for an
+        E contact on an edge within a call of the discretizer, the band of its point-or-line decision)."""
         env = contact.env
         z = env[0].z if len(env) == 1 else tuple(e.z for e in env)
         key = (contact.dlo.kind == "E", env, z)
@@ -560,7 +591,10 @@ class Discretizer:
         last = got[1]
         if last is not None and last.span == contact.dlo.span and got[0][1] is None:
             return last
-        dc = _from_parts(got[0], contact, self.params)
+        band = self.line_band_deg if key in self._lines else 0.0
+        dc = _from_parts(got[0], contact, self.params, band)
+        if self._now is not None and got[0][1] is not None and dc.state.env == "E^L":
+            self._now.add(key)
         if last is not None and last.span == dc.span and last.state == dc.state:
             return last
         got[1] = dc

@@ -31,7 +31,7 @@ import json
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -41,7 +41,15 @@ import numpy as np
 from dlovr.inputs import InputError, parse_json, read_json, where_msg
 from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteContact, DiscreteSituation, Stability
-from dlovr.model.program import Detection, PoseTrack, TimedSituation, detections, motion_between
+from dlovr.model.program import (
+    ChatterRules,
+    Detection,
+    PoseTrack,
+    TimedSituation,
+    detections,
+    motion_between,
+    remove_chatter,
+)
 from dlovr.model.tracks import EdgeTrack, representative, stretch
 from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
 from dlovr.transforms import norm
@@ -190,6 +198,7 @@ class Network:
     goal: str
     version: int = NETWORK_VERSION
     reference: EdgeTrack | None = None  # the reference demonstration's whole commanded track
+    chatter: str = ""  # "": the kept situations as recorded; else how each one's chatter was removed
 
     def node(self, node_id: str) -> Node:
         for n in self.nodes:
@@ -227,6 +236,7 @@ class Network:
             "starts": [_endpoint_json(p) for p in self.starts],
             "ends": [_endpoint_json(p) for p in self.ends],
             **({} if self.reference is None else {"reference": self.reference.to_json()}),
+            **({"chatter": self.chatter} if self.chatter else {}),
             "nodes": [
                 {
                     "id": n.id,
@@ -283,6 +293,7 @@ class Network:
                 nodes, edges, tuple(_each(data, "starts", _endpoint_from_json)),
                 tuple(_each(data, "ends", _endpoint_from_json)), str(data["start"]), str(data["goal"]),
                 NETWORK_VERSION, None if ref is None else EdgeTrack.from_json(ref),
+                str(data.get("chatter", "")),
             )
         _check(net)
         return net
@@ -501,14 +512,20 @@ class _Visits:
     demo_keys: list[list[str]] = field(default_factory=list)
 
 
-def build_network(demos: Sequence[Demonstration]) -> Network:
-    """Merge demonstrations of one scene into a transition network (module docstring)."""
+def build_network(demos: Sequence[Demonstration], chatter: ChatterRules | None = None) -> Network:
+    """Merge demonstrations of one scene into a transition network (module docstring).
+
+    ``chatter``: merge each demonstration's path to its goal instead of its kept situations as they
+    happened: its chatter removed first as a program's compiler removes it
+    (:func:`dlovr.model.program.remove_chatter` with these rules; the network says so in ``chatter``)."""
     if not demos:
         raise NetworkError("no demonstrations to build a network from")
     _check_scenes(demos)
     for d in demos:
         if not d.states:
             raise NetworkError(f"{d.name}: demonstration has no contact situations")
+    if chatter is not None:
+        demos = [replace(d, states=tuple(remove_chatter(d.states, d.poses, chatter))) for d in demos]
     seen = _Visits()
     for di, d in enumerate(demos):
         _visit(seen, di, d)
@@ -522,10 +539,18 @@ def build_network(demos: Sequence[Demonstration]) -> Network:
         demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
         _endpoints(firsts, order), _endpoints(lasts, order),
         _most_common(Counter(k for k, _ in firsts), order), _most_common(Counter(k for k, _ in lasts), order),
-        NETWORK_VERSION, _whole_track(demos[reference], reference),
+        NETWORK_VERSION, _whole_track(demos[reference], reference), _chatter_note(chatter),
     )
     _check(net)
     return net
+
+
+def _chatter_note(rules: ChatterRules | None) -> str:
+    """What a network records of how its demonstrations' chatter was treated ("": kept)."""
+    if rules is None:
+        return ""
+    return (f"removed from each demonstration (an excursion back to where it left within {rules.max_s:g} s, "
+            f"{rules.max_m:g} m and {rules.max_deg:g} deg of gripper motion)")
 
 
 def _visit(seen: _Visits, di: int, d: Demonstration) -> None:

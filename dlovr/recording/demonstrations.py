@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from dlovr.model.network import Demonstration, Network, NetworkError, build_network
-from dlovr.model.program import PoseTrack
+from dlovr.model.program import ChatterRules, PoseTrack
 from dlovr.recording.format import RecordingError, one_line
 from dlovr.recording.reader import Recording, kept_states
 
@@ -50,9 +50,11 @@ def network_from_recordings(
     *,
     workers: int | None = None,
     cluster: str | None = None,
+    chatter: ChatterRules | None = None,
 ) -> Network:
     """Build a transition network from recordings of one scene; ``progress(k)`` after each one read
-    (with ``workers`` / ``cluster``: as the k-th completes, in order of completion).
+    (with ``workers`` / ``cluster``: as the k-th completes, in order of completion); ``chatter``: each
+    recording's chatter removed first (:func:`dlovr.model.network.build_network`).
 
     The recordings are read here one after the other, or with ``workers`` / ``cluster`` through
     :func:`dlovr.batch.run_batch` (local processes or Ray; the network is the same, it is built from
@@ -73,7 +75,7 @@ def network_from_recordings(
         demos.append(d)
         if progress is not None and not batched:
             progress(k)
-    return build_network(demos)
+    return build_network(demos, chatter)
 
 
 def _demonstrations(

@@ -14,6 +14,7 @@ the steps where the hits or the tip's decision change.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar, cast
@@ -109,7 +110,10 @@ class ContactTracker:
 
     ``tip_band_deg`` is the hysteresis of the end-vertex rule (docs/model.md, section 2): a tip that
     touches keeps touching until its last segment points into the surface by less than the tip angle
-    minus this band (degrees); one that does not must pass the tip angle itself.
+    minus this band (degrees); one that does not must pass the tip angle itself. ``line_band_deg`` is
+    the hysteresis of the point-or-line decision on an edge (docs/model.md, section 3.2): an edge
+    contact that is a line contact stays one until its DLO vector is more than the parallel tolerance
+    plus this band (degrees) from the edge (:class:`dlovr.model.discrete.Discretizer`).
 
     ``hold`` (s) is the flicker hold time and ``flight`` (s) the flight time of the debouncing
     (docs/model.md, :class:`dlovr.model.transitions.Debouncer`). ``changes`` lists every step at
@@ -130,6 +134,7 @@ class ContactTracker:
     enter_tol: float = 5e-4
     leave_tol: float = 1e-3
     tip_band_deg: float = 3.0
+    line_band_deg: float = 3.0
     changes: list[ContactState] = field(default_factory=list)
     reuse: bool = True
 
@@ -159,7 +164,13 @@ class ContactTracker:
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
         self._tip_held = False  # the tip's own contact at the last step (the rule's hysteresis)
+        if self._disc is not None:
+            self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
+        # whether no discrete state of the situation depends on its DLO vectors (else, with an E
+        # contact on an edge, its vectors are refreshed once they turn, for the point-or-line decision)
+        self._fixed = True
+        self._edge_vectors: list[tuple[int, list[float]]] = []  # (DLO index, vector) of its edge contacts
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -182,8 +193,10 @@ class ContactTracker:
         situation is made again) is the gripper's z axis.
 
         The situation is made again whenever the kept hits or the tip's decision change (which also
-        refreshes its DLO vectors and the gripper's z). When no point's primitives changed, it is
-        the last one with those annotations refreshed (:func:`_refreshed`): what
+        refreshes its DLO vectors and the gripper's z), and whenever the DLO vector of one of its E
+        contacts on an edge has turned by more than ``TURN_DEG`` (the point-or-line decision follows
+        it). When no point's primitives
+        changed, it is the last one with those annotations refreshed (:func:`_refreshed`): what
         ``situation_from_points`` makes of the same primitives, without contracting them again."""
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
@@ -203,7 +216,8 @@ class ContactTracker:
         signature = (n, self._version, tip)
         last = self._signature
         if signature == last and self._situation is not None:
-            return self._situation
+            if self._fixed or not _turned(self._edge_vectors, pts):
+                return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
         if (
@@ -221,7 +235,13 @@ class ContactTracker:
                 tip_angle_deg=angle,
                 gripper_z=z,
             )
+            self._fixed = _vector_independent(sit)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
+        if not self._fixed:
+            self._edge_vectors = [
+                (cast(int, c.dlo.index), list(cast(Vec3, c.dlo.vector))) for c in sit.contacts
+                if c.dlo.kind == "E" and any(e.type == "E" for e in c.env) and c.dlo.vector is not None
+            ]
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -372,8 +392,9 @@ class ContactTracker:
     def _discretizer(self) -> Discretizer:
         """The scene's :class:`dlovr.model.discrete.Discretizer` for the current parameters."""
         d, book = self._disc, self.geometry.fact_book()
-        if d is None or d.book is not book or d.params is not self.params:
-            d = self._disc = Discretizer(book, self.params)
+        band = self.line_band_deg
+        if d is None or d.book is not book or d.params is not self.params or d.line_band_deg != band:
+            d = self._disc = Discretizer(book, self.params, line_band_deg=band)
         return d
 
     def _forces(self, topo: Situation, table: np.ndarray | None) -> tuple[float, ...]:
@@ -437,6 +458,20 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     return obj
 
 
+def _turned(edge_vectors: list[tuple[int, list[float]]], pts: np.ndarray) -> bool:
+    """Has the DLO vector of an edge contact (DLO index, vector when the situation was made) turned
+    by more than ``TURN_DEG`` since (its point-or-line decision may then change)?"""
+    n = len(pts) - 1
+    for i, v in edge_vectors:
+        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+        d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+        dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2]
+        nn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if nn <= 0.0 or dot < 0.0 or dot * dot < _COS2_TURN * nn:
+            return True
+    return False
+
+
 def _vector_independent(topo: Situation) -> bool:
     """Discrete states depend on DLO vectors only through point/line decisions of E contacts on
     edges: without such contacts the discrete situation of an unchanged topology can be reused."""
@@ -474,6 +509,10 @@ def _table_of(arrays: Any) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+#: An edge contact's DLO vector is looked at again (its point-or-line decision made again) once it has
+#: turned by more than this since the last time (degrees): well inside the decision's 3° band.
+TURN_DEG = 0.25
+_COS2_TURN = math.cos(math.radians(TURN_DEG)) ** 2
 _KEPT, _GROW = tk.KEPT, tk.GROW
 _track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))

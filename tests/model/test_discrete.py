@@ -402,6 +402,43 @@ def test_discretizer_gives_what_discretize_gives_annotations_and_all():
         d(parse_situation("VS/G & E3/c.F1 & VE/N"))
 
 
+def test_the_discretizer_holds_a_line_contact_by_its_band():
+    """docs/model.md 3.2 step 4: hysteresis on the point-or-line decision. A line contact on an edge stays one
+    until its DLO vector is more than the parallel tolerance plus the band from the crease (10 + 3 deg);
+    a point contact (or an edge contact that was not there a situation ago) must come within 10 deg."""
+    import dataclasses
+
+    book = FactBook({"box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X)},
+                    [PairFact("box.F1", "box.F2", False, 270)])
+    topo = parse_situation("VS/G & E3/N & E9/(box.F1,box.F2) & E12/N & VE/N")
+    free = parse_situation("VS/G & E3/N & VE/N")  # its third contact: the free tip
+
+    def on_edge(deg):  # the DLO vector deg from the crease (y)
+        a = math.radians(deg)
+        c = list(topo.contacts)
+        vec = (math.sin(a), math.cos(a), 0.0)
+        c[2] = dataclasses.replace(c[2], dlo=dataclasses.replace(c[2].dlo, vector=vec))
+        return type(topo)(tuple(c))
+
+    def states(d, steps):
+        return [d(on_edge(x) if x is not None else free).contacts[2].state.name for x in steps]
+
+    line, point, n = "E/E^LI", "E/E^P", "V/N"
+    angles = [5, 11.5, 12.5, 14, 11.5, 8, 12.5]
+    held = states(Discretizer(book, line_band_deg=3.0), angles)
+    assert held == [line, line, line, point, point, line, line]
+    assert states(Discretizer(book), angles) == [line, point, point, point, point, line, point]
+    pure = [discretize(on_edge(x), book).contacts[2].state.name for x in angles]
+    assert pure == states(Discretizer(book), angles)
+    d = Discretizer(book, line_band_deg=3.0)
+    assert states(d, [5, None, 11.5]) == [line, n, point]  # the edge contact left in between
+    assert states(d, [5]) == [line]
+    d.forget()
+    assert states(d, [11.5]) == [point]
+    with pytest.raises(ValueError, match="line_band_deg"):
+        Discretizer(book, line_band_deg=-1.0)
+
+
 def test_discrete_notation_roundtrip_and_errors():
     text = "V/G & E/N & E/E^P[block.F1,block.F2] & V/N"
     s = parse_discrete_situation(text)

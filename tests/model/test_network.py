@@ -471,3 +471,32 @@ def test_network_macros_follow_the_reference_demonstration_where_it_went():
     assert at_tip.macro.target == net.locate(inst_y) and at_tip.macro.classes == ("I",)
     assert reference_span(prog, at_tip.macro, tip) == (1.0, 2.0)  # A's own I, from TIP to inst_x
     assert reference_goal_entry(prog) == 3.0
+
+
+def _shape(net: Network):
+    """The graph's shape: its situations and its transitions (source, target, class)."""
+    sit = {n.id: n.situation for n in net.nodes}
+    return sorted(sit.values()), sorted((sit[e.source], sit[e.target], e.label) for e in net.edges)
+
+
+def test_a_network_without_chatter_has_the_shape_of_the_scripted_demonstrations():
+    """A person's hand at the tip angle flips TIP/LIE back and forth: as recorded the network shows it
+    (a back edge, a cycle, a plan less likely than 1); with each demonstration's chatter removed
+    (``dlovr network --without-chatter``) it is the scripted demonstrations' graph, said so in the file."""
+    from dlovr.model.program import ChatterRules
+
+    scripted = demo("script", [FREE, TIP, LIE, GROOVE], [1.0, 2.0, 2.0, 1.0])
+    person = demo("person", [FREE, TIP, LIE, TIP, LIE, TIP, LIE, GROOVE],
+                  [1.0, 2.0, 0.3, 0.05, 0.2, 0.04, 1.5, 1.0])
+    script_net = build_network([scripted, scripted])
+    as_recorded = build_network([scripted, person])
+    nodes, edges = _shape(as_recorded)
+    assert nodes == _shape(script_net)[0] and set(edges) - set(_shape(script_net)[1]) == {(LIE, TIP, "C")}
+    plan = NetworkProgram(as_recorded).plan_from_start()
+    assert plan[0].reach_probability < 1.0
+    cleaned = build_network([scripted, person], chatter=ChatterRules())
+    assert _shape(cleaned) == _shape(script_net) and not as_recorded.chatter and "removed" in cleaned.chatter
+    plans = [[c.macro.classes for c in NetworkProgram(n).plan_from_start()] for n in (cleaned, script_net)]
+    assert plans[0] == plans[1] and NetworkProgram(cleaned).plan_from_start()[0].reach_probability == 1.0
+    assert Network.loads(cleaned.dumps()).chatter == cleaned.chatter
+    assert "chatter" not in json.loads(as_recorded.dumps())

@@ -389,3 +389,36 @@ def test_a_refreshed_situation_is_the_one_made_from_the_points_again():
         got = _refreshed(first, moved, z)
         assert got == want and ann(got) == ann(want)
         assert got.format() == want.format()
+
+
+def _across_ridge(deg, n=31, length=0.3):
+    """A straight cable touching the L block's ridge along x (top face and -y face, y 0.1, z 0.1) at
+    x 0.2 and nothing else, ``deg`` from the ridge (turned in the plane of the ridge and the
+    direction that leaves both faces)."""
+    a = np.radians(deg)
+    b, w = np.array([0.0, -1.0, 1.0]) / np.sqrt(2.0), np.array([0.0, 1.0, 1.0]) / np.sqrt(2.0)
+    d = np.cos(a) * np.array([1.0, 0.0, 0.0]) + np.sin(a) * w
+    mid = np.array([0.2, 0.1, 0.1]) + (R + 2e-4) * b
+    return _line(mid - 0.5 * length * d, mid + 0.5 * length * d, n)
+
+
+def test_the_point_or_line_decision_has_hysteresis(geom):
+    """docs/model.md section 3.2: a line contact on an edge holds until the DLO vector is the band
+    beyond the parallel tolerance (10 + 3 = 13 deg); a point contact must come within 10 deg again."""
+    angles = [5, 11.5, 12.5, 14, 11.5, 8]
+
+    def states(tr):
+        out = []
+        for k, d in enumerate(angles):
+            c = [x for x in tr.update(Rec(_across_ridge(d), step=k, time=k * 0.002)).discrete.contacts
+                 if x.faces]
+            assert len(c) == 1 and c[0].faces == ("lblock.F1", "lblock.F7"), c
+            out.append(c[0].state.name)
+        return out
+
+    line, point = "E/E^LI", "E/E^P"
+    assert states(ContactTracker(geom)) == [line, line, line, point, point, line]
+    assert states(ContactTracker(geom, line_band_deg=0.0)) == [line, point, point, point, point, line]
+    tr = ContactTracker(geom)
+    tr.update(Rec(_across_ridge(5), step=0, time=0.0))
+    assert tr.restart(Rec(_across_ridge(11.5), step=1, time=0.002)).discrete.contacts[2].state.name == point
