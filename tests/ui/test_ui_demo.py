@@ -130,11 +130,34 @@ def test_reset_after_a_run_clears_the_contact_arrows_and_the_detector_signal(dem
     wait_for(lambda: "/contacts/vectors" in scene_nodes(page), timeout=30, what="a contact arrow")
     wait_for(lambda: bool((plot_data(page)[6] >= 0).any()), timeout=10, what="the detector signal")
     assert not runner.done
+    # hovering the plot reads its values out (uPlot's legend showed `--`): near its end, the run's
+    over = page.locator(".u-over").first
+    over.scroll_into_view_if_needed()
+    box = over.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + 0.97 * box["width"], box["y"] + box["height"] / 2)
+    wait_for(lambda: legend(page)["detector"][:1].isdigit(), timeout=5, what="the hovered detector value")
+    read = legend(page)
+    assert read["t [s]"].endswith(" s") and all(read[k].endswith(" N") for k in ("Fx", "Fy", "Fz", "|F|"))
     page.get_by_role("button", name="Reset", exact=True).click()
     wait_for(lambda: demo.session.runner is None and demo.run_panel.runner is None, what="the run to stop")
     wait_for(lambda: demo.status()["t"] > 1.0, timeout=10, what="the restarted simulation")
     wait_for(lambda: "/contacts/vectors" not in scene_nodes(page), timeout=5, what="the arrow removed")
     wait_for(lambda: bool((plot_data(page)[6] < 0).all()), timeout=5, what="no detector signal")
+    page.mouse.move(5, 300)  # off the plot: the latest values, not `--`
+    wait_for(lambda: legend(page)["detector"] == "off", timeout=5, what="the read-out without a run")
+    read = legend(page)
+    assert abs(float(read["t [s]"].split()[0]) - demo.status()["t"]) < 1.0, read
+    assert not any("--" in v for v in read.values()), read
+
+
+def legend(page) -> dict[str, str]:
+    """The force plot's read-out under it: series label -> value shown."""
+    return page.evaluate(
+        "() => Object.fromEntries([...document.querySelectorAll('.u-legend .u-series')]"
+        ".map((e) => [e.querySelector('.u-label').innerText.trim(),"
+        " e.querySelector('.u-value').innerText.trim()]))"
+    )
 
 
 # -- Broken 4: the live timeline holds still under the mouse ------------------------------------

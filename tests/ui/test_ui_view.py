@@ -349,9 +349,10 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     tl = server.open_recording(path)
     t = (tl.start + tl.end) / 2
     server.scrub(t)
-    title = f"up to {t:.2f} s"
+    moment = f"up to {t:.2f} s"
     plot = server.force_panel.plot
-    wait_for(lambda: title in (plot.title or ""), timeout=10, what="the plot at the moment")
+    caption = server.force_panel.caption  # the moment is said under the plot (a new title redraws it)
+    wait_for(lambda: moment in caption.content, timeout=10, what="the plot at the moment")
 
     def at_moment() -> bool:  # the browser's data: samples where the contact state changed, up to t
         x = plot_data(page)[0]

@@ -4,6 +4,7 @@ program runs (:mod:`dlovr.ui.panels.run`), its current macro's detector signal a
 
 from __future__ import annotations
 
+from html import escape
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from dlovr.ui.forces import (
     WINDOW_S,
     ForceTrace,
     plot_arrays,
+    readout_js,
     signal_arrays,
 )
 from dlovr.ui.panels.run import RunPanel
@@ -83,6 +85,8 @@ class ForcePanel:
                 height=190,
             )
             self.caption = gui.add_markdown("")
+            js = escape(readout_js(), quote=True)  # the legend's read-out (forces.READOUT_JS)
+            gui.add_html(f'<img alt="" src="data:," style="display:none" onerror="{js}">')
 
     def show_live(self) -> None:
         """The last seconds of the live simulation (the server calls this at ``PANEL_HZ``)."""
@@ -105,11 +109,13 @@ class ForcePanel:
         data = _with_signal(plot_arrays(tl.forces, tl.transition_times(), t), None)
         bands = [b for b in tl.bands if b.classes and b.start <= t]
         live = tl is self.app.session.timeline
-        title = f"force on the gripper [N] up to {t:.2f} s"
+        # the moment goes under the plot: a new title would make the page draw the chart anew (and
+        # lose the mouse's read-out) at every step of a scrub or a playback
+        title = f"force on the gripper [N], {WINDOW_S:g} s up to the moment"
         if tl.forces_note:
             title += f" ({tl.forces_note})"
         dense = live or tl.forces.every > 1  # a step-rate trace, not samples at state changes
-        self._show(data, bands, "live" if dense else "recording", title)
+        self._show(data, bands, "live" if dense else "recording", title, f"up to {t:.2f} s")
 
     def _show(
         self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str, extra: str = ""
