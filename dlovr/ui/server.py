@@ -180,6 +180,7 @@ class DemoServer:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self.loop.stop()
         self.timeline_panel.cancel_resim()
+        self.timeline_panel.stop_playing()
         self.run_panel.cancel(None)
         self.loop.join(timeout=10)
         path = self.session.stop_recording()

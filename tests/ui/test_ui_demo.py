@@ -241,9 +241,28 @@ def test_a_scene_switch_and_an_opened_recording_leave_nothing_of_the_last_scene(
     assert page.locator("table.dlovr-program").count() == 1  # l_block's sample, not the recording's
     assert page.locator("tr[data-outcome]").count() == 0
 
-    demo.open_recording(path)  # a table recording while l_block runs live
+    tl = demo.open_recording(path)  # a table recording while l_block runs live
     wait_for(lambda: not scene_nodes(page).get("/gripper", True), timeout=5, what="the gizmo hidden")
     page.get_by_text("Viewing recording").first.wait_for(timeout=5_000)
+    # the recording's timeline: zoom in about the moment, step a frame, play at 2x, pan
+    panel = demo.timeline_panel
+    page.get_by_role("button", name="zoom in").click()
+    wait_for(lambda: panel.window is not None, timeout=5, what="the zoomed window")
+    page.get_by_text("zoomed to").first.wait_for(timeout=5_000)
+    assert panel.slider.max - panel.slider.min < 0.6 * (tl.end - tl.start) + 0.02
+    t0 = float(panel.slider.value)
+    page.get_by_role("button", name="step \u25b6").click()
+    wait_for(lambda: float(panel.slider.value) > t0, timeout=5, what="a step to the next frame")
+    assert float(panel.slider.value) - t0 < 0.1  # one frame (~30 Hz)
+    panel.speed_dd.value = "2x"
+    assert panel.speed == 2.0
+    page.get_by_role("button", name="\u25b6 play").click()
+    wait_for(lambda: panel.playing or float(panel.slider.value) >= tl.end - 0.02, timeout=5, what="play")
+    wait_for(lambda: float(panel.slider.value) >= tl.end - 0.02, timeout=10, what="playing to the end")
+    assert panel.window is not None and panel.window[1] >= tl.end - 0.02  # the window followed
+    wait_for(lambda: not panel.playing, timeout=5, what="the end of the playback")
+    page.get_by_role("button", name="\u25c0 pan").click()  # half a window back
+    wait_for(lambda: panel.window is not None and panel.window[1] < tl.end - 0.01, timeout=5, what="a pan")
     page.get_by_role("button", name="Back to live").click()
     wait_for(lambda: scene_nodes(page).get("/gripper", False), timeout=5, what="the gizmo back")
     assert page.get_by_text("Viewing recording").count() == 0
@@ -272,6 +291,31 @@ def test_the_essentials_are_on_the_first_screen_and_the_legend_explains(demo: De
     for words in ("V/G", "establishing", "instable", "free", "risky", "Timeline", "detector"):
         assert words in text, words
     page.get_by_text("Legend", exact=True).click()
+
+
+def test_the_timeline_zooms_pans_and_steps_through_its_frames():
+    from dlovr.ui.timeline import Band, Snapshot, Timeline, pan_window, step_time, window_showing, zoom_window
+
+    full = (0.0, 10.0)
+    w = zoom_window(None, full, 4.0, 0.5)
+    assert w is not None and np.allclose(w, (2.0, 7.0))  # the moment keeps its place
+    assert zoom_window(w, full, 4.0, 2.0) is None  # all of it again
+    assert np.allclose(zoom_window(None, full, 10.0, 0.5) or (), (5.0, 10.0))
+    assert np.allclose(pan_window((2.0, 7.0), full, 0.5) or (), (4.5, 9.5))
+    assert np.allclose(pan_window((4.5, 9.5), full, 0.5) or (), (5.0, 10.0))  # kept inside
+    assert pan_window(None, full, 0.5) is None
+    assert np.allclose(window_showing((0.0, 2.0), full, 2.5) or (), (2.5, 4.5))  # turns the page
+    tl = Timeline(source="r")
+    tl.bands += [Band(0.0, 4.0, "A", ()), Band(4.0, 10.0, "B", ("E",))]
+    z3 = np.zeros(3)
+    for t in (0.0, 0.5, 1.0):
+        tl.snapshots.append(Snapshot(t, np.zeros((2, 3)), np.zeros((2, 3)), z3, np.r_[1.0, z3], ""))
+    assert step_time(tl, 0.5, 1) == 1.0 and step_time(tl, 0.5, -1) == 0.0 and step_time(tl, 1.0, 1) == 1.0
+    html = tl.html(None, None, (5.0, 10.0))
+    bar = html.split('class="dlovr-timeline"')[1].split("</div><div>")[0]  # the bands, not the list
+    assert 'data-situation="0"' not in bar and 'data-situation="1"' in bar and "zoomed to 5.00-10.00" in html
+    assert "width:100.00%" in html and "border-left" not in html  # B cut at the window: no transition drawn
+    assert tl.html() == tl.html(None, None, None)
 
 
 def held_z(demo: DemoServer) -> float:
