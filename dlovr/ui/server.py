@@ -36,6 +36,7 @@ from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
+from dlovr.ui.framing import camera_key_speed
 from dlovr.ui.guard import Reporter, checked_pose, guard_incoming
 from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
@@ -333,6 +334,7 @@ class DemoServer:
                 view.body.wxyz = cast(Quat, tuple(map(float, rec.gripper_quat)))
                 if text is not None:
                     self.state_panel.show_live(text)
+            self.viewport.follow(np.asarray(rec.gripper_pos, dtype=float))
             srv.flush()
             self.publish_count += 1
         self.keys.tick()
@@ -381,6 +383,7 @@ class DemoServer:
         with self.draw_lock:
             self.viewport.build()
             self.timeline_panel.update(force=True)
+        self.status_panel.camera_speed = camera_key_speed(*self.viewport.scene_box())
 
     # -- clients ------------------------------------------------------------------------------------
 
@@ -396,6 +399,7 @@ class DemoServer:
         mid-drag."""
         self.keys.held.clear()
         self.viewport.camera_ready.pop(client.client_id, None)
+        self.viewport.following.pop(client.client_id, None)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation
                 self.viewport.faces.pin(None)

@@ -23,9 +23,13 @@ if TYPE_CHECKING:
     import viser
 
 
-CAMERA_PRESETS = ("top", "front", "side", "gripper", "contacts")
-"""The camera presets: looking down, from -y, from +x at the workspace; at the gripper; at the contacts
-(the cable's tip when there is none), each from the framing's distance."""
+CAMERA_PRESETS = ("top", "front", "side", "gripper", "follow", "contacts")
+"""The camera presets: looking down, from -y, from +x at the workspace; at the gripper; at the gripper
+and following it as it moves (until another preset or *Frame scene*); at the contacts (the cable's tip
+when there is none), each from the framing's distance."""
+
+FOLLOW_MIN_M = 0.0005
+"""The least gripper motion (m) that moves a following camera (a still gripper sends nothing)."""
 
 _PRESET_DIRS = {"top": (0.0, -0.02, 1.0), "front": (0.0, -1.0, 0.25), "side": (1.0, 0.0, 0.25)}
 
@@ -50,6 +54,8 @@ class Viewport:
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
         self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
+        # clients whose camera follows the gripper -> the gripper position it was last moved for (m)
+        self.following: dict[int, np.ndarray] = {}
         self.faces = FaceHighlighter(self._scene_api)
 
     def _scene_api(self) -> viser.SceneApi:
@@ -221,6 +227,7 @@ class Viewport:
             cam.position = cast(Vec3, tuple(map(float, pos)))
         clients = [client] if client is not None else list(srv.get_clients().values())
         for c in clients:
+            self.following.pop(c.client_id, None)
             if c.client_id not in self.camera_ready:
                 continue  # framed when its camera first reports (camera_update)
             cam = c.camera
@@ -245,12 +252,15 @@ class Viewport:
             cam = c.camera
             pos, look = frame_box(lo, hi, aspect=cam.aspect)
             dist = float(np.linalg.norm(pos - look))
+            self.following.pop(c.client_id, None)
             if name in _PRESET_DIRS:
                 d = np.asarray(_PRESET_DIRS[name], dtype=float)
             else:
                 d = np.asarray(cam.position, dtype=float) - np.asarray(cam.look_at, dtype=float)
                 look = self._focus(name)
                 dist *= 0.6
+                if name == "follow":
+                    self.following[c.client_id] = look.copy()
             d = d / max(float(np.linalg.norm(d)), 1e-9)
             with c.atomic():
                 cam.fov = FOV
@@ -263,10 +273,33 @@ class Viewport:
         with app.lock:
             rec, st = app.session.record, app.session.state
             pts = np.asarray(rec.points, dtype=float)
-            if name == "gripper":
+            if name in ("gripper", "follow"):
                 return np.asarray(rec.gripper_pos, dtype=float).copy()
             touched = [i for i, c in enumerate(point_classes(st, len(pts))) if c is not None]
         return pts[touched].mean(axis=0) if touched else pts[-1].copy()
+
+    def follow(self, gripper: np.ndarray) -> None:
+        """Move the cameras that follow the gripper (the *follow* preset) by the gripper's motion since
+        their last move, to ``gripper`` (m, world): they keep their view of it, turned as the person
+        turned them meanwhile."""
+        srv = self.app.server
+        if srv is None or not self.following:
+            return
+        clients = srv.get_clients()
+        for cid, last in list(self.following.items()):
+            c = clients.get(cid)
+            if c is None:
+                self.following.pop(cid, None)
+                continue
+            d = np.asarray(gripper, dtype=float) - last
+            if float(np.linalg.norm(d)) < FOLLOW_MIN_M:
+                continue
+            cam = c.camera
+            pos, look = np.asarray(cam.position, dtype=float) + d, np.asarray(cam.look_at, dtype=float) + d
+            with c.atomic():
+                cam.position = cast(Vec3, tuple(map(float, pos)))  # moves look_at along; set it after
+                cam.look_at = cast(Vec3, tuple(map(float, look)))
+            self.following[cid] = last + d
 
     def camera_update(self, client: Any) -> None:
         """A client's camera reported: frame it the first time, and again when its view changed shape

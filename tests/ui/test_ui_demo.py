@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_ui import drag, line_down, wait_for
-from test_ui_view import plot_data
+from test_ui_view import plot_data, the_client
 
 from dlovr.ui import DemoServer
 
@@ -348,6 +348,29 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
     z1 = held_z(demo)
     time.sleep(0.3)
     assert held_z(demo) == z1  # released: it stops
+
+    # the camera keys fly at a speed scaled to the workspace (viser's 2 m/s crossed it in 0.5 s)
+    cam = the_client(demo).camera
+    lo, hi = demo.viewport.scene_box()
+    diag = float(np.linalg.norm(hi - lo))
+    c0 = np.asarray(cam.position, dtype=float)
+    page.keyboard.down("w")
+    time.sleep(0.5)
+    page.keyboard.up("w")
+    flown = lambda: float(np.linalg.norm(np.asarray(cam.position, dtype=float) - c0))  # noqa: E731
+    wait_for(lambda: flown() > 0.01 * diag, timeout=5, what="the camera to fly forward")
+    time.sleep(0.3)  # the last report of the camera
+    assert flown() < 0.3 * diag, (flown(), diag)  # about 0.15 diag (CAMERA_KEY_SPEED), not 1 m
+    # the "follow" preset: the camera moves with the gripper
+    page.get_by_role("button", name="follow", exact=True).click()
+    wait_for(lambda: the_client(demo).client_id in demo.viewport.following, timeout=5, what="following")
+    look0 = np.asarray(cam.look_at, dtype=float)
+    p, q = demo.target()
+    demo.set_target(p + np.array([0.05, 0.0, 0.0]), q)
+    wait_for(lambda: np.asarray(cam.look_at, dtype=float)[0] > look0[0] + 0.04, timeout=5,
+             what="the camera following the gripper")
+    page.get_by_role("button", name="top", exact=True).click()  # another preset: no longer following
+    wait_for(lambda: not demo.viewport.following, timeout=5, what="the follow ended")
 
 
 def test_recording_shows_a_red_dot_and_time_and_reset_asks_first(demo: DemoServer, page):
