@@ -116,7 +116,7 @@ var K={KeyW:1,KeyA:1,KeyS:1,KeyD:1,KeyQ:1,KeyE:1};
 function typing(e){var t=e.target;
 return t&&(t.tagName==='INPUT'||t.tagName==='TEXTAREA'||t.isContentEditable);}
 function tick(now){var c=window.__viserMutable&&window.__viserMutable.cameraControl;
-var dt=Math.min(Math.max((now-last)/1000,0),0.1),v=(window.__dlovrCamSpeed||0.3)*dt;last=now;
+var dt=Math.min(Math.max((now-last)/1000,0),0.25),v=(window.__dlovrCamSpeed||0.3)*dt;last=now;
 if(c&&c.enabled){if(held.KeyA)c.truck(-v,0,false);if(held.KeyD)c.truck(v,0,false);
 if(held.KeyW)c.forward(v,false);if(held.KeyS)c.forward(-v,false);
 if(held.KeyQ)c.elevate(-v,false);if(held.KeyE)c.elevate(v,false);}

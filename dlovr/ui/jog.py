@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dlovr.transforms import quat_mul, quat_rotate, rotvec_to_quat
+from dlovr.transforms import quat_mul, quat_rotate, quat_to_rotvec, rotvec_to_quat
 
 JOG_KEYS: dict[str, tuple[int, float]] = {
     "J": (0, -1.0), "L": (0, 1.0),  # x
@@ -84,6 +84,22 @@ def turn_about(pos: np.ndarray, quat: np.ndarray, rotvec: np.ndarray, pivot: np.
         c = np.asarray(pivot, dtype=float)
         p = c + quat_rotate(r, p - c)
     return p, q / np.linalg.norm(q)
+
+
+def gizmo_target(
+    start_pos: np.ndarray, start_quat: np.ndarray, pos: np.ndarray, quat: np.ndarray, pivot: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The gripper target (m, world; wxyz) for a gizmo dragged from ``start_pos``, ``start_quat`` to
+    ``pos``, ``quat`` with turns about ``pivot`` (m, world, fixed at the drag's start; None: about the
+    gripper, i.e. the gizmo's pose itself): the gizmo's turn since the drag's start is made about the
+    pivot, its move added."""
+    if pivot is None:
+        return np.asarray(pos, dtype=float), np.asarray(quat, dtype=float)
+    q0 = np.asarray(start_quat, dtype=float)
+    conj = q0 * np.array([1.0, -1.0, -1.0, -1.0]) / float(q0 @ q0)
+    rel = quat_mul(np.asarray(quat, dtype=float), conj)  # the turn since the start (world axes)
+    p, q = turn_about(start_pos, q0, np.asarray(quat_to_rotvec(rel)), pivot)
+    return p + (np.asarray(pos, dtype=float) - np.asarray(start_pos, dtype=float)), q
 
 
 class HeldKeys:

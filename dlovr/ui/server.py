@@ -142,6 +142,7 @@ class DemoServer:
         self.simulation_panel = SimulationPanel(self, self.viewport, self.timeline_panel)
         self.network_panel = NetworkPanel(self)
         self.keys = KeysPanel(self, self.simulation_panel, self.status_panel)
+        self.viewport.pivot = self.keys.pivot_point  # gizmo turns about the pivot, as the keys' turns
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -180,8 +181,7 @@ class DemoServer:
     def stop(self) -> Path | None:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self.loop.stop()
-        self.timeline_panel.cancel_resim()
-        self.timeline_panel.stop_playing()
+        self.timeline_panel.stop()
         self.run_panel.cancel(None)
         self.loop.join(timeout=10)
         path = self.session.stop_recording()
@@ -398,8 +398,7 @@ class DemoServer:
         """A tab went away: forget its camera, its hover and its keys; hold the gripper if it left
         mid-drag."""
         self.keys.held.clear()
-        self.viewport.camera_ready.pop(client.client_id, None)
-        self.viewport.following.pop(client.client_id, None)
+        self.viewport.forget(client.client_id)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation
                 self.viewport.faces.pin(None)

@@ -18,6 +18,7 @@ from dlovr.ui.app import App
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
 from dlovr.ui.framing import FOV, frame_box
 from dlovr.ui.highlight import FaceHighlighter
+from dlovr.ui.jog import gizmo_target
 
 if TYPE_CHECKING:
     import viser
@@ -54,6 +55,9 @@ class Viewport:
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
         self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
+        # the point gizmo turns are about (m, world; None: the gripper): the simulation panel's pivot
+        self.pivot: Callable[[], np.ndarray | None] = lambda: None
+        self._drag_start: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None = None
         # clients whose camera follows the gripper -> the gripper position it was last moved for (m)
         self.following: dict[int, np.ndarray] = {}
         self.faces = FaceHighlighter(self._scene_api)
@@ -75,17 +79,25 @@ class Viewport:
         async def _(event: Any) -> None:
             if event.phase == "start" and event.client_id is not None:
                 self.dragging[event.client_id] = None
+                g = event.target  # a turn is about the pivot where it was at the drag's start
+                self._drag_start = (np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float),
+                                    self.pivot())
             elif event.phase == "end":
                 # viser sends a synthetic "end" just before the disconnect callbacks of a tab that
                 # goes away mid-drag: remember when, so the server's on_client_disconnect can tell
                 if event.client_id is not None:
                     self.dragging[event.client_id] = time.perf_counter()
+                start, self._drag_start = self._drag_start, None
+                if start is not None and start[2] is not None:
+                    app.move_gizmo(*app.target())  # turned about a pivot: the gizmo back on the gripper
                 return
             if event.phase == "update":
                 g = event.target
-                app.set_target(
-                    np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float), move_gizmo=False
-                )
+                pos, quat = np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float)
+                start = self._drag_start
+                if start is not None and start[2] is not None:
+                    pos, quat = gizmo_target(start[0], start[1], pos, quat, start[2])
+                app.set_target(pos, quat, move_gizmo=False)
 
     def draw_cable(self, pts: np.ndarray, colors: np.ndarray, arrows: np.ndarray) -> None:
         """Move the cable to ``pts`` (world frame, m) with per-point ``colors``; ``arrows`` (k, 2, 3)."""
@@ -300,6 +312,11 @@ class Viewport:
                 cam.position = cast(Vec3, tuple(map(float, pos)))  # moves look_at along; set it after
                 cam.look_at = cast(Vec3, tuple(map(float, look)))
             self.following[cid] = last + d
+
+    def forget(self, client_id: int) -> None:
+        """A tab went away: its camera is neither framed nor following any more."""
+        self.camera_ready.pop(client_id, None)
+        self.following.pop(client_id, None)
 
     def camera_update(self, client: Any) -> None:
         """A client's camera reported: frame it the first time, and again when its view changed shape

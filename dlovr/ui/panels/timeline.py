@@ -153,6 +153,11 @@ class TimelinePanel:
             self.resim_thread.join(timeout=5)
             self.resim_thread = None
 
+    def stop(self) -> None:
+        """The server stops: no re-simulation, no playback goes on."""
+        self.cancel_resim()
+        self.stop_playing()
+
     def scrub(self, t: float) -> Snapshot | None:
         app = self.app
         with app.lock:
