@@ -105,6 +105,15 @@ def test_the_network_of_peg_in_hole_is_readable_zoomable_and_opens_full_size(dem
         ".map((t) => t.getBoundingClientRect().height)"
     )
     assert heights and min(heights) >= 8.0, heights  # 1 px high before
+    # no two labels drawn over each other (edge labels overlapped, in the table's network too)
+    clash = page.evaluate(
+        "() => { const b = [...document.querySelectorAll('div.dlovr-network text')].filter("
+        "(t) => !t.classList.contains('nid')).map((t) => t.getBoundingClientRect());"
+        " const o = (p, q) => p.left < q.right - 1 && q.left < p.right - 1 && p.top < q.bottom - 1"
+        " && q.top < p.bottom - 1; let n = 0;"
+        " b.forEach((p, i) => b.slice(0, i).forEach((q) => { n += o(p, q); })); return n; }"
+    )
+    assert clash == 0, clash
     width = lambda: page.evaluate(  # noqa: E731
         "() => document.querySelector('div.dlovr-network svg').getBoundingClientRect().width"
     )
