@@ -179,6 +179,12 @@ def band_boxes(page) -> list[tuple[float, float]]:
     )
 
 
+def contact_force_shown(demo: DemoServer) -> float:
+    """The panel's *Contact normal force (sum)* (N), as shown."""
+    text = demo.state_panel.markdown.content
+    return float(text.split("Contact normal force (sum):**")[1].split("N")[0])
+
+
 def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServer, page):
     from dlovr.model.discrete import Stability
     from dlovr.ui.timeline import axis_end
@@ -189,6 +195,8 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
     wait_for(lambda: len(demo.session.timeline.bands) >= 2, timeout=20, what="a second situation")
     faces = demo.viewport.faces
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
+    # the cable on the table: the contact normal force is not 0.00 N (the issue's reading)
+    wait_for(lambda: contact_force_shown(demo) > 0.01, timeout=5, what="the contact force on the table")
     page.locator('.dlovr-timeline > div[data-situation="1"]').wait_for(timeout=10_000)
     # the axis changes scale only when time reaches three quarters of it: hover with 5 s to spare
     wait_for(lambda: axis_end(demo.status()["t"] + 5.0) == axis_end(demo.status()["t"]), timeout=20,
