@@ -32,7 +32,7 @@ through the pivot."""
 KEY_HELP = (
     ("J / L", "x"), ("I / K", "y"), ("U / O", "z"), ("T / G", "turn about x"), ("Y / H", "turn about y"),
     ("N / M", "turn about z (yaw)"), ("R", "start / stop recording"), ("P", "pause / resume"),
-    ("arrows, W/A/S/D/Q/E", "the camera (viser)"),
+    ("W/S, A/D, Q/E", "fly the camera (scaled to the scene)"), ("arrows", "turn the camera"),
 )
 """The keys, as the page's help lists them."""
 
