@@ -387,8 +387,10 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
     wait_for(lambda: the_client(demo).client_id in demo.viewport.following, timeout=5, what="following")
     look0 = np.asarray(cam.look_at, dtype=float)
     p, q = demo.target()
+    g0 = float(demo.status()["gripper_pos"][0])
     demo.set_target(p + np.array([0.05, 0.0, 0.0]), q)
-    wait_for(lambda: np.asarray(cam.look_at, dtype=float)[0] > look0[0] + 0.04, timeout=5,
+    wait_for(lambda: demo.status()["gripper_pos"][0] > g0 + 0.04, timeout=20, what="the gripper to move")
+    wait_for(lambda: np.asarray(cam.look_at, dtype=float)[0] > look0[0] + 0.035, timeout=5,
              what="the camera following the gripper")
     page.get_by_role("button", name="top", exact=True).click()  # another preset: no longer following
     wait_for(lambda: not demo.viewport.following, timeout=5, what="the follow ended")
