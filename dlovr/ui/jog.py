@@ -131,7 +131,9 @@ class HeldKeys:
             page_t = None
         if page_t is not None and not math.isfinite(page_t):
             page_t = None  # a client's message is untrusted: no NaN or infinite time reaches the motion
-        pressed = sorted(keys - set(self.down))
+        # a key let go for want of reports (a busy server or page) but still held is not pressed anew:
+        # no second step, and its release is still measured from the page's first press
+        pressed = sorted(keys - set(self.down) - set(self._page_down))
         fix: dict[str, float] = {}
         for k in (set(self.down) | set(self._page_down)) - keys:
             t0 = self._page_down.pop(k, None)
