@@ -235,6 +235,10 @@ def hover_until(page, locator, pred, what: str, timeout: float = 10.0, *, click:
     moves the mouse off and onto the element's place, as a person's hand would."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
+        # the timeline mid-panel, as a person scrolls to it (a checkbox below may have scrolled it under
+        # the panel's header); the page's own query: the bar is drawn anew every second
+        page.evaluate("() => { const t = document.querySelector('.dlovr-timeline');"
+                      " if (t) t.scrollIntoView({block: 'center'}); }")
         box = locator.bounding_box()
         if box is not None:
             page.mouse.move(5, 300)

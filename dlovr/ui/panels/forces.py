@@ -31,6 +31,11 @@ if TYPE_CHECKING:
     from viser import uplot
 
 
+READOUT_CSS = ".uplot .u-legend .u-value{display:inline-block;min-width:9ch;white-space:nowrap}"
+"""The read-out's values keep their width as they change: the panel below the plot (the timeline)
+does not move under the mouse."""
+
+
 def _series(points: bool) -> tuple[uplot.Series, ...]:
     out: list[uplot.Series] = [{"label": SERIES_LABELS[0]}]
     for label, color in zip(SERIES_LABELS[1:], SERIES_COLORS[1:], strict=True):
@@ -86,7 +91,8 @@ class ForcePanel:
             )
             self.caption = gui.add_markdown("")
             js = escape(readout_js(), quote=True)  # the legend's read-out (forces.READOUT_JS)
-            gui.add_html(f'<img alt="" src="data:," style="display:none" onerror="{js}">')
+            img = f'<img alt="" src="data:," style="display:none" onerror="{js}">'
+            gui.add_html(f"<style>{READOUT_CSS}</style>{img}")
 
     def show_live(self) -> None:
         """The last seconds of the live simulation (the server calls this at ``PANEL_HZ``)."""
