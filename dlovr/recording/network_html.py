@@ -98,7 +98,82 @@ def _edge_title(e: Edge) -> str:
     )
 
 
-def _svg(net: Network, plan_edges: set[str]) -> str:
+Box = tuple[float, float, float, float]
+"""A text's box on the drawing (px): left, top, right, bottom."""
+
+CHAR_W = 0.6
+"""A character's width as a fraction of the font size (an estimate for placing the labels)."""
+
+WRAP = 24
+"""The longest line of a node's label (characters); a longer contact is broken after a comma."""
+
+
+def _overlaps(a: Box, b: Box) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def _wrap(text: str, width: int = WRAP) -> list[str]:
+    """``text`` in lines of at most ``width`` characters, broken after commas and ``&`` (a longer
+    piece whole)."""
+    lines, line = [], ""
+    for piece in text.replace(",", ",\0").replace("&", "&\0").split("\0"):
+        if line and len(line) + len(piece) > width:
+            lines.append(line)
+            line = ""
+        line += piece
+    return [*lines, line]
+
+
+def _shape(situation: str) -> str:
+    """A situation without its face names (``V/G&E/N&E/F&V/N``): what tells apart two nodes whose
+    principal contacts read alike."""
+    parts = [part.split("[")[0].strip() for part in situation.split("&")]
+    return "&".join(parts)
+
+
+def _differing(situation: str, others: list[str]) -> str:
+    """The contacts of ``situation`` that differ from those at the same place in ``others`` (all of
+    them when the counts differ), joined by ``&``."""
+    parts = [x.strip() for x in situation.split("&")]
+    split = [[x.strip() for x in o.split("&")] for o in others]
+    if any(len(o) != len(parts) for o in split):
+        return situation
+    return " & ".join(x for k, x in enumerate(parts) if any(o[k] != x for o in split))
+
+
+def node_labels(net: Network) -> dict[str, list[str]]:
+    """Each node's label lines: its principal contacts (``free`` when none), wrapped; nodes whose
+    lines would read alike get their situation's shape (:func:`_shape`) added, and the contacts where
+    their situations differ when that is alike too, so that no two nodes carry the same label."""
+    lines = {n.id: [x for c in (n.principal or ("free",)) for x in _wrap(c)] for n in net.nodes}
+    sit = {n.id: n.situation for n in net.nodes}
+    for extra in (
+        lambda nid, ids: _wrap(_shape(sit[nid])),
+        lambda nid, ids: _wrap(_differing(sit[nid], [sit[i] for i in ids if i != nid])),
+    ):
+        seen: dict[tuple[str, ...], list[str]] = {}
+        for n in net.nodes:
+            seen.setdefault(tuple(lines[n.id]), []).append(n.id)
+        for ids in seen.values():
+            if len(ids) > 1:
+                for nid in ids:
+                    lines[nid] = lines[nid] + extra(nid, ids)
+    return lines
+
+
+def _text_box(x: float, baseline: float, text: str, px: float) -> Box:
+    w = CHAR_W * px * len(text) + 4.0  # with a little room around
+    return (x - w / 2, baseline - 0.85 * px, x + w / 2, baseline + 0.3 * px)
+
+
+def _place(candidates: list[list[Box]], taken: list[Box]) -> int:
+    """The first candidate (a set of boxes) that overlaps none of ``taken``, else the one that overlaps
+    the fewest."""
+    counts = [sum(_overlaps(b, t) for b in cand for t in taken) for cand in candidates]
+    return counts.index(min(counts))
+
+
+def _svg(net: Network, plan_edges: set[str], text_px: float = 11.0) -> str:
     pos = layout(net)
     top = min(y for _, y in pos.values()) - 50.0
 
@@ -106,10 +181,13 @@ def _svg(net: Network, plan_edges: set[str]) -> str:
         return pos[e.source][0] - pos[e.target][0] > 1.5 * DX
 
     curves = {e.id: _edge_path(pos[e.source], pos[e.target], top if back(e) else None) for e in net.edges}
-    xs = [x for x, _ in pos.values()] + [m[0] for _, m in curves.values()]
-    ys = [y for _, y in pos.values()] + [m[1] for _, m in curves.values()]
-    x0, y0 = min(min(xs) - MARGIN, 0.0), min(min(ys) - 40.0, 0.0)
-    width, height = max(xs) + MARGIN + 120 - x0, max(ys) + 60 - y0
+    taken: list[Box] = [(x - R - 3, y - R - 3, x + R + 3, y + R + 3) for x, y in pos.values()]
+    nodes = _node_texts(net, pos, text_px, taken)
+    edges = _edge_texts(net, curves, 0.9 * text_px, taken)
+    x0 = min(min(b[0] for b in taken) - 20.0, 0.0)
+    y0 = min(min(b[1] for b in taken) - 20.0, 0.0)
+    width = max(max(b[2] for b in taken), max(x for x, _ in pos.values()) + MARGIN) + 20.0 - x0
+    height = max(b[3] for b in taken) + 20.0 - y0
     out = [
         f'<svg id="network" xmlns="http://www.w3.org/2000/svg" width="{width:.0f}" height="{height:.0f}" '
         f'viewBox="{x0:.0f} {y0:.0f} {width:.0f} {height:.0f}" role="img" aria-label="transition network">',
@@ -123,7 +201,7 @@ def _svg(net: Network, plan_edges: set[str]) -> str:
         )
     out.append("</defs>")
     for e in net.edges:
-        d, (mx, my) = curves[e.id]
+        d = curves[e.id][0]
         color, dash = RISK_STYLE[e.risk]
         width_px = 1.2 + 6.0 * e.probability
         out.append(f'<g class="edge risk-{e.risk}" data-edge="{escape(e.id)}">')
@@ -138,10 +216,7 @@ def _svg(net: Network, plan_edges: set[str]) -> str:
             f'<path d="{d}" fill="none" stroke="{color}" stroke-width="{width_px:.1f}"{dash_attr} '
             f'marker-end="url(#arrow-{e.risk})"/>'
         )
-        out.append(
-            f'<text class="elabel" x="{mx:.1f}" y="{my - 4:.1f}">{escape(e.label)} ×{e.count} · '
-            f"{e.probability:.2f}</text></g>"
-        )
+        out.append(f"{edges[e.id]}</g>")
     for n in net.nodes:
         x, y = pos[n.id]
         fill = STABILITY_COLORS[n.stability]
@@ -157,19 +232,60 @@ def _svg(net: Network, plan_edges: set[str]) -> str:
             f'<circle cx="{x:.1f}" cy="{y:.1f}" r="{R:.1f}" fill="{fill}" stroke="#000" '
             f'stroke-width="{stroke}"/>'
         )
-        out.append(f'<text class="nid" x="{x:.1f}" y="{y + 4:.1f}">{n.id}</text>')
-        lines = list(n.principal) or ["free"]
-        above = round((x - MARGIN) / DX) % 2 == 1  # labels of odd layers above: neighbours do not overlap
-        ty0 = y - R - 8 - 12 * (len(lines) - 1) if above else y + R + 14
-        for k, line in enumerate(lines):
-            out.append(f'<text class="nlabel" x="{x:.1f}" y="{ty0 + 12 * k:.1f}">{escape(line)}</text>')
-        role = "start" if n.id == net.start else "goal" if n.id == net.goal else ""
-        if role:
-            ry = ty0 - 14 if above else y - R - 9
-            out.append(f'<text class="role" x="{x:.1f}" y="{ry:.1f}">{role}</text>')
-        out.append("</g>")
+        out.append(f'<text class="nid" x="{x:.1f}" y="{y + 4:.1f}">{n.id}</text>{nodes[n.id]}</g>')
     out.append("</svg>")
     return "\n".join(out)
+
+
+def _node_texts(net: Network, pos: dict[str, tuple[float, float]], px: float, taken: list[Box]) -> dict[
+    str, str
+]:
+    """Each node's label (and its role, start or goal, above it) as SVG text, placed below or above
+    its circle (above on odd layers, so that neighbours alternate) where it overlaps nothing placed
+    before (``taken``: boxes, extended with the labels placed)."""
+    labels = node_labels(net)
+    lh = 1.15 * px
+    out = {}
+    for n in net.nodes:
+        x, y = pos[n.id]
+        role = "start" if n.id == net.start else "goal" if n.id == net.goal else ""
+        lines = [("role", role)] * bool(role) + [("nlabel", t) for t in labels[n.id]]
+        below = [y + R + 6 + 0.8 * px + k * lh for k in range(len(lines))]
+        above = [b - (below[-1] - below[0]) - 2 * R - 12 - 0.8 * px - 0.25 * px for b in below]
+        ys = [above, below] if round((x - MARGIN) / DX) % 2 == 1 else [below, above]
+        sides = [(x, side) for side in ys]
+        half = CHAR_W * px * max(len(t) for _, t in lines) / 2 + R + 6  # beside the circle, at mid-height
+        mid = [y + 0.3 * px + (k - (len(lines) - 1) / 2) * lh for k in range(len(lines))]
+        sides += [(x + half, mid), (x - half, mid)]
+        boxes = [[_text_box(sx, b, t, px) for b, (_, t) in zip(ys_, lines, strict=True)] for sx, ys_ in sides]
+        k = _place(boxes, taken)
+        taken.extend(boxes[k])
+        sx = sides[k][0]
+        out[n.id] = "".join(
+            f'<text class="{cls}" x="{sx:.1f}" y="{b:.1f}">{escape(t)}</text>'
+            for b, (cls, t) in zip(sides[k][1], lines, strict=True)
+        )
+    return out
+
+
+def _edge_texts(
+    net: Network, curves: dict[str, tuple[str, tuple[float, float]]], px: float, taken: list[Box]
+) -> dict[str, str]:
+    """Each edge's label (class ×count · probability) as SVG text at the middle of its curve, moved
+    up or down (by up to 4 lines) to overlap no circle and no label placed before."""
+    out = {}
+    for e in net.edges:
+        mx, my = curves[e.id][1]
+        text = f"{e.label} ×{e.count} · {e.probability:.2f}"
+        w = CHAR_W * px * len(text)
+        shifts = [(0.0, 0.0)] + [(0.0, s * k * 1.1 * px) for k in range(1, 7) for s in (-1.0, 1.0)]
+        shifts += [(s * 0.6 * w, dy) for dy in (0.0, -1.1 * px, 1.1 * px) for s in (-1.0, 1.0)]
+        boxes = [[_text_box(mx + dx, my - 4 + dy, text, px)] for dx, dy in shifts]
+        k = _place(boxes, taken)
+        taken.extend(boxes[k])
+        x, y = mx + shifts[k][0], my - 4 + shifts[k][1]
+        out[e.id] = f'<text class="elabel" x="{x:.1f}" y="{y:.1f}">{escape(text)}</text>'
+    return out
 
 
 def _legend() -> str:
@@ -221,7 +337,7 @@ body { font-family: sans-serif; margin: 1em; color: #222; }
 #network text { font-size: 11px; text-anchor: middle; }
 #network .nid { font-size: 10px; font-weight: bold; }
 #network .role { font-weight: bold; }
-#network .elabel { fill: #333; font-size: 10px; }
+#network .elabel { fill: #333; font-size: 10px; paint-order: stroke; stroke: #fff; stroke-width: 3px; }
 #network g.edge:hover path { stroke-opacity: 0.6; }
 #network g.node:hover circle { stroke: #1f77b4; }
 #legend { margin: 0.5em 0; line-height: 1.7; }
@@ -252,7 +368,9 @@ def network_html(net: Network, program: NetworkProgram | None = None, title: str
     )
 
 
-def network_svg(net: Network, plan_edges: set[str] | None = None) -> str:
+def network_svg(net: Network, plan_edges: set[str] | None = None, text_px: float = 11.0) -> str:
     """The drawing alone (inline SVG, ``id="network"``; style it with :data:`CSS`): one
-    ``g.node[data-node]`` per node, one ``g.edge[data-edge]`` per edge (used by the browser UI)."""
-    return _svg(net, set(plan_edges or ()))
+    ``g.node[data-node]`` per node, one ``g.edge[data-edge]`` per edge (used by the browser UI).
+    The labels are placed for node text ``text_px`` high and edge text 0.9 of that (the browser UI
+    draws the drawing scaled down, its text larger)."""
+    return _svg(net, set(plan_edges or ()), text_px)

@@ -136,3 +136,36 @@ def signal_arrays(x: np.ndarray, trace: ForceTrace | None) -> tuple[np.ndarray, 
     inside = (x >= t[0]) & (x <= t[-1])
     sig = np.where(inside, np.interp(x, t, s), MARK_LOW)
     return sig, np.where(inside, 1.0, MARK_LOW)
+
+
+READOUT_JS = """(function(){if(window.__dlovrReadout)return;window.__dlovrReadout=1;
+function last(u){return Math.max(0,u.data[0].length-1);}
+function fmt(u,si,v,idx){if(idx==null){idx=last(u);v=u.data[si][idx];}if(v==null||!isFinite(v))return '-';
+var l=u.series[si].label;if(si==0)return v.toFixed(2)+' s';
+if(l==='transition')return v>=MARK?'here':'-';
+if(l==='detector')return v<0?'off':v.toFixed(2);if(l==='threshold')return v<0?'-':v.toFixed(0);
+return v.toFixed(3)+' N';}
+function patch(u){if(u.__dlovr)return;u.__dlovr=1;u.series.forEach(function(s,i){
+s.value=function(uu,v,si,idx){return fmt(uu,si,v,idx);};});
+u.hooks.setData=(u.hooks.setData||[]).concat([function(uu){var t=performance.now();
+if(uu.cursor.idx==null&&t-(uu.__dlovrAt||0)>=LEGEND_MS){uu.__dlovrAt=t;uu.setLegend({idx:null});}}]);
+u.setLegend({idx:u.cursor.idx==null?null:u.cursor.idx});}
+setInterval(function(){var tp=(window.__viserTestpoints||{}).uplots||{};
+Object.keys(tp).forEach(function(k){try{patch(tp[k].chart);}catch(e){}});},300);})()"""
+"""The force plot's read-out on the page: the legend under the plot shows the values at the hovered
+time (``12.34 s``, forces in N to the mN, ``here`` on a transition's mark, the detector signal or
+``off``) and, with the mouse off the plot, the latest sample's (redrawn every :data:`LEGEND_MS`),
+instead of uPlot's ``--``. uPlot's
+options cross to the page as JSON, which carries no formatting functions: the page installs them on
+every chart (viser registers each uPlot chart in ``window.__viserTestpoints.uplots``), looking again
+every 0.3 s for a chart drawn anew."""
+
+
+LEGEND_MS = 500
+"""How often the read-out of the latest values is redrawn with the mouse off the plot (ms): the page
+has other work (a hovered read-out follows every update)."""
+
+
+def readout_js() -> str:
+    """:data:`READOUT_JS` with the transition mark's value and :data:`LEGEND_MS`."""
+    return READOUT_JS.replace("MARK", repr(MARK_HIGH)).replace("LEGEND_MS", str(LEGEND_MS)).replace("\n", "")

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dlovr.transforms import quat_mul, quat_rotate, rotvec_to_quat
+from dlovr.transforms import quat_mul, quat_rotate, quat_to_rotvec, rotvec_to_quat
 
 JOG_KEYS: dict[str, tuple[int, float]] = {
     "J": (0, -1.0), "L": (0, 1.0),  # x
@@ -32,7 +32,7 @@ through the pivot."""
 KEY_HELP = (
     ("J / L", "x"), ("I / K", "y"), ("U / O", "z"), ("T / G", "turn about x"), ("Y / H", "turn about y"),
     ("N / M", "turn about z (yaw)"), ("R", "start / stop recording"), ("P", "pause / resume"),
-    ("arrows, W/A/S/D/Q/E", "the camera (viser)"),
+    ("W/S, A/D, Q/E", "fly the camera (scaled to the scene)"), ("arrows", "turn the camera"),
 )
 """The keys, as the page's help lists them."""
 
@@ -86,6 +86,22 @@ def turn_about(pos: np.ndarray, quat: np.ndarray, rotvec: np.ndarray, pivot: np.
     return p, q / np.linalg.norm(q)
 
 
+def gizmo_target(
+    start_pos: np.ndarray, start_quat: np.ndarray, pos: np.ndarray, quat: np.ndarray, pivot: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The gripper target (m, world; wxyz) for a gizmo dragged from ``start_pos``, ``start_quat`` to
+    ``pos``, ``quat`` with turns about ``pivot`` (m, world, fixed at the drag's start; None: about the
+    gripper, i.e. the gizmo's pose itself): the gizmo's turn since the drag's start is made about the
+    pivot, its move added."""
+    if pivot is None:
+        return np.asarray(pos, dtype=float), np.asarray(quat, dtype=float)
+    q0 = np.asarray(start_quat, dtype=float)
+    conj = q0 * np.array([1.0, -1.0, -1.0, -1.0]) / float(q0 @ q0)
+    rel = quat_mul(np.asarray(quat, dtype=float), conj)  # the turn since the start (world axes)
+    p, q = turn_about(start_pos, q0, np.asarray(quat_to_rotvec(rel)), pivot)
+    return p + (np.asarray(pos, dtype=float) - np.asarray(start_pos, dtype=float)), q
+
+
 class HeldKeys:
     """The jog keys held down on the page. :meth:`report` takes what the page says is held (and the
     page's clock) and returns the keys just pressed (a step each) and, for the keys released, how many
@@ -115,7 +131,9 @@ class HeldKeys:
             page_t = None
         if page_t is not None and not math.isfinite(page_t):
             page_t = None  # a client's message is untrusted: no NaN or infinite time reaches the motion
-        pressed = sorted(keys - set(self.down))
+        # a key let go for want of reports (a busy server or page) but still held is not pressed anew:
+        # no second step, and its release is still measured from the page's first press
+        pressed = sorted(keys - set(self.down) - set(self._page_down))
         fix: dict[str, float] = {}
         for k in (set(self.down) | set(self._page_down)) - keys:
             t0 = self._page_down.pop(k, None)

@@ -19,12 +19,15 @@ from dlovr.recording import RecordingError
 from dlovr.recording.network_html import CSS, network_svg
 
 LIVE_COLOR = "#1f77b4"
-FIT_CSS = """
-#network { height: auto; max-width: none; }
-#network text { font-size: 20px; }
-#network .nid, #network .elabel { font-size: 17px; }
+TEXT_PX = 20.0
+"""The drawing's node text (px, before the scaling; edge text 0.9 of it): enlarged to stay readable
+when the drawing is scaled down, the labels placed for that size (no two overlap)."""
+FIT_CSS = f"""
+#network {{ height: auto; max-width: none; }}
+#network text {{ font-size: {TEXT_PX:g}px; }}
+#network .nid {{ font-size: 17px; }}
+#network .elabel {{ font-size: {0.9 * TEXT_PX:g}px; }}
 """
-"""The drawing's text is enlarged to stay readable when the drawing is scaled down."""
 
 ZOOM = 0.5
 """The drawing's scale in the panel at first (its text 10 px high): a long network scrolls sideways
@@ -102,7 +105,7 @@ def network_view_html(net: Network, live: str | None, situation: str = "", note:
         f"{len(net.nodes)} situations, {len(net.edges)} transitions, start {net.start}, goal {net.goal}"
         f"{' (' + escape(note) + ')' if note else ''}<br>{where}"
     )
-    svg = network_svg(net)
+    svg = network_svg(net, text_px=TEXT_PX)
     sized = svg.replace("<svg ", f'<svg style="width:{ZOOM * _svg_width(svg):.0f}px" ', 1)
     # the zoom a person chose survives the redraws (the live node moves): applied as the image loads
     keep = _ZOOM_JS.format(f="1").replace(_SVG, "this.parentNode.querySelector('svg')")

@@ -36,6 +36,7 @@ from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
 from dlovr.ui.app import View
 from dlovr.ui.drawing import contact_arrows, point_classes, point_colors, situation_faces
+from dlovr.ui.framing import camera_key_speed
 from dlovr.ui.guard import Reporter, checked_pose, guard_incoming
 from dlovr.ui.loop import RealtimeLoop, TargetCommand
 from dlovr.ui.panels import (
@@ -141,6 +142,7 @@ class DemoServer:
         self.simulation_panel = SimulationPanel(self, self.viewport, self.timeline_panel)
         self.network_panel = NetworkPanel(self)
         self.keys = KeysPanel(self, self.simulation_panel, self.status_panel)
+        self.viewport.pivot = self.keys.pivot_point  # gizmo turns about the pivot, as the keys' turns
 
     # -- lifecycle ----------------------------------------------------------------------------------
 
@@ -179,7 +181,7 @@ class DemoServer:
     def stop(self) -> Path | None:
         """Stop the simulation thread, finish any recording (returned) and stop the server."""
         self.loop.stop()
-        self.timeline_panel.cancel_resim()
+        self.timeline_panel.stop()
         self.run_panel.cancel(None)
         self.loop.join(timeout=10)
         path = self.session.stop_recording()
@@ -332,6 +334,7 @@ class DemoServer:
                 view.body.wxyz = cast(Quat, tuple(map(float, rec.gripper_quat)))
                 if text is not None:
                     self.state_panel.show_live(text)
+            self.viewport.follow(np.asarray(rec.gripper_pos, dtype=float))
             srv.flush()
             self.publish_count += 1
         self.keys.tick()
@@ -380,6 +383,7 @@ class DemoServer:
         with self.draw_lock:
             self.viewport.build()
             self.timeline_panel.update(force=True)
+        self.status_panel.camera_speed = camera_key_speed(*self.viewport.scene_box())
 
     # -- clients ------------------------------------------------------------------------------------
 
@@ -394,7 +398,7 @@ class DemoServer:
         """A tab went away: forget its camera, its hover and its keys; hold the gripper if it left
         mid-drag."""
         self.keys.held.clear()
-        self.viewport.camera_ready.pop(client.client_id, None)
+        self.viewport.forget(client.client_id)
         if self.viewport.faces.pinned is not None and not self.loop.stopping:
             with self.draw_lock:  # it may have gone away while hovering a situation
                 self.viewport.faces.pin(None)

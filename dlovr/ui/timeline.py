@@ -103,24 +103,41 @@ class Timeline:
                 return b
         return self.bands[-1] if self.bands and t >= self.bands[-1].start else None
 
-    def html(self, pick_uuid: str | None = None, axis_end: float | None = None) -> str:
+    def html(
+        self,
+        pick_uuid: str | None = None,
+        axis_end: float | None = None,
+        window: tuple[float, float] | None = None,
+    ) -> str:
         """Coloured bands, one per kept situation, transitions marked with their classes, and a list
         of the last situations.
 
         With ``pick_uuid`` (a text input of the page), hovering a band or a row sends ``h<i>`` to that
         input, leaving it sends an empty value, and clicking sends ``c<i>:<ms>`` (``i``: the index of
-        the situation in :attr:`bands`); the server highlights its faces or scrubs to it.
+        the situation in :attr:`bands`); the server highlights its faces or scrubs to it. ``axis_end``
+        (s) ends the axis after the last band (the live timeline's room to grow); ``window`` (s, a
+        zoomed view) draws only the bands within it, cut at its ends, each in its own colour still.
         """
         t0, t1 = self.start, self.end
-        span = max((t1 if axis_end is None else max(axis_end, t1)) - t0, 1e-9)
+        lo, hi = window if window is not None else (t0, t1 if axis_end is None else max(axis_end, t1))
+        span = max(hi - lo, 1e-9)
         colors: dict[str, str] = {}
         cells = []
+        drawn = lo  # the bar is drawn up to this time
         for i, b in enumerate(self.bands):
             c = colors.setdefault(b.situation, BAND_COLORS[len(colors) % len(BAND_COLORS)])
-            w = 100.0 * (b.end - b.start) / span
+            start, end = b.start, b.end
+            if window is not None:
+                if b.end < lo or b.start > hi:
+                    continue
+                start, end = max(b.start, lo), min(b.end, hi)
+                if start > drawn + 1e-9:  # a gap before it (the window starts before the first band)
+                    cells.append(f'<div style="width:{100.0 * (start - drawn) / span:.2f}%"></div>')
+            drawn = end
+            w = 100.0 * (end - start) / span
             label = format_classes(b.classes) if b.classes else ""
             tip = html.escape(f"{b.start:.2f}-{b.end:.2f} s  {label}  {b.situation}")
-            border = "border-left:2px solid #000;" if b.classes else ""
+            border = "border-left:2px solid #000;" if b.classes and start == b.start else ""
             cells.append(
                 f'<div title="{tip}" data-situation="{i}" '
                 f'style="width:{w:.2f}%;min-width:{MIN_BAND_PX}px;background:{c};{border}'
@@ -138,11 +155,69 @@ class Timeline:
             for k, b in enumerate(self.bands[first:])
         )
         src = html.escape(self.source)
+        shown = f", zoomed to {lo:.2f}-{hi:.2f} s" if window is not None else ""
         return (
             f'<div class="dlovr-pick"{_pick_handlers(pick_uuid)} style="font-size:11px">{bar}'
-            f"<div>{src}: {len(self.bands)} situations, "
-            f"{t0:.2f}-{t1:.2f} s</div><ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
+            f"<div>{src}: {len(self.bands)} situations, {t0:.2f}-{t1:.2f} s{shown}</div>"
+            f"<ul style='margin:2px 0;padding-left:14px'>{rows}</ul></div>"
         )
+
+
+ZOOM_MIN_S = 0.2
+"""The narrowest zoomed window of the timeline (s)."""
+
+
+def zoom_window(
+    window: tuple[float, float] | None, full: tuple[float, float], at: float, factor: float
+) -> tuple[float, float] | None:
+    """The timeline's window (s) after zooming by ``factor`` (< 1: in) about the moment ``at`` (s),
+    inside ``full`` (the whole timeline); None when it covers the whole timeline again. The moment
+    keeps its place in the window (as a mouse-wheel zoom keeps the point under the mouse)."""
+    lo, hi = window if window is not None else full
+    span = max(hi - lo, 1e-9)
+    at = min(max(at, lo), hi)
+    width = max(span * factor, ZOOM_MIN_S)
+    if width >= full[1] - full[0]:
+        return None
+    frac = (at - lo) / span
+    return _inside(at - frac * width, width, full)
+
+
+def pan_window(window: tuple[float, float] | None, full: tuple[float, float], by: float) -> tuple[
+    float, float
+] | None:
+    """The window moved by ``by`` of its width (-0.5: half a window earlier), kept inside ``full``."""
+    if window is None:
+        return None
+    width = window[1] - window[0]
+    return _inside(window[0] + by * width, width, full)
+
+
+def window_showing(window: tuple[float, float] | None, full: tuple[float, float], t: float) -> tuple[
+    float, float
+] | None:
+    """The window, moved on (or back) to show the moment ``t`` (s) when it is outside (a playback
+    reaching the window's end turns the page)."""
+    if window is None or window[0] <= t <= window[1]:
+        return window
+    width = window[1] - window[0]
+    return _inside(t if t > window[1] else t - width, width, full)
+
+
+def _inside(lo: float, width: float, full: tuple[float, float]) -> tuple[float, float]:
+    lo = min(max(lo, full[0]), full[1] - width)
+    return (lo, lo + width)
+
+
+def step_time(tl: Timeline, t: float, direction: int) -> float:
+    """The time (s) of the next (``direction`` 1) or the previous (-1) cable snapshot of ``tl`` after
+    or before ``t`` (a recording's frame); ``t`` itself when there is none."""
+    ts = [s.t for s in tl.snapshots]
+    if direction > 0:
+        later = [x for x in ts if x > t + 1e-6]
+        return min(later, default=t)
+    earlier = [x for x in ts if x < t - 1e-6]
+    return max(earlier, default=t)
 
 
 PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0;

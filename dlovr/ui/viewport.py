@@ -18,14 +18,19 @@ from dlovr.ui.app import App
 from dlovr.ui.drawing import COLOR_FREE, point_classes, point_colors, segment_transforms
 from dlovr.ui.framing import FOV, frame_box
 from dlovr.ui.highlight import FaceHighlighter
+from dlovr.ui.jog import gizmo_target
 
 if TYPE_CHECKING:
     import viser
 
 
-CAMERA_PRESETS = ("top", "front", "side", "gripper", "contacts")
-"""The camera presets: looking down, from -y, from +x at the workspace; at the gripper; at the contacts
-(the cable's tip when there is none), each from the framing's distance."""
+CAMERA_PRESETS = ("top", "front", "side", "gripper", "follow", "contacts")
+"""The camera presets: looking down, from -y, from +x at the workspace; at the gripper; at the gripper
+and following it as it moves (until another preset or *Frame scene*); at the contacts (the cable's tip
+when there is none), each from the framing's distance."""
+
+FOLLOW_MIN_M = 0.0005
+"""The least gripper motion (m) that moves a following camera (a still gripper sends nothing)."""
 
 _PRESET_DIRS = {"top": (0.0, -0.02, 1.0), "front": (0.0, -1.0, 0.25), "side": (1.0, 0.0, 0.25)}
 
@@ -50,6 +55,11 @@ class Viewport:
         self.arrows: Any = None
         # clients whose camera has reported its state -> (aspect, position) of the last framing
         self.camera_ready: dict[int, tuple[float, np.ndarray]] = {}
+        # the point gizmo turns are about (m, world; None: the gripper): the simulation panel's pivot
+        self.pivot: Callable[[], np.ndarray | None] = lambda: None
+        self._drag_start: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None = None
+        # clients whose camera follows the gripper -> the gripper position it was last moved for (m)
+        self.following: dict[int, np.ndarray] = {}
         self.faces = FaceHighlighter(self._scene_api)
 
     def _scene_api(self) -> viser.SceneApi:
@@ -69,17 +79,25 @@ class Viewport:
         async def _(event: Any) -> None:
             if event.phase == "start" and event.client_id is not None:
                 self.dragging[event.client_id] = None
+                g = event.target  # a turn is about the pivot where it was at the drag's start
+                self._drag_start = (np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float),
+                                    self.pivot())
             elif event.phase == "end":
                 # viser sends a synthetic "end" just before the disconnect callbacks of a tab that
                 # goes away mid-drag: remember when, so the server's on_client_disconnect can tell
                 if event.client_id is not None:
                     self.dragging[event.client_id] = time.perf_counter()
+                start, self._drag_start = self._drag_start, None
+                if start is not None and start[2] is not None:
+                    app.move_gizmo(*app.target())  # turned about a pivot: the gizmo back on the gripper
                 return
             if event.phase == "update":
                 g = event.target
-                app.set_target(
-                    np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float), move_gizmo=False
-                )
+                pos, quat = np.array(g.position, dtype=float), np.array(g.wxyz, dtype=float)
+                start = self._drag_start
+                if start is not None and start[2] is not None:
+                    pos, quat = gizmo_target(start[0], start[1], pos, quat, start[2])
+                app.set_target(pos, quat, move_gizmo=False)
 
     def draw_cable(self, pts: np.ndarray, colors: np.ndarray, arrows: np.ndarray) -> None:
         """Move the cable to ``pts`` (world frame, m) with per-point ``colors``; ``arrows`` (k, 2, 3)."""
@@ -221,6 +239,7 @@ class Viewport:
             cam.position = cast(Vec3, tuple(map(float, pos)))
         clients = [client] if client is not None else list(srv.get_clients().values())
         for c in clients:
+            self.following.pop(c.client_id, None)
             if c.client_id not in self.camera_ready:
                 continue  # framed when its camera first reports (camera_update)
             cam = c.camera
@@ -245,12 +264,15 @@ class Viewport:
             cam = c.camera
             pos, look = frame_box(lo, hi, aspect=cam.aspect)
             dist = float(np.linalg.norm(pos - look))
+            self.following.pop(c.client_id, None)
             if name in _PRESET_DIRS:
                 d = np.asarray(_PRESET_DIRS[name], dtype=float)
             else:
                 d = np.asarray(cam.position, dtype=float) - np.asarray(cam.look_at, dtype=float)
                 look = self._focus(name)
                 dist *= 0.6
+                if name == "follow":
+                    self.following[c.client_id] = look.copy()
             d = d / max(float(np.linalg.norm(d)), 1e-9)
             with c.atomic():
                 cam.fov = FOV
@@ -263,10 +285,38 @@ class Viewport:
         with app.lock:
             rec, st = app.session.record, app.session.state
             pts = np.asarray(rec.points, dtype=float)
-            if name == "gripper":
+            if name in ("gripper", "follow"):
                 return np.asarray(rec.gripper_pos, dtype=float).copy()
             touched = [i for i, c in enumerate(point_classes(st, len(pts))) if c is not None]
         return pts[touched].mean(axis=0) if touched else pts[-1].copy()
+
+    def follow(self, gripper: np.ndarray) -> None:
+        """Move the cameras that follow the gripper (the *follow* preset) by the gripper's motion since
+        their last move, to ``gripper`` (m, world): they keep their view of it, turned as the person
+        turned them meanwhile."""
+        srv = self.app.server
+        if srv is None or not self.following:
+            return
+        clients = srv.get_clients()
+        for cid, last in list(self.following.items()):
+            c = clients.get(cid)
+            if c is None:
+                self.following.pop(cid, None)
+                continue
+            d = np.asarray(gripper, dtype=float) - last
+            if float(np.linalg.norm(d)) < FOLLOW_MIN_M:
+                continue
+            cam = c.camera
+            pos, look = np.asarray(cam.position, dtype=float) + d, np.asarray(cam.look_at, dtype=float) + d
+            with c.atomic():
+                cam.position = cast(Vec3, tuple(map(float, pos)))  # moves look_at along; set it after
+                cam.look_at = cast(Vec3, tuple(map(float, look)))
+            self.following[cid] = last + d
+
+    def forget(self, client_id: int) -> None:
+        """A tab went away: its camera is neither framed nor following any more."""
+        self.camera_ready.pop(client_id, None)
+        self.following.pop(client_id, None)
 
     def camera_update(self, client: Any) -> None:
         """A client's camera reported: frame it the first time, and again when its view changed shape

@@ -31,3 +31,26 @@ def test_the_live_node_is_ringed_and_named():
     assert page.count("data-node=") == len(net.nodes) + 2  # the nodes and the two CSS rules
     outside = network_view_html(net, None, "V/G & E/F[x.F1] & V/N")
     assert 'data-live=""' in outside and "outside the network" in outside
+
+
+def test_no_two_nodes_read_alike_and_no_two_labels_overlap():
+    import re
+    from html import unescape
+
+    from dlovr.recording.network_html import _overlaps, _text_box, node_labels
+    from dlovr.ui.network_view import TEXT_PX
+
+    for scene in ("table", "peg_in_hole"):
+        net, _ = scene_network(scene, [ROOT / "recordings"])
+        assert net is not None
+        labels = node_labels(net)
+        assert len({tuple(v) for v in labels.values()}) == len(net.nodes), labels  # table: n3, n4 alike
+        page = network_view_html(net, None)
+        pattern = r'<text class="(nlabel|role|elabel)" x="([-\d.]+)" y="([-\d.]+)">([^<]*)</text>'
+        texts = re.findall(pattern, page)
+        px = {"elabel": 0.9 * TEXT_PX, "nlabel": TEXT_PX, "role": TEXT_PX}
+        boxes = [_text_box(float(x), float(y), unescape(t), px[c]) for c, x, y, t in texts]
+        assert len(texts) >= len(net.nodes) + len(net.edges)
+        pairs = [(i, j) for i in range(len(boxes)) for j in range(i)]
+        clash = [(texts[i], texts[j]) for i, j in pairs if _overlaps(boxes[i], boxes[j])]
+        assert not clash, (scene, clash[:3])

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ui import drag, line_down, wait_for
-from test_ui_view import plot_data
+from test_ui import drag, line_down, send, wait_for
+from test_ui_view import plot_data, the_client
 
 from dlovr.ui import DemoServer
 
@@ -105,6 +105,15 @@ def test_the_network_of_peg_in_hole_is_readable_zoomable_and_opens_full_size(dem
         ".map((t) => t.getBoundingClientRect().height)"
     )
     assert heights and min(heights) >= 8.0, heights  # 1 px high before
+    # no two labels drawn over each other (edge labels overlapped, in the table's network too)
+    clash = page.evaluate(
+        "() => { const b = [...document.querySelectorAll('div.dlovr-network text')].filter("
+        "(t) => !t.classList.contains('nid')).map((t) => t.getBoundingClientRect());"
+        " const o = (p, q) => p.left < q.right - 1 && q.left < p.right - 1 && p.top < q.bottom - 1"
+        " && q.top < p.bottom - 1; let n = 0;"
+        " b.forEach((p, i) => b.slice(0, i).forEach((q) => { n += o(p, q); })); return n; }"
+    )
+    assert clash == 0, clash
     width = lambda: page.evaluate(  # noqa: E731
         "() => document.querySelector('div.dlovr-network svg').getBoundingClientRect().width"
     )
@@ -130,11 +139,34 @@ def test_reset_after_a_run_clears_the_contact_arrows_and_the_detector_signal(dem
     wait_for(lambda: "/contacts/vectors" in scene_nodes(page), timeout=30, what="a contact arrow")
     wait_for(lambda: bool((plot_data(page)[6] >= 0).any()), timeout=10, what="the detector signal")
     assert not runner.done
+    # hovering the plot reads its values out (uPlot's legend showed `--`): near its end, the run's
+    over = page.locator(".u-over").first
+    over.scroll_into_view_if_needed()
+    box = over.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + 0.97 * box["width"], box["y"] + box["height"] / 2)
+    wait_for(lambda: legend(page)["detector"][:1].isdigit(), timeout=5, what="the hovered detector value")
+    read = legend(page)
+    assert read["t [s]"].endswith(" s") and all(read[k].endswith(" N") for k in ("Fx", "Fy", "Fz", "|F|"))
     page.get_by_role("button", name="Reset", exact=True).click()
     wait_for(lambda: demo.session.runner is None and demo.run_panel.runner is None, what="the run to stop")
     wait_for(lambda: demo.status()["t"] > 1.0, timeout=10, what="the restarted simulation")
     wait_for(lambda: "/contacts/vectors" not in scene_nodes(page), timeout=5, what="the arrow removed")
     wait_for(lambda: bool((plot_data(page)[6] < 0).all()), timeout=5, what="no detector signal")
+    page.mouse.move(5, 300)  # off the plot: the latest values, not `--`
+    wait_for(lambda: legend(page)["detector"] == "off", timeout=5, what="the read-out without a run")
+    read = legend(page)
+    assert abs(float(read["t [s]"].split()[0]) - demo.status()["t"]) < 1.0, read
+    assert not any("--" in v for v in read.values()), read
+
+
+def legend(page) -> dict[str, str]:
+    """The force plot's read-out under it: series label -> value shown."""
+    return page.evaluate(
+        "() => Object.fromEntries([...document.querySelectorAll('.u-legend .u-series')]"
+        ".map((e) => [e.querySelector('.u-label').innerText.trim(),"
+        " e.querySelector('.u-value').innerText.trim()]))"
+    )
 
 
 # -- Broken 4: the live timeline holds still under the mouse ------------------------------------
@@ -147,6 +179,12 @@ def band_boxes(page) -> list[tuple[float, float]]:
     )
 
 
+def contact_force_shown(demo: DemoServer) -> float:
+    """The panel's *Contact normal force (sum)* (N), as shown."""
+    text = demo.state_panel.markdown.content
+    return float(text.split("Contact normal force (sum):**")[1].split("N")[0])
+
+
 def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServer, page):
     from dlovr.model.discrete import Stability
     from dlovr.ui.timeline import axis_end
@@ -157,6 +195,8 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
     wait_for(lambda: len(demo.session.timeline.bands) >= 2, timeout=20, what="a second situation")
     faces = demo.viewport.faces
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
+    # the cable on the table: the contact normal force is not 0.00 N (the issue's reading)
+    wait_for(lambda: contact_force_shown(demo) > 0.01, timeout=5, what="the contact force on the table")
     page.locator('.dlovr-timeline > div[data-situation="1"]').wait_for(timeout=10_000)
     # the axis changes scale only when time reaches three quarters of it: hover with 5 s to spare
     wait_for(lambda: axis_end(demo.status()["t"] + 5.0) == axis_end(demo.status()["t"]), timeout=20,
@@ -218,9 +258,28 @@ def test_a_scene_switch_and_an_opened_recording_leave_nothing_of_the_last_scene(
     assert page.locator("table.dlovr-program").count() == 1  # l_block's sample, not the recording's
     assert page.locator("tr[data-outcome]").count() == 0
 
-    demo.open_recording(path)  # a table recording while l_block runs live
+    tl = demo.open_recording(path)  # a table recording while l_block runs live
     wait_for(lambda: not scene_nodes(page).get("/gripper", True), timeout=5, what="the gizmo hidden")
     page.get_by_text("Viewing recording").first.wait_for(timeout=5_000)
+    # the recording's timeline: zoom in about the moment, step a frame, play at 2x, pan
+    panel = demo.timeline_panel
+    page.get_by_role("button", name="zoom in").click()
+    wait_for(lambda: panel.window is not None, timeout=5, what="the zoomed window")
+    page.get_by_text("zoomed to").first.wait_for(timeout=5_000)
+    assert panel.slider.max - panel.slider.min < 0.6 * (tl.end - tl.start) + 0.02
+    t0 = float(panel.slider.value)
+    page.get_by_role("button", name="step \u25b6").click()
+    wait_for(lambda: float(panel.slider.value) > t0, timeout=5, what="a step to the next frame")
+    assert float(panel.slider.value) - t0 < 0.1  # one frame (~30 Hz)
+    panel.speed_dd.value = "2x"
+    assert panel.speed == 2.0
+    page.get_by_role("button", name="\u25b6 play").click()
+    wait_for(lambda: panel.playing or float(panel.slider.value) >= tl.end - 0.02, timeout=5, what="play")
+    wait_for(lambda: float(panel.slider.value) >= tl.end - 0.02, timeout=10, what="playing to the end")
+    assert panel.window is not None and panel.window[1] >= tl.end - 0.02  # the window followed
+    wait_for(lambda: not panel.playing, timeout=5, what="the end of the playback")
+    page.get_by_role("button", name="\u25c0 pan").click()  # half a window back
+    wait_for(lambda: panel.window is not None and panel.window[1] < tl.end - 0.01, timeout=5, what="a pan")
     page.get_by_role("button", name="Back to live").click()
     wait_for(lambda: scene_nodes(page).get("/gripper", False), timeout=5, what="the gizmo back")
     assert page.get_by_text("Viewing recording").count() == 0
@@ -249,6 +308,31 @@ def test_the_essentials_are_on_the_first_screen_and_the_legend_explains(demo: De
     for words in ("V/G", "establishing", "instable", "free", "risky", "Timeline", "detector"):
         assert words in text, words
     page.get_by_text("Legend", exact=True).click()
+
+
+def test_the_timeline_zooms_pans_and_steps_through_its_frames():
+    from dlovr.ui.timeline import Band, Snapshot, Timeline, pan_window, step_time, window_showing, zoom_window
+
+    full = (0.0, 10.0)
+    w = zoom_window(None, full, 4.0, 0.5)
+    assert w is not None and np.allclose(w, (2.0, 7.0))  # the moment keeps its place
+    assert zoom_window(w, full, 4.0, 2.0) is None  # all of it again
+    assert np.allclose(zoom_window(None, full, 10.0, 0.5) or (), (5.0, 10.0))
+    assert np.allclose(pan_window((2.0, 7.0), full, 0.5) or (), (4.5, 9.5))
+    assert np.allclose(pan_window((4.5, 9.5), full, 0.5) or (), (5.0, 10.0))  # kept inside
+    assert pan_window(None, full, 0.5) is None
+    assert np.allclose(window_showing((0.0, 2.0), full, 2.5) or (), (2.5, 4.5))  # turns the page
+    tl = Timeline(source="r")
+    tl.bands += [Band(0.0, 4.0, "A", ()), Band(4.0, 10.0, "B", ("E",))]
+    z3 = np.zeros(3)
+    for t in (0.0, 0.5, 1.0):
+        tl.snapshots.append(Snapshot(t, np.zeros((2, 3)), np.zeros((2, 3)), z3, np.r_[1.0, z3], ""))
+    assert step_time(tl, 0.5, 1) == 1.0 and step_time(tl, 0.5, -1) == 0.0 and step_time(tl, 1.0, 1) == 1.0
+    html = tl.html(None, None, (5.0, 10.0))
+    bar = html.split('class="dlovr-timeline"')[1].split("</div><div>")[0]  # the bands, not the list
+    assert 'data-situation="0"' not in bar and 'data-situation="1"' in bar and "zoomed to 5.00-10.00" in html
+    assert "width:100.00%" in html and "border-left" not in html  # B cut at the window: no transition drawn
+    assert tl.html() == tl.html(None, None, None)
 
 
 def held_z(demo: DemoServer) -> float:
@@ -281,6 +365,55 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
     z1 = held_z(demo)
     time.sleep(0.3)
     assert held_z(demo) == z1  # released: it stops
+
+    # the camera keys fly at a speed scaled to the workspace (viser's 2 m/s crossed it in 0.5 s)
+    cam = the_client(demo).camera
+    lo, hi = demo.viewport.scene_box()
+    diag = float(np.linalg.norm(hi - lo))
+    c0 = np.asarray(cam.position, dtype=float)
+    flown = lambda: float(np.linalg.norm(np.asarray(cam.position, dtype=float) - c0))  # noqa: E731
+    page.keyboard.down("w")
+    t0 = time.monotonic()
+    try:
+        wait_for(lambda: flown() > 0.03 * diag, timeout=5, what="the camera to fly forward")
+    finally:
+        page.keyboard.up("w")
+    held = time.monotonic() - t0
+    time.sleep(0.3)  # the last report of the camera
+    # CAMERA_KEY_SPEED: 0.3 diagonals a second (the page may see the key late, and its release as late)
+    assert flown() < 0.6 * diag * held + 0.03 * diag, (flown(), diag, held)
+    # the "follow" preset: the camera moves with the gripper
+    page.get_by_role("button", name="follow", exact=True).click()
+    wait_for(lambda: the_client(demo).client_id in demo.viewport.following, timeout=5, what="following")
+    look0 = np.asarray(cam.look_at, dtype=float)
+    p, q = demo.target()
+    g0 = float(demo.status()["gripper_pos"][0])
+    demo.set_target(p + np.array([0.05, 0.0, 0.0]), q)
+    wait_for(lambda: demo.status()["gripper_pos"][0] > g0 + 0.04, timeout=20, what="the gripper to move")
+    cid = the_client(demo).client_id
+    # the camera moved by the gripper's motion (what the server sent; a busy page reports it back late)
+    wait_for(lambda: demo.viewport.following[cid][0] > look0[0] + 0.035, timeout=10,
+             what="the camera following the gripper")
+    page.get_by_role("button", name="top", exact=True).click()  # another preset: no longer following
+    wait_for(lambda: not demo.viewport.following, timeout=5, what="the follow ended")
+    # a gizmo turn about the cable's tip (the pivot chosen), as the keys turn: the tip's distance kept
+    demo.simulation_panel.pivot = "cable tip"
+    try:
+        tip = np.asarray(demo.session.record.points[-1], dtype=float)
+        p0, _ = demo.target()
+        half = np.radians(10.0) / 2
+        drag(page, [], end=False)  # start: the gizmo where the target is
+        send(page, "TransformControlsUpdateMessage", wxyz=[np.cos(half), np.sin(half), 0.0, 0.0],
+             position=[float(x) for x in demo.viewport.gizmo.position])
+        turned = lambda: abs(float(demo.target()[0][1]) - p0[1]) > 0.01  # noqa: E731
+        wait_for(turned, timeout=5, what="the turn about the tip")
+        send(page, "TransformControlsDragEndMessage")
+        p1 = demo.target()[0]
+        assert abs(np.linalg.norm(p1 - tip) - np.linalg.norm(p0 - tip)) < 1e-3  # turned about the tip
+        wait_for(lambda: np.allclose(demo.viewport.gizmo.position, p1, atol=1e-6), timeout=5,
+                 what="the gizmo back on the gripper")
+    finally:
+        demo.simulation_panel.pivot = "gripper"
 
 
 def test_recording_shows_a_red_dot_and_time_and_reset_asks_first(demo: DemoServer, page):
@@ -317,7 +450,7 @@ def test_status_warns_of_a_force_that_may_break_the_cable():
 
 
 def test_a_turn_about_the_tip_keeps_the_tip_in_place():
-    from dlovr.ui.jog import HeldKeys, key_motion, turn_about
+    from dlovr.ui.jog import HeldKeys, gizmo_target, key_motion, turn_about
 
     p, q = np.array([0.0, 0.0, 0.5]), np.array([1.0, 0.0, 0.0, 0.0])
     tip = np.array([0.0, 0.0, 0.1])
@@ -326,6 +459,11 @@ def test_a_turn_about_the_tip_keeps_the_tip_in_place():
     p2, q2 = turn_about(p, q, rv, tip)
     assert np.isclose(np.linalg.norm(p2 - tip), 0.4) and not np.allclose(p2, p)
     assert np.isclose(abs(q2[1]), np.sin(np.radians(5)))
+    # a gizmo dragged by the same turn, about the same pivot, gives the same pose; and a move on top
+    dy = np.array([0.0, 0.01, 0.0])
+    gp, gq = gizmo_target(p, q, p + dy, q2, tip)
+    assert np.allclose(gp, p2 + dy) and np.allclose(gq, q2)
+    assert all(np.allclose(a, b) for a, b in zip(gizmo_target(p, q, p2, q2, None), (p2, q2), strict=True))
     keys = HeldKeys()
     assert keys.report("ju#1@1000", 0.0) == (["J", "U"], {})
     assert keys.report("J#2@1100", 0.1) == ([], {"U": 0.0})  # U released at once: no smooth motion
@@ -335,6 +473,11 @@ def test_a_turn_about_the_tip_keeps_the_tip_in_place():
     assert keys.report("J#4@2000", 0.6) == (["J"], {})
     assert keys.tick(0.7)[0] == [] and keys.tick(1.3)[0] == [] and keys.down == {}  # not reported: let go
     assert keys.report("#5@2310", 1.4) == ([], {"J": pytest.approx(0.01)})  # the late release corrects
+    # let go for want of reports while the page still holds it: no new step, timed from the first press
+    assert keys.report("K#6@3000", 2.0) == (["K"], {})
+    assert keys.tick(2.1)[0] == [] and keys.tick(2.7)[0] == [] and keys.down == {}
+    assert keys.report("K#7@3800", 2.8) == ([], {})
+    assert keys.report("#8@4000", 2.9) == ([], {"K": pytest.approx(0.7)})  # held 1 s by the page's clock
 
 
 def test_the_starting_page_needs_viser_alone():

@@ -235,6 +235,10 @@ def hover_until(page, locator, pred, what: str, timeout: float = 10.0, *, click:
     moves the mouse off and onto the element's place, as a person's hand would."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
+        # the timeline mid-panel, as a person scrolls to it (a checkbox below may have scrolled it under
+        # the panel's header); the page's own query: the bar is drawn anew every second
+        page.evaluate("() => { const t = document.querySelector('.dlovr-timeline');"
+                      " if (t) t.scrollIntoView({block: 'center'}); }")
         box = locator.bounding_box()
         if box is not None:
             page.mouse.move(5, 300)
@@ -349,9 +353,10 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     tl = server.open_recording(path)
     t = (tl.start + tl.end) / 2
     server.scrub(t)
-    title = f"up to {t:.2f} s"
+    moment = f"up to {t:.2f} s"
     plot = server.force_panel.plot
-    wait_for(lambda: title in (plot.title or ""), timeout=10, what="the plot at the moment")
+    caption = server.force_panel.caption  # the moment is said under the plot (a new title redraws it)
+    wait_for(lambda: moment in caption.content, timeout=10, what="the plot at the moment")
 
     def at_moment() -> bool:  # the browser's data: samples where the contact state changed, up to t
         x = plot_data(page)[0]

@@ -4,6 +4,7 @@ program runs (:mod:`dlovr.ui.panels.run`), its current macro's detector signal a
 
 from __future__ import annotations
 
+from html import escape
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from dlovr.ui.forces import (
     WINDOW_S,
     ForceTrace,
     plot_arrays,
+    readout_js,
     signal_arrays,
 )
 from dlovr.ui.panels.run import RunPanel
@@ -27,6 +29,11 @@ from dlovr.ui.timeline import Timeline
 if TYPE_CHECKING:
     import viser
     from viser import uplot
+
+
+READOUT_CSS = ".uplot .u-legend .u-value{display:inline-block;min-width:9ch;white-space:nowrap}"
+"""The read-out's values keep their width as they change: the panel below the plot (the timeline)
+does not move under the mouse."""
 
 
 def _series(points: bool) -> tuple[uplot.Series, ...]:
@@ -83,6 +90,9 @@ class ForcePanel:
                 height=190,
             )
             self.caption = gui.add_markdown("")
+            js = escape(readout_js(), quote=True)  # the legend's read-out (forces.READOUT_JS)
+            img = f'<img alt="" src="data:," style="display:none" onerror="{js}">'
+            gui.add_html(f"<style>{READOUT_CSS}</style>{img}")
 
     def show_live(self) -> None:
         """The last seconds of the live simulation (the server calls this at ``PANEL_HZ``)."""
@@ -105,11 +115,13 @@ class ForcePanel:
         data = _with_signal(plot_arrays(tl.forces, tl.transition_times(), t), None)
         bands = [b for b in tl.bands if b.classes and b.start <= t]
         live = tl is self.app.session.timeline
-        title = f"force on the gripper [N] up to {t:.2f} s"
+        # the moment goes under the plot: a new title would make the page draw the chart anew (and
+        # lose the mouse's read-out) at every step of a scrub or a playback
+        title = f"force on the gripper [N], {WINDOW_S:g} s up to the moment"
         if tl.forces_note:
             title += f" ({tl.forces_note})"
         dense = live or tl.forces.every > 1  # a step-rate trace, not samples at state changes
-        self._show(data, bands, "live" if dense else "recording", title)
+        self._show(data, bands, "live" if dense else "recording", title, f"up to {t:.2f} s")
 
     def _show(
         self, data: tuple[np.ndarray, ...], bands: list[Any], mode: str, title: str, extra: str = ""

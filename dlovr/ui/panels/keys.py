@@ -12,6 +12,7 @@ import numpy as np
 
 from dlovr.ui.app import App
 from dlovr.ui.drawing import point_classes
+from dlovr.ui.framing import CAMERA_KEYS_JS
 from dlovr.ui.jog import HeldKeys, key_motion, keys_js, turn_about
 from dlovr.ui.panels.simulation import SimulationPanel
 from dlovr.ui.panels.status import StatusPanel
@@ -41,7 +42,7 @@ class KeysPanel:
                 self.report(str(keys.value))
 
         if uuid is not None:
-            self.status.script = keys_js(uuid)
+            self.status.script = keys_js(uuid) + ";" + CAMERA_KEYS_JS.replace("\n", "")
 
     def move(self, keys: list[str], linear: float, angular: float) -> None:
         """Move the target as the jog keys ``keys`` say: ``linear`` m along and ``angular`` rad about

@@ -108,6 +108,7 @@ class StatusPanel:
         self.status = Status(waiting="starting")
         self._shown: tuple[str, str] = ("", "")
         self.script = ""  # more code the page runs as the line is drawn (the key follower)
+        self.camera_speed = 0.3  # the camera keys' speed for the scene shown (m/s, framing.CAMERA_KEYS_JS)
 
     def build(self, gui: viser.GuiApi) -> None:
         self.html = gui.add_html(status_html(self.status))
@@ -120,12 +121,13 @@ class StatusPanel:
     def show(self, status: Status) -> None:
         self.status = status
         text, title = status_html(status), page_title(status)
-        if (text, title) == self._shown:
+        speed = f"window.__dlovrCamSpeed={self.camera_speed:.4g};"
+        if (text, title + speed) == self._shown:
             return
-        self._shown = (text, title)
-        # the title is set, and the key follower installed, by the page itself as the line is drawn
+        self._shown = (text, title + speed)
+        # the title is set, and the key followers installed, by the page itself as the line is drawn
         # (an image that fails to load runs its onerror)
-        js = escape(f"document.title={title!r};{self.script}", quote=True)
+        js = escape(f"document.title={title!r};{speed}{self.script}", quote=True)
         self.html.content = text + f'<img alt="" src="data:," style="display:none" onerror="{js}">'
 
 

@@ -1,9 +1,10 @@
 """The timeline panel: the kept situations as coloured bands, a time slider to scrub the cable
-through them (live or a recording file), and opening a recording."""
+through them (live or a recording file), play / step / speed, zoom and pan, and opening a recording."""
 
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,11 +17,27 @@ from dlovr.scene import SceneError
 from dlovr.ui.app import App
 from dlovr.ui.panels.forces import ForcePanel
 from dlovr.ui.panels.state import StatePanel
-from dlovr.ui.timeline import Snapshot, Timeline, axis_end, recording_timeline, resimulated_forces
+from dlovr.ui.timeline import (
+    Snapshot,
+    Timeline,
+    axis_end,
+    pan_window,
+    recording_timeline,
+    resimulated_forces,
+    step_time,
+    window_showing,
+    zoom_window,
+)
 from dlovr.ui.viewport import Viewport
 
 if TYPE_CHECKING:
     import viser
+
+PLAY, PAUSE, STEP_BACK, STEP = "\u25b6 play", "\u275a\u275a pause", "\u25c0 step", "step \u25b6"
+ZOOM_IN, ZOOM_OUT, PAN_BACK, PAN_ON, ZOOM_ALL = "zoom in", "out", "\u25c0 pan", "pan \u25b6", "all"
+SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
+PLAY_HZ = 20.0
+"""How often a playing timeline shows its next moment (per second of wall time)."""
 
 
 class TimelinePanel:
@@ -37,12 +54,18 @@ class TimelinePanel:
         self._key: Any = None
         self._resim_stop: threading.Event | None = None
         self.resim_thread: threading.Thread | None = None
+        self.window: tuple[float, float] | None = None  # the zoomed part of the timeline (s)
+        self._play_stop = threading.Event()
+        self.play_thread: threading.Thread | None = None
 
     def build(self, gui: viser.GuiApi) -> None:
         app = self.app
         with gui.add_folder("Timeline"):
             self.timeline_html = gui.add_html("")
             self.slider = gui.add_slider("Time [s]", min=0.0, max=1.0, step=0.01, initial_value=0.0)
+            self.play_bg = gui.add_button_group("Play", (STEP_BACK, PLAY, STEP))
+            self.speed_dd = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
+            self.zoom_bg = gui.add_button_group("Zoom", (ZOOM_IN, ZOOM_OUT, PAN_BACK, PAN_ON, ZOOM_ALL))
             self.live_btn = gui.add_button("Back to live", visible=False)
             self.open_dd = gui.add_dropdown("Recording file", options=self.recording_files())
             self.open_btn = gui.add_button("Open recording")
@@ -59,9 +82,12 @@ class TimelinePanel:
         @self.slider.on_update
         def _(event: Any) -> None:
             if event.client is not None:
+                self.stop_playing()  # the hand on the slider takes over
                 app.scrub(float(self.slider.value))
 
         self.live_btn.on_click(lambda _e: app.live())
+        self.play_bg.on_click(lambda e: self.playback(str(e.target.value)))
+        self.zoom_bg.on_click(lambda e: self.zoom(str(e.target.value)))
 
         @self.open_btn.on_click
         def _(_e: Any) -> None:
@@ -84,6 +110,8 @@ class TimelinePanel:
         app = self.app
         tl, scene, rec = recording_timeline(path)
         self.cancel_resim()
+        self.stop_playing()
+        self.window = None
         with app.lock:
             app.view.timeline = tl
             app.view.scene = scene
@@ -125,6 +153,11 @@ class TimelinePanel:
             self.resim_thread.join(timeout=5)
             self.resim_thread = None
 
+    def stop(self) -> None:
+        """The server stops: no re-simulation, no playback goes on."""
+        self.cancel_resim()
+        self.stop_playing()
+
     def scrub(self, t: float) -> Snapshot | None:
         app = self.app
         with app.lock:
@@ -150,6 +183,10 @@ class TimelinePanel:
             self.forces.show_at(tl, t)
         srv.flush()
         self.live_btn.visible = True
+        shown = window_showing(self.window, (tl.start, max(tl.end, tl.start + 0.01)), t)
+        if shown != self.window:
+            self.window = shown
+            self.update(force=True)
         v = min(max(round(float(t), 2), float(self.slider.min)), float(self.slider.max))
         if v != self.slider.value:  # the Time [s] box follows (a server-side set calls back without client)
             self.slider.value = v
@@ -158,6 +195,8 @@ class TimelinePanel:
     def live(self) -> None:
         app = self.app
         self.cancel_resim()
+        self.stop_playing()
+        self.window = None
         with app.lock:
             viewed = app.view.scene
             app.view.clear()
@@ -190,6 +229,80 @@ class TimelinePanel:
             self.viewport.faces.pin(band.faces if band is not None else None)
         app.server.flush()
 
+    def viewed(self) -> Timeline:
+        """The timeline being viewed: an opened recording's, or the live one."""
+        return self.app.view.timeline or self.app.session.timeline
+
+    @property
+    def speed(self) -> float:
+        """The playback speed: seconds of the timeline per second of wall time."""
+        return float(str(self.speed_dd.value).rstrip("x"))
+
+    @property
+    def playing(self) -> bool:
+        return self.play_thread is not None and self.play_thread.is_alive() and not self._play_stop.is_set()
+
+    def playback(self, what: str) -> None:
+        """The *Play* buttons: a step to the next or the previous cable frame, or play / pause."""
+        if what in (STEP, STEP_BACK):
+            self.stop_playing()
+            self.app.scrub(step_time(self.viewed(), float(self.slider.value), 1 if what == STEP else -1))
+        elif self.playing:
+            self.stop_playing()
+        else:
+            self.play()
+
+    def play(self) -> None:
+        """Play the viewed timeline from the moment shown (from its start when at its end), at
+        :attr:`speed`, until its end, a pause, or another view."""
+        self.stop_playing()
+        tl = self.viewed()
+        t = float(self.slider.value)
+        if t >= tl.end - 1e-3 or t < tl.start:
+            t = tl.start
+        stop = self._play_stop = threading.Event()
+        self.play_thread = threading.Thread(target=self._play, args=(tl, t, stop), name="dlovr-play",
+                                            daemon=True)
+        self.play_bg.options = (STEP_BACK, PAUSE, STEP)
+        self.play_thread.start()
+
+    def _play(self, tl: Timeline, t: float, stop: threading.Event) -> None:
+        last = time.perf_counter()
+        while not stop.wait(1.0 / PLAY_HZ):
+            now = time.perf_counter()
+            t, last = min(t + (now - last) * self.speed, tl.end), now
+            if self.viewed() is not tl or self.app.server is None:
+                break
+            self.app.scrub(t)
+            if t >= tl.end:
+                break
+        if not stop.is_set():  # the end, or another view: the button says play again
+            stop.set()
+            self.play_bg.options = (STEP_BACK, PLAY, STEP)
+
+    def stop_playing(self) -> None:
+        """Pause a playing timeline (it stays at the moment reached)."""
+        self._play_stop.set()
+        th = self.play_thread
+        if th is not None and th is not threading.current_thread():
+            th.join(timeout=5)
+        self.play_thread = None
+        if hasattr(self, "play_bg") and self.play_bg.options[1] != PLAY:
+            self.play_bg.options = (STEP_BACK, PLAY, STEP)
+
+    def zoom(self, what: str) -> None:
+        """The *Zoom* buttons: in or out about the moment shown, pan half a window, or all of it."""
+        tl = self.viewed()
+        full = (tl.start, max(tl.end, tl.start + 0.01))
+        at = float(self.slider.value)
+        if what in (ZOOM_IN, ZOOM_OUT):
+            self.window = zoom_window(self.window, full, at, 0.5 if what == ZOOM_IN else 2.0)
+        elif what in (PAN_BACK, PAN_ON):
+            self.window = pan_window(self.window, full, -0.5 if what == PAN_BACK else 0.5)
+        else:
+            self.window = None
+        self.update(force=True)
+
     def recording_files(self) -> list[str]:
         d = self.app.recordings_dir
         files = sorted((p.name for p in d.glob("*.mcap")), reverse=True) if d.is_dir() else []
@@ -199,13 +312,15 @@ class TimelinePanel:
         """Redraw the bands and the slider's range when the viewed timeline changed (or ``force``)."""
         app = self.app
         tl = app.view.timeline or app.session.timeline
-        key = (id(tl), len(tl.bands), round(tl.end))
+        key = (id(tl), len(tl.bands), round(tl.end), self.window)
         if not force and key == self._key:
             return
         self._key = key
         live = tl is app.session.timeline
-        self.timeline_html.content = tl.html(self.pick_uuid, axis_end(tl.end) if live else None)
+        self.timeline_html.content = tl.html(self.pick_uuid, axis_end(tl.end) if live else None, self.window)
         lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
+        if self.window is not None:  # the slider spans the zoomed window: finer scrubbing
+            lo, hi = round(self.window[0], 2), round(max(self.window[1], self.window[0] + 0.01), 2)
         self.slider.min, self.slider.max = lo, hi
         # the number box shows the slider's value: keep it inside the range (live: the present)
         v = hi if app.view.timeline is None else min(max(float(self.slider.value), lo), hi)
