@@ -282,7 +282,8 @@ def test_a_scene_switch_and_an_opened_recording_leave_nothing_of_the_last_scene(
     wait_for(lambda: panel.window is not None and panel.window[1] < tl.end - 0.01, timeout=5, what="a pan")
     page.get_by_role("button", name="Back to live").click()
     wait_for(lambda: scene_nodes(page).get("/gripper", False), timeout=5, what="the gizmo back")
-    assert page.get_by_text("Viewing recording").count() == 0
+    # the banner and the gizmo reach the page in separate messages
+    wait_for(lambda: page.get_by_text("Viewing recording").count() == 0, timeout=5, what="the banner gone")
 
 
 # -- What is shown, and what a demonstrator expects ----------------------------------------------

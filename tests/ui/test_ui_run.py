@@ -76,7 +76,7 @@ def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServe
     shot(page, "run-program-running")
     server.pause(False)
     result = page.get_by_text("table (force):")
-    result.wait_for(timeout=60_000)
+    result.wait_for(timeout=120_000)
     text = result.inner_text()
     assert "Goal reached" in text or ("Failed" in text and "macro" in text), text
     assert server.run_panel.runner is None and server.session.runner is None
