@@ -167,10 +167,9 @@ class ContactTracker:
         if self._disc is not None:
             self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
-        # whether no discrete state of the situation depends on its DLO vectors (else, with an E
-        # contact on an edge, its vectors are refreshed once they turn, for the point-or-line decision)
-        self._fixed = True
-        self._edge_vectors: list[tuple[int, list[float]]] = []  # (DLO index, vector) of its edge contacts
+        # (DLO index, vector) of the situation's E contacts on edges: their point-or-line decisions
+        # depend on these vectors, so the situation is made again once one turns (none: it never is)
+        self._edge_vectors: list[tuple[int, list[float]]] = []
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -215,9 +214,8 @@ class ContactTracker:
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         last = self._signature
-        if signature == last and self._situation is not None:
-            if self._fixed or not _turned(self._edge_vectors, pts):
-                return self._situation
+        if signature == last and self._situation is not None and not _turned(self._edge_vectors, pts):
+            return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
         if (
@@ -235,13 +233,11 @@ class ContactTracker:
                 tip_angle_deg=angle,
                 gripper_z=z,
             )
-            self._fixed = _vector_independent(sit)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
-        if not self._fixed:
-            self._edge_vectors = [
-                (cast(int, c.dlo.index), list(cast(Vec3, c.dlo.vector))) for c in sit.contacts
-                if c.dlo.kind == "E" and any(e.type == "E" for e in c.env) and c.dlo.vector is not None
-            ]
+        self._edge_vectors = [
+            (cast(int, c.dlo.index), list(c.dlo.vector)) for c in sit.contacts
+            if _on_edge(c) and c.dlo.vector is not None
+        ]
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -475,7 +471,12 @@ def _turned(edge_vectors: list[tuple[int, list[float]]], pts: np.ndarray) -> boo
 def _vector_independent(topo: Situation) -> bool:
     """Discrete states depend on DLO vectors only through point/line decisions of E contacts on
     edges: without such contacts the discrete situation of an unchanged topology can be reused."""
-    return not any(c.dlo.kind == "E" and any(e.type == "E" for e in c.env) for c in topo.contacts)
+    return not any(_on_edge(c) for c in topo.contacts)
+
+
+def _on_edge(contact: Contact) -> bool:
+    """Is ``contact`` an E contact on an edge (whose discrete state is a point-or-line decision)?"""
+    return contact.dlo.kind == "E" and any(e.type == "E" for e in contact.env)
 
 
 def _force_spans(topo: Situation) -> list[tuple[int, int]]:
