@@ -183,7 +183,7 @@ class TimelinePanel:
             self.forces.show_at(tl, t)
         srv.flush()
         self.live_btn.visible = True
-        shown = window_showing(self.window, (tl.start, max(tl.end, tl.start + 0.01)), t)
+        shown = window_showing(self.window, _span(tl), t)
         if shown != self.window:
             self.window = shown
             self.update(force=True)
@@ -214,7 +214,7 @@ class TimelinePanel:
         """A situation of the timeline hovered (``h<i>``: highlight its faces), left (``""``) or
         clicked (``c<i>:<ms>``: show the middle of it, as the slider would)."""
         app = self.app
-        tl = app.view.timeline or app.session.timeline
+        tl = self.viewed()
         kind = value.partition(":")[0]
         try:
             i = int(kind[1:]) if kind[:1] in ("h", "c") else -1
@@ -293,7 +293,7 @@ class TimelinePanel:
     def zoom(self, what: str) -> None:
         """The *Zoom* buttons: in or out about the moment shown, pan half a window, or all of it."""
         tl = self.viewed()
-        full = (tl.start, max(tl.end, tl.start + 0.01))
+        full = _span(tl)
         at = float(self.slider.value)
         if what in (ZOOM_IN, ZOOM_OUT):
             self.window = zoom_window(self.window, full, at, 0.5 if what == ZOOM_IN else 2.0)
@@ -311,16 +311,16 @@ class TimelinePanel:
     def update(self, force: bool = False) -> None:
         """Redraw the bands and the slider's range when the viewed timeline changed (or ``force``)."""
         app = self.app
-        tl = app.view.timeline or app.session.timeline
+        tl = self.viewed()
         key = (id(tl), len(tl.bands), round(tl.end), self.window)
         if not force and key == self._key:
             return
         self._key = key
         live = tl is app.session.timeline
         self.timeline_html.content = tl.html(self.pick_uuid, axis_end(tl.end) if live else None, self.window)
-        lo, hi = round(tl.start, 2), round(max(tl.end, tl.start + 0.01), 2)
-        if self.window is not None:  # the slider spans the zoomed window: finer scrubbing
-            lo, hi = round(self.window[0], 2), round(max(self.window[1], self.window[0] + 0.01), 2)
+        # the slider spans the timeline, or the zoomed window (finer scrubbing)
+        a, b = (tl.start, tl.end) if self.window is None else self.window
+        lo, hi = round(a, 2), round(max(b, a + 0.01), 2)
         self.slider.min, self.slider.max = lo, hi
         # the number box shows the slider's value: keep it inside the range (live: the present)
         v = hi if app.view.timeline is None else min(max(float(self.slider.value), lo), hi)
@@ -329,3 +329,8 @@ class TimelinePanel:
         files = self.recording_files()
         if tuple(files) != tuple(self.open_dd.options):
             self.open_dd.options = files
+
+
+def _span(tl: Timeline) -> tuple[float, float]:
+    """The whole of ``tl`` (s), at least 0.01 s long (a timeline just begun)."""
+    return (tl.start, max(tl.end, tl.start + 0.01))
