@@ -273,7 +273,7 @@ def _exec_options(a: RunArgs, n: Numbers) -> Any:
 def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
     """The scene ``program`` runs in and its demonstration's track (None when not needed, or not
     found and not required)."""
-    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.execution.run import POSES_INSTEAD, find_recording, load_track, not_found, resolve_scene
 
     try:
         rec_path = find_recording(program, a.recording)
@@ -284,12 +284,11 @@ def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
         if a.path_mode in ("auto", "demo") or a.baseline:
             if rec_path is None:
                 if a.path_mode == "demo" or a.baseline:
-                    why = f"its demonstration {program.source!r} was not found: give --recording"
+                    why = f"{not_found(program)}: give --recording"
                     raise UserError(f"{a.program_path}: {why}")
                 click.echo(  # another way, another result: say so
-                    f"note: {a.program_path}: its demonstration {program.source!r} was not found, so the "
-                    "macros move along the program's poses (--path program); give --recording FILE to "
-                    "follow the demonstration",
+                    f"note: {a.program_path}: {not_found(program)}, so {POSES_INSTEAD}; give --recording "
+                    "FILE to follow the demonstration",
                     err=True,
                 )
             else:

@@ -42,7 +42,7 @@ def trial_setup(
     ``dlovr run`` says it: another way of moving, another result."""
     from dlovr.execution.executor import ExecOptions
     from dlovr.execution.network_run import network_scene
-    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.execution.run import POSES_INSTEAD, find_recording, load_track, not_found, resolve_scene
     from dlovr.execution.trials import TrialSetup
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces
@@ -59,10 +59,9 @@ def trial_setup(
         rec = find_recording(program)
         scene = resolve_scene(program, None, rec)
         if rec is None and path_mode == "demo":
-            raise DatasetError(f"{program_path}: its demonstration {program.source!r} was not found")
+            raise DatasetError(f"{program_path}: {not_found(program)}")
         if rec is None and path_mode == "auto" and note is not None:
-            note(f"{program_path}: its demonstration {program.source!r} was not found, so the macros move "
-                 "along the program's poses (--path program)")
+            note(f"{program_path}: {not_found(program)}, so {POSES_INSTEAD}")
         track = load_track(rec) if rec is not None and path_mode != "program" else None
     return TrialSetup(
         program=program, scene=scene, pieces=scene_pieces(scene), track=track,

@@ -56,6 +56,15 @@ def find_recording(program: Program, given: str | Path | None = None) -> Path | 
     return next((c for c in cands if c.is_file()), None)
 
 
+def not_found(program: Program) -> str:
+    """Said when :func:`find_recording` finds no demonstration for ``program``."""
+    return f"its demonstration {program.source!r} was not found"
+
+
+POSES_INSTEAD = "the macros move along the program's poses (--path program)"
+"""What a program does without its demonstration (another way of moving: another result)."""
+
+
 def check_program_scene(program: Program, scene: Any) -> None:
     """Raise :class:`ProgramError` when ``program`` was not made for ``scene``: it names objects the
     scene lacks, or it starts away from the scene's gripper pose."""

@@ -21,7 +21,7 @@ import viser
 
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import Event, ExecOptions
-from dlovr.execution.run import check_program_scene, find_recording, load_track
+from dlovr.execution.run import check_program_scene, find_recording, load_track, not_found
 from dlovr.execution.scoring import RunResult
 from dlovr.model.program import Program, ProgramError
 from dlovr.ui.app import App
@@ -272,7 +272,7 @@ def demonstration(program: Program) -> tuple[Any, str]:
     try:
         path = find_recording(program)
         if path is None:
-            missing = f"its demonstration {program.source!r} was not found: {other}"
+            missing = f"{not_found(program)}: {other}"
             return None, missing if program.source else ""
         return load_track(path), ""
     except Exception as e:  # any unreadable demonstration: the program's own poses
