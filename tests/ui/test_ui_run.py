@@ -110,3 +110,23 @@ def test_the_network_view_shows_the_nodes_and_highlights_the_live_one(server: De
     assert live in {n.id for n in net.nodes}
     shot(page, "network-live-contact")
     page.close()
+
+
+def test_the_program_file_is_written_before_the_program_is_announced(server: DemoServer, monkeypatch):
+    """The run panel offers the last recording's program once ``last_program`` changes, reading its
+    file: the file must be there by then (else the program was never offered: a race seen in CI)."""
+    from dlovr.ui.panels import recording
+
+    announced = []
+    real = recording.write_output
+
+    def spy(path, *args, **kwargs):
+        announced.append(server.last_program is not None)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(recording, "write_output", spy)
+    wait_for(lambda: server.status()["t"] > 0.2, what="the simulation to run")
+    server.start_recording()
+    wait_for(lambda: server.status()["t"] > 0.5, what="some recorded time")
+    assert server.stop_recording() is not None and server.last_program is not None
+    assert announced == [False, False]

@@ -140,8 +140,6 @@ class RecordingPanel:
         try:
             prog = compile_recording(path)
             text = prog.listing()
-            app.program_text = text
-            app.last_program = prog
             files: list[tuple[str, Path]] = [("recording", path)]
             try:
                 jpath = path.with_name(f"{path.stem}.program.json")
@@ -154,6 +152,8 @@ class RecordingPanel:
                 why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
                 md = f"Saved `{path}`; cannot write its program: {why}"
             view = program_html(prog, files)
+            # set last: the run panel offers the program once last_program changes, from its file
+            app.program_text, app.last_program = text, prog
         except Exception as e:  # shown to the user, not raised in a worker thread
             app.program_text = ""
             app.last_program = None
