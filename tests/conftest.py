@@ -24,19 +24,42 @@ SLOW_FIXTURES = frozenset({"browser", "server", "ray_instance"})
 UI_GROUP = "ui"
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the tests that use a slow fixture ``slow``, and give every test its xdist group.
+    """Mark the tests that use a slow fixture ``slow``, give every test its xdist group, and put the
+    browser UI's tests first.
 
     Under ``pytest -n auto`` (the README's test command; ``--dist loadgroup`` is in pyproject.toml's
     addopts) a group runs on one worker: a test file is one group, so its module-scoped fixtures
     (recordings, simulations, servers) are made once; every test of the browser UI is in
-    :data:`UI_GROUP`."""
+    :data:`UI_GROUP`, which is handed out first: it is the longest group (its tests wait on real
+    time), and the other worker runs the rest meanwhile. ``tryfirst``: xdist reads the groups in its
+    own hook of this name, which must run after this one (without it, no test had a group)."""
+    ui_items, other = [], []
     for item in items:
         fixtures = set(getattr(item, "fixturenames", ()))
         if SLOW_FIXTURES & fixtures:
             item.add_marker(pytest.mark.slow)
         ui = bool({"browser", "server"} & fixtures) or "tests/ui/" in item.nodeid
         item.add_marker(pytest.mark.xdist_group(UI_GROUP if ui else item.nodeid.split("::")[0]))
+        (ui_items if ui else other).append(item)
+    items[:] = ui_items + other
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node: object, ids: list[str]) -> None:
+    """Under ``--dist loadgroup``, stop at once if a worker's tests carry no ``@group``: every test
+    would then be handed out alone, the browser tests to both workers at once."""
+    config = getattr(node, "config", None)
+    if config is None or config.getvalue("dist") != "loadgroup":
+        return
+    ungrouped = [i for i in ids if "@" not in i]
+    if ungrouped:
+        pytest.exit(
+            f"xdist groups not applied ({ungrouped[0]}): pytest {pytest.__version__} with this "
+            "pytest-xdist names tests otherwise (pyproject.toml pins pytest below 9)",
+            returncode=4,
+        )
 
 
 @pytest.fixture(autouse=True, scope="session")
