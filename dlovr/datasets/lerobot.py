@@ -43,14 +43,6 @@ def state_vector(ep: Episode) -> np.ndarray:
     return np.concatenate(parts, axis=1)
 
 
-def write_lerobot(episodes: Sequence[Episode], out: str | Path, task: str) -> Path:
-    """Write ``episodes`` (one fps, one scene layout) as a LeRobot v3.0 dataset in the new folder ``out``."""
-    w = LeRobotWriter(out, task)
-    for ep in episodes:
-        w.add(ep)
-    return w.close()
-
-
 class LeRobotWriter:
     """Writes a LeRobot v3.0 dataset into the new folder ``out`` one episode at a time: the camera
     images are encoded as each episode comes and not kept (only every 10th frame, for the stats);

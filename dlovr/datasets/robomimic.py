@@ -13,21 +13,12 @@ per-episode facts. Every float is float64, exactly the replayed simulation's val
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from dlovr.datasets.frames import CABLE_NODES, LABELS, Episode
-
-
-def write_robomimic(episodes: Sequence[Episode], out: str | Path, task: str) -> Path:
-    """Write ``episodes`` to the new HDF5 file ``out``."""
-    w = RobomimicWriter(out, task)
-    for ep in episodes:
-        w.add(ep)
-    return w.close()
 
 
 class RobomimicWriter:

@@ -257,6 +257,9 @@ def _node_texts(net: Network, pos: dict[str, tuple[float, float]], px: float, ta
         half = CHAR_W * px * max(len(t) for _, t in lines) / 2 + R + 6  # beside the circle, at mid-height
         mid = [y + 0.3 * px + (k - (len(lines) - 1) / 2) * lh for k in range(len(lines))]
         sides += [(x + half, mid), (x - half, mid)]
+        # a crowded network: further below or above, then further aside
+        sides += [(x, [b + s * k * lh for b in ys[i]]) for k in range(1, 9) for i, s in ((0, 1), (1, -1))]
+        sides += [(x + s * k * half, mid) for k in (2, 3) for s in (1.0, -1.0)]
         boxes = [[_text_box(sx, b, t, px) for b, (_, t) in zip(ys_, lines, strict=True)] for sx, ys_ in sides]
         k = _place(boxes, taken)
         taken.extend(boxes[k])
@@ -280,6 +283,9 @@ def _edge_texts(
         w = CHAR_W * px * len(text)
         shifts = [(0.0, 0.0)] + [(0.0, s * k * 1.1 * px) for k in range(1, 7) for s in (-1.0, 1.0)]
         shifts += [(s * 0.6 * w, dy) for dy in (0.0, -1.1 * px, 1.1 * px) for s in (-1.0, 1.0)]
+        # a crowded network: further up or down, and aside at every height
+        shifts += [(0.0, s * k * 1.1 * px) for k in range(7, 15) for s in (-1.0, 1.0)]
+        shifts += [(s * f * w, k * 1.1 * px) for k in range(-6, 7) for f in (0.6, 1.2) for s in (-1.0, 1.0)]
         boxes = [[_text_box(mx + dx, my - 4 + dy, text, px)] for dx, dy in shifts]
         k = _place(boxes, taken)
         taken.extend(boxes[k])

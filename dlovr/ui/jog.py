@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dlovr.transforms import quat_mul, quat_rotate, quat_to_rotvec, rotvec_to_quat
+from dlovr.ui.page_js import with_input
 
 JOG_KEYS: dict[str, tuple[int, float]] = {
     "J": (0, -1.0), "L": (0, 1.0),  # x
@@ -165,10 +166,8 @@ class HeldKeys:
         return keys, dt
 
 
-KEYS_JS = """(function(){if(window.__dlovrKeys)return;window.__dlovrKeys=1;var held={},n=0;
-function send(t){var s=Object.keys(held).sort().join('')+'#'+(n++)+'@'+(t||performance.now()).toFixed(1);
-if(!window.__viserMutable)return;
-window.__viserMutable.sendMessage({type:'GuiUpdateMessage',uuid:'UUID',updates:{value:s}});}
+KEYS_JS = """(function(){if(window.__dlovrKeys)return;window.__dlovrKeys=1;var held={},n=0;POST
+function send(t){post(Object.keys(held).sort().join('')+'#'+(n++)+'@'+(t||performance.now()).toFixed(1));}
 function typing(e){var t=e.target;
 return t&&(t.tagName==='INPUT'||t.tagName==='TEXTAREA'||t.isContentEditable);}
 document.addEventListener('keydown',function(e){var k=(e.key||'').toUpperCase();
@@ -185,7 +184,5 @@ key repeats are ignored; leaving the window lets go."""
 
 
 def keys_js(uuid: str) -> str:
-    """:data:`KEYS_JS` for the text input ``uuid`` (letters, digits, ``-`` and ``_`` only)."""
-    if not all(ch.isalnum() or ch in "-_" for ch in uuid):
-        raise ValueError(f"not a widget id: {uuid!r}")
-    return KEYS_JS.replace("UUID", uuid).replace("KEYS", repr("".join(JOG_KEYS))).replace("\n", "")
+    """:data:`KEYS_JS` for the text input ``uuid`` (:func:`dlovr.ui.page_js.with_input`)."""
+    return with_input(KEYS_JS.replace("KEYS", repr("".join(JOG_KEYS))), uuid)

@@ -18,6 +18,7 @@ from dlovr.recording import Recording, kept_states
 from dlovr.scene import Scene
 from dlovr.ui.drawing import point_colors, situation_faces
 from dlovr.ui.forces import ForceTrace
+from dlovr.ui.page_js import is_widget_id, with_input
 
 BAND_COLORS = ("#4e79a7", "#a0cbe8", "#b07aa1", "#9c755f", "#76b7b2", "#d4a6c8", "#bab0ac", "#6b6ecf")
 """The situations' colours on the timeline: categorical, and none green, yellow or red (those are the
@@ -220,14 +221,12 @@ def step_time(tl: Timeline, t: float, direction: int) -> float:
     return max(earlier, default=t)
 
 
-PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0;
-function send(v){window.__viserMutable&&window.__viserMutable.sendMessage(
-{type:'GuiUpdateMessage',uuid:'UUID',updates:{value:v}});}
+PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0;POST
 function at(){var el=xy&&document.elementFromPoint(xy[0],xy[1]);
 var t=el&&el.closest&&el.closest('.dlovr-pick [data-situation]');return t?'h'+t.dataset.situation:'';}
-function decide(){var s=at();if(s!==hover){hover=s;send(s);}}
+function decide(){var s=at();if(s!==hover){hover=s;post(s);}}
 var pick=function(e){if(e&&e.clientX!==undefined)xy=[e.clientX,e.clientY];
-if(e&&e.type==='click'){var c=at();if(c)send('c'+c.slice(1)+':'+Date.now());return;}clearTimeout(timer);
+if(e&&e.type==='click'){var c=at();if(c)post('c'+c.slice(1)+':'+Date.now());return;}clearTimeout(timer);
 if(at())decide();else timer=setTimeout(decide,LEAVE_MS);};
 document.addEventListener('mousemove',pick,true);
 document.documentElement.addEventListener('mouseleave',function(){xy=null;pick(null);});
@@ -247,9 +246,9 @@ def _pick_handlers(uuid: str | None) -> str:
     """Inline mouse handlers of the timeline's outer element, which install :data:`PICK_JS` for the
     text input ``uuid`` (it reaches the server as a ``GuiUpdateMessage``, as an input edit does).
     One copy of the code for the whole timeline (event delegation)."""
-    if uuid is None or not all(ch.isalnum() or ch in "-_" for ch in uuid):
+    if uuid is None or not is_widget_id(uuid):
         return ""
-    pick = PICK_JS.replace("UUID", uuid).replace("LEAVE_MS", str(LEAVE_MS)).replace("\n", "")
+    pick = with_input(PICK_JS.replace("LEAVE_MS", str(LEAVE_MS)), uuid)
     return f' onmouseover="{pick}(event)" onmouseleave="{pick}(event)" onclick="{pick}(event)"'
 
 

@@ -40,7 +40,7 @@ def test_no_two_nodes_read_alike_and_no_two_labels_overlap():
     from dlovr.recording.network_html import _overlaps, _text_box, node_labels
     from dlovr.ui.network_view import TEXT_PX
 
-    for scene in ("table", "peg_in_hole"):
+    for scene in ("table", "peg_in_hole", "corners", "edges"):  # corners, edges: crowded
         net, _ = scene_network(scene, [ROOT / "recordings"])
         assert net is not None
         labels = node_labels(net)
@@ -54,3 +54,9 @@ def test_no_two_nodes_read_alike_and_no_two_labels_overlap():
         pairs = [(i, j) for i in range(len(boxes)) for j in range(i)]
         clash = [(texts[i], texts[j]) for i, j in pairs if _overlaps(boxes[i], boxes[j])]
         assert not clash, (scene, clash[:3])
+        circle = r'<circle cx="([-\d.]+)" cy="([-\d.]+)" r="([-\d.]+)" fill="#'
+        nodes = [(float(x) - float(r), float(y) - float(r), float(x) + float(r), float(y) + float(r))
+                 for x, y, r in re.findall(circle, page)]
+        assert len(nodes) == len(net.nodes)
+        on_node = [texts[i] for i, b in enumerate(boxes) if any(_overlaps(b, c) for c in nodes)]
+        assert not on_node, (scene, on_node[:3])
