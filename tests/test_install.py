@@ -30,7 +30,9 @@ def run(cmd: list[str], cwd: Path, env: dict[str, str], timeout: float = 120) ->
     return run_both(cmd, cwd, env, timeout).stdout
 
 
-def run_both(cmd: list[str], cwd: Path, env: dict[str, str], timeout: float = 120) -> subprocess.CompletedProcess:
+def run_both(
+    cmd: list[str], cwd: Path, env: dict[str, str], timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
     r = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
     assert r.returncode == 0, f"{' '.join(map(str, cmd))}\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}"
     return r
