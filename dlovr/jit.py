@@ -13,12 +13,12 @@ by the versions of Python, numba and dlovr and the kernels' sources, beside numb
 commands can say "compiling kernels (first run only)" while :func:`dlovr.sim.warm_up` compiles them;
 :func:`check_cache` drops cached kernels compiled from other sources.
 
-The kernel store (``<cache dir>/kernels/<key>``, :func:`store_dir`) keeps one copy of the compiled
-kernels per key for the whole machine: :func:`keep_in_store` copies an installation's compiled
-kernels there, and :func:`check_cache` copies them from there into an installation that has none
-(a new virtual environment, an upgrade with the same kernels, another checkout). numba's cache is
+The kernel store (``<cache dir>/kernels/<key>-<processor>``, :func:`store_dir`) keeps one copy of
+the compiled kernels per key for the whole machine: :func:`keep_in_store` copies an installation's
+compiled kernels there, and :func:`check_cache` copies them from there into an installation that
+has none (a new virtual environment, an upgrade with the same kernels, another checkout). numba's cache is
 keyed by the sources' content (not their path or time) and by the processor, so the copied kernels
-are the ones this installation would compile (on another processor numba compiles them again).
+are the ones this installation would compile (the store is kept per processor too).
 ``DLOVR_KERNEL_STORE=0`` turns the store off.
 """
 
@@ -195,10 +195,15 @@ _CACHE_FILES = (".nbi", ".nbc")  # numba's index and data files
 
 
 def store_dir() -> Path | None:
-    """This key's folder in the kernel store (None when ``DLOVR_KERNEL_STORE=0``)."""
+    """This key's folder in the kernel store, for this processor (numba's target: triple, processor
+    name and features, which its cache keys kernels by too); None when ``DLOVR_KERNEL_STORE=0``."""
     if os.environ.get("DLOVR_KERNEL_STORE", "1") == "0":
         return None
-    return cache_dir() / "kernels" / _key()
+    from numba.core.registry import cpu_target
+
+    context: Any = cpu_target.target_context
+    target = hashlib.sha256(repr(context.codegen().magic_tuple()).encode()).hexdigest()
+    return cache_dir() / "kernels" / f"{_key()}-{target[:12]}"
 
 
 def _module_files(module: str, path: Path) -> list[Path]:
