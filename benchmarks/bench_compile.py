@@ -81,7 +81,7 @@ def _run(cache: Path, store: Path, scene: str, steps: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--scene", default="peg_in_hole", help="built-in scene whose script is stepped")
     ap.add_argument("--steps", type=int, default=1000, help="steps simulated after the warm-up")
     args = ap.parse_args()
