@@ -2,12 +2,15 @@
 
 Run: ``.venv/bin/python benchmarks/bench_compile.py [--steps 1000] [--scene peg_in_hole]``
 
-Starts a fresh Python process twice on one new, empty numba cache directory (``$NUMBA_CACHE_DIR``, a
-temporary directory: numba's cache in ``__pycache__`` beside the sources is not consulted when it is
-set, and the "kernels warm" marker lives beside numba's cache, so the first process finds nothing):
+Starts a fresh Python process three times, with a new, empty kernel store (``$DLOVR_CACHE_DIR``, a
+temporary directory) and numba cache directory (``$NUMBA_CACHE_DIR``: numba's cache in ``__pycache__``
+beside the sources is not consulted when it is set, and the "kernels warm" marker lives beside
+numba's cache, so the first process finds nothing):
 
-1. first run: the kernels compile (target: at most 10 s);
-2. cached run: the same on the cache the first run wrote.
+1. first run: the kernels compile (target: at most 10 s), and go into the kernel store;
+2. cached run: the same on the cache the first run wrote;
+3. new installation: another empty numba cache directory (as a new virtual environment has), the
+   kernels copied from the store (:func:`dlovr.jit.keep_in_store`) instead of compiled.
 
 Each process times what ``dlovr serve`` / ``dlovr demo`` do before their first step: importing numba
 and the kernel modules, then :func:`dlovr.sim.warmup.warm_up` (the part behind "compiling kernels
@@ -66,8 +69,8 @@ _ROWS = (
 )
 
 
-def _run(cache: Path, scene: str, steps: int) -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+def _run(cache: Path, store: Path, scene: str, steps: int) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), DLOVR_CACHE_DIR=str(store))
     t0 = time.perf_counter()
     out = subprocess.run(
         [sys.executable, "-c", _CHILD, scene, str(steps)], env=env, check=True, capture_output=True, text=True
@@ -78,22 +81,24 @@ def _run(cache: Path, scene: str, steps: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--scene", default="peg_in_hole", help="built-in scene whose script is stepped")
     ap.add_argument("--steps", type=int, default=1000, help="steps simulated after the warm-up")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="dlovr-bench-compile-") as tmp:
-        first = _run(Path(tmp), args.scene, args.steps)
-        cached = _run(Path(tmp), args.scene, args.steps)
+        numba_cache, other_cache, store = Path(tmp, "numba"), Path(tmp, "numba-new"), Path(tmp, "store")
+        first = _run(numba_cache, store, args.scene, args.steps)
+        cached = _run(numba_cache, store, args.scene, args.steps)
+        stored = _run(other_cache, store, args.scene, args.steps)
     print(f"numba {__import__('numba').__version__}, NUMBA_OPT={os.environ.get('NUMBA_OPT', '(default)')}, "
           f"{args.steps} steps of {args.scene}; seconds wall (CPU)")
-    print(f"{'':28} {'first run':>16} {'cached':>16}")
+    print(f"{'':28} {'first run':>16} {'cached':>16} {'from the store':>16}")
 
     def cell(t: tuple) -> str:
         return f"{t[0]:7.2f}" + (f" ({t[1]:6.2f})" if t[1] is not None else " " * 9)
 
     for label, key in (*_ROWS, ("whole process", "process")):
-        print(f"{label:28} {cell(first[key]):>16} {cell(cached[key]):>16}")
+        print(f"{label:28} {cell(first[key]):>16} {cell(cached[key]):>16} {cell(stored[key]):>16}")
 
 
 if __name__ == "__main__":

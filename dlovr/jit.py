@@ -12,13 +12,23 @@ the same on every x86-64 processor (their labels go into recordings that replay 
 by the versions of Python, numba and dlovr and the kernels' sources, beside numba's cache), so that
 commands can say "compiling kernels (first run only)" while :func:`dlovr.sim.warm_up` compiles them;
 :func:`check_cache` drops cached kernels compiled from other sources.
+
+The kernel store (``<cache dir>/kernels/<key>-<processor>``, :func:`store_dir`) keeps one copy of
+the compiled kernels per key for the whole machine: :func:`keep_in_store` copies an installation's
+compiled kernels there, and :func:`check_cache` copies them from there into an installation that
+has none (a new virtual environment, an upgrade with the same kernels, another checkout). numba's cache is
+keyed by the sources' content (not their path or time) and by the processor, so the copied kernels
+are the ones this installation would compile (the store is kept per processor too).
+``DLOVR_KERNEL_STORE=0`` turns the store off.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, cast
@@ -151,6 +161,7 @@ def check_cache(module: str) -> None:
         for kernel in _KERNELS[module]:
             kernel._cache.flush()
         path.mkdir(parents=True, exist_ok=True)
+        _take_from_store(module, path)
         stamp.write_text(key)
     except (OSError, AttributeError):
         pass
@@ -176,5 +187,69 @@ def mark_kernels_warm() -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(_key())
+    except OSError:
+        pass
+
+
+_CACHE_FILES = (".nbi", ".nbc")  # numba's index and data files
+
+
+def store_dir() -> Path | None:
+    """This key's folder in the kernel store, for this processor (numba's target: triple, processor
+    name and features, which its cache keys kernels by too); None when ``DLOVR_KERNEL_STORE=0``."""
+    if os.environ.get("DLOVR_KERNEL_STORE", "1") == "0":
+        return None
+    from numba.core.registry import cpu_target
+
+    context: Any = cpu_target.target_context
+    target = hashlib.sha256(repr(context.codegen().magic_tuple()).encode()).hexdigest()
+    return cache_dir() / "kernels" / f"{_key()}-{target[:12]}"
+
+
+def _module_files(module: str, path: Path) -> list[Path]:
+    """``module``'s compiled kernels in numba's cache folder ``path`` (which other modules share):
+    numba names them ``<file name>.<kernel>-<line>.py<version>.nb[ic]``; the warm marker with them."""
+    prefix = module.rpartition(".")[2] + "."
+    files = [p for p in path.iterdir() if p.name.startswith(prefix) and p.suffix in _CACHE_FILES]
+    if _marker().parent == path and _marker().is_file() and module == "dlovr.sim.track_kernels":
+        files.append(_marker())
+    return files
+
+
+def _take_from_store(module: str, path: Path) -> None:
+    """Copy ``module``'s compiled kernels from the store into its cache folder ``path`` (nothing when
+    the store has none for this key); each file is written aside and renamed into place."""
+    store = store_dir()
+    if store is None or not (store / module).is_dir():
+        return
+    for src in (store / module).iterdir():
+        tmp = path / f".{src.name}.{os.getpid()}.tmp"
+        shutil.copyfile(src, tmp)
+        tmp.replace(path / src.name)
+
+
+def keep_in_store() -> None:
+    """Copy this installation's compiled kernels (every kernel module imported, the kernels warm)
+    into the store, unless it has them for this key already: written aside and renamed, so a
+    reader finds all or nothing. The store keeps the four most recent keys. Failures are ignored
+    (the store only saves compiling)."""
+    store = store_dir()
+    if store is None or store.is_dir() or not kernels_warm():
+        return
+    try:
+        store.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix=".new-", dir=store.parent) as tmp:
+            for module in _KERNELS:
+                path = _cache_path(module)
+                if path is None or not path.is_dir():
+                    return
+                (Path(tmp) / module).mkdir()
+                for f in _module_files(module, path):
+                    shutil.copyfile(f, Path(tmp) / module / f.name)
+            os.rename(tmp, store)
+            os.mkdir(tmp)  # for TemporaryDirectory's clean-up
+        old = sorted((p for p in store.parent.iterdir() if not p.name.startswith(".")), key=os.path.getmtime)
+        for p in old[:-4]:
+            shutil.rmtree(p, ignore_errors=True)
     except OSError:
         pass

@@ -56,7 +56,7 @@ def _serve(early: StartingServer, scene_ref: str, host: str, recordings_dir: str
     """Warn (off loopback), print the URL, then check the scene and compile the kernels while the page
     says so, and serve."""
     from dlovr.cli.common import load_scene_arg
-    from dlovr.ui.server import exposure_warning
+    from dlovr.ui.starting import exposure_warning
 
     port = early.server.get_port()
     warning = exposure_warning(host, port)

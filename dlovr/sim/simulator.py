@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import dot, norm, quat_normalize, quat_rotate, slerp
+from dlovr.transforms import dot, norm, quat_rotate, slerp
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -247,16 +247,22 @@ class Simulator:
     def set_target(
         self, pos: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray | None = None
     ) -> None:
-        """Command the gripper pose (world ``pos``, ``quat`` wxyz; ``None`` keeps the orientation)."""
-        p = np.asarray(pos, dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
+        """Command the gripper pose (world ``pos``, ``quat`` wxyz; ``None`` keeps the orientation).
+
+        Called every step by programs and scripts: the checks run on Python floats, and the
+        quaternion is divided by its :func:`dlovr.transforms.norm` computed once (the same bits as
+        ``quat_normalize``)."""
+        p = np.array(pos, dtype=float)  # a private copy
+        if p.shape != (3,) or not all(map(math.isfinite, p.tolist())):
             raise ValueError(f"gripper target position must be 3 finite numbers, got {pos!r}")
-        self.target_pos = p.copy()
+        self.target_pos = p
         if quat is not None:
             q = np.asarray(quat, dtype=float)
-            if q.shape != (4,) or not np.all(np.isfinite(q)) or norm(q) < 1e-9:
+            w = q.tolist() if q.shape == (4,) else None
+            n = math.sqrt(dot(w, w)) if w is not None and all(map(math.isfinite, w)) else 0.0
+            if n < 1e-9:
                 raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
-            self.target_quat = quat_normalize(q)
+            self.target_quat = q / n
 
     def _move_mocap(self) -> None:
         dt = self._dt

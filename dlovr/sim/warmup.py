@@ -3,7 +3,8 @@
 numba compiles a kernel at its first call and caches it on disk (:mod:`dlovr.jit`): the first run of
 dlovr on a machine spends some seconds compiling, later runs load the cache. :func:`warm_up` does it
 up front (``dlovr serve`` and ``dlovr demo`` call it and say so), by running every kernel once on the
-built-in table scene.
+built-in table scene. Compiled kernels go into the machine's kernel store (:func:`dlovr.jit.keep_in_store`),
+from which a new installation with the same kernels takes them instead of compiling.
 """
 
 from __future__ import annotations
@@ -20,16 +21,18 @@ NOTICE = "compiling kernels (first run only)"
 def warm_up(say: Callable[[str], None] | None = None, *, force: bool = False) -> float:
     """Compile the kernels unless this installation has them already (``force``: run them anyway);
     ``say`` gets :data:`NOTICE` first. Returns the seconds it took (0 when they were compiled)."""
-    from dlovr.jit import kernels_warm, mark_kernels_warm
-    from dlovr.sim import track_kernels  # noqa: F401  (its cache tells whether the kernels are warm)
+    from dlovr.jit import keep_in_store, kernels_warm, mark_kernels_warm
+    from dlovr.sim import track_kernels  # noqa: F401  (imports every kernel module; its cache tells)
 
     if not force and kernels_warm():
+        keep_in_store()
         return 0.0
     if say is not None:
         say(NOTICE)
     t0 = time.perf_counter()
     _run_every_kernel()
     mark_kernels_warm()
+    keep_in_store()
     return time.perf_counter() - t0
 
 

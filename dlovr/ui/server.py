@@ -19,7 +19,6 @@ recording in progress is independent of the tabs and is finished by :meth:`DemoS
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import math
 import socket
 import sys
@@ -52,7 +51,7 @@ from dlovr.ui.panels import (
 from dlovr.ui.panels.keys import KeysPanel
 from dlovr.ui.panels.status import StatusPanel, current_status
 from dlovr.ui.session import Session
-from dlovr.ui.starting import StartingServer
+from dlovr.ui.starting import StartingServer, exposure_warning
 from dlovr.ui.timeline import Snapshot, Timeline
 from dlovr.ui.viewport import Viewport
 
@@ -407,24 +406,6 @@ class DemoServer:
             return
         if ended is None or (ended >= 0 and time.perf_counter() - ended < 1.0):
             self.hold()  # it went away mid-drag: the gripper stays where it is now
-
-
-def exposure_warning(host: str, port: int) -> str | None:
-    """The warning printed when ``host`` is not a loopback address (None for a loopback one)."""
-    h = host.strip().strip("[]")
-    if h.lower() == "localhost":
-        return None
-    try:
-        if ipaddress.ip_address(h).is_loopback:
-            return None
-    except ValueError:
-        pass  # a host name, or "" (every interface): treat as reachable from outside
-    where = h or "every interface"
-    return (
-        f"dlovr serve: WARNING: listening on {where}, not on loopback: anyone who can reach port {port} "
-        "can drive the simulation and write recordings on this machine (there is no authentication); "
-        "use --host 127.0.0.1 unless that is what you want"
-    )
 
 
 def serve(

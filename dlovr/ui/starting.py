@@ -8,6 +8,7 @@ URL is printed within a second or two of the command, not after the 30-40 s of a
 
 from __future__ import annotations
 
+import ipaddress
 import time
 
 import viser
@@ -36,3 +37,21 @@ class StartingServer:
 
     def stop(self) -> None:
         self.server.stop()
+
+
+def exposure_warning(host: str, port: int) -> str | None:
+    """The warning printed when ``host`` is not a loopback address (None for a loopback one)."""
+    h = host.strip().strip("[]")
+    if h.lower() == "localhost":
+        return None
+    try:
+        if ipaddress.ip_address(h).is_loopback:
+            return None
+    except ValueError:
+        pass  # a host name, or "" (every interface): treat as reachable from outside
+    where = h or "every interface"
+    return (
+        f"dlovr serve: WARNING: listening on {where}, not on loopback: anyone who can reach port {port} "
+        "can drive the simulation and write recordings on this machine (there is no authentication); "
+        "use --host 127.0.0.1 unless that is what you want"
+    )

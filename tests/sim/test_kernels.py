@@ -39,6 +39,24 @@ def test_warm_up_compiles_once_and_says_so():
     assert warm_up(again.append) == 0.0 and again == []
 
 
+def test_warm_kernels_go_into_the_kernel_store(monkeypatch):
+    """What an installation without kernels would take from the store: every kernel module's cache
+    files and the warm marker (the round trip through a wheel: tests/test_install.py)."""
+    from dlovr.jit import _KERNELS, store_dir
+    from dlovr.sim.warmup import warm_up
+
+    warm_up()
+    store = store_dir()
+    assert store is not None and store.is_dir()
+    assert sorted(p.name for p in store.iterdir()) == sorted(_KERNELS)
+    for module in _KERNELS:
+        names = [p.name for p in (store / module).iterdir()]
+        assert any(n.endswith(".nbi") for n in names) and any(n.endswith(".nbc") for n in names), module
+    assert (store / "dlovr.sim.track_kernels" / "dlovr-kernels.warm").is_file()
+    monkeypatch.setenv("DLOVR_KERNEL_STORE", "0")
+    assert store_dir() is None
+
+
 def test_contact_rows_read_in_place_match_mujocos_own_accessors():
     import mujoco
 

@@ -125,7 +125,7 @@ def test_the_panel_and_the_readme_name_the_forces_alike(server: DemoServer):
 
 
 def test_exposure_warning_only_off_loopback():
-    from dlovr.ui.server import exposure_warning
+    from dlovr.ui.starting import exposure_warning
 
     for host in ("127.0.0.1", "localhost", "::1", "127.0.0.5", "[::1]"):
         assert exposure_warning(host, 8080) is None, host
