@@ -201,8 +201,8 @@ class Program:
     ``dlovr/data/program.schema.json``). ``scene``: the scene the file names, if any; ``path``: the
     file it was read from. Neither is written. ``smoothing_s``: the moving-average window (s) the
     demonstrated wrench and orientation were smoothed over, the positions' tremor taken out
-    (:mod:`dlovr.model.smoothing`; 0: taken as recorded), and ``smoothing`` says why; both written only when not 0 (the executor follows the
-    demonstrated track smoothed the same way)."""
+    (:mod:`dlovr.model.smoothing`; 0: taken as recorded), and ``smoothing`` says why; both written
+    only when not 0 (the executor follows the demonstrated track treated the same way)."""
 
     name: str
     source: str
