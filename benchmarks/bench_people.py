@@ -11,6 +11,11 @@ count against the scripted one's, and, with ``--trials`` > 0, how often the prog
 replay reach the goal under the standard variation (cable length +-10 %, stiffness x0.5-2, friction
 +-30 %, obstacles +-5 mm; trial seed 0). One table, one row a demonstration, then the totals per
 script. The recordings stay in ``--out`` (default: a temporary folder).
+
+For peg-in-hole each row also gives ``corner``: how much of the drag along the groove (the gripper's
+travel along -y, mm) is left when the tip reaches the groove's corner (``V/VI``), as recorded and as
+the program follows it (the track averaged to take out the tremor): what decides whether the tip
+goes over the corner into the hole (docs/people.md, "Why these programs fail").
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.run import load_track, resolve_scene
@@ -27,8 +34,10 @@ from dlovr.execution.trials import TrialSetup, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces
 from dlovr.model.program import Program
+from dlovr.model.smoothing import TREMOR_ACCEL, smooth_poses, tremor_of
 from dlovr.recording.bundle import SceneBundle
 from dlovr.recording.compile import compile_recording
+from dlovr.recording.reader import Recording, kept_states
 from dlovr.scene import load_scene
 from dlovr.script import load_script
 
@@ -74,6 +83,22 @@ def success(program: Program, rec: Path, args: argparse.Namespace) -> tuple[floa
     return prog, replay
 
 
+def corner_margin(rec: Path) -> str:
+    """Peg-in-hole: the drag left (mm, gripper -y) when the tip reaches the groove's corner, as
+    recorded / as the program follows it ("-" without a ``V/VI`` situation)."""
+    r = Recording(rec)
+    steps, pos, quat = r.commands()
+    t = np.asarray(steps, dtype=float) * r.dt
+    at = [k.t for k in kept_states(r, None) if "V/VI[" in k.situation.format()]
+    if not at:
+        return "-"
+    i = int(np.searchsorted(t, at[0]))
+    near = (t > at[0] - 3.0) & (t < at[0] + 1.0)
+    follows = smooth_poses(t, pos, quat)[0] if tremor_of(t, pos) > TREMOR_ACCEL else pos
+    left = [1000.0 * (p[i, 1] - p[near, 1].min()) for p in (pos, follows)]
+    return f"{left[0]:.1f}/{left[1]:.1f}"
+
+
 def _pct(x: float) -> str:
     return "-" if x != x else f"{x:.0%}"  # NaN: no trials run
 
@@ -92,7 +117,7 @@ def main() -> None:
     print(f"{args.demos} demonstrations a script, demo.person={args.person:g}, seed {args.seed}, "
           f"{args.trials} trials each (seed 0, {' '.join(VARY)}); recordings in {out}")
     print(f"{'script':<12} {'demo':>4} {'macros':>6} {'ratio':>5} {'edit':>4} {'same':>4} "
-          f"{'program':>7} {'replay':>6}  classes")
+          f"{'program':>7} {'replay':>6} {'corner':>9}  classes")
     for name in args.scripts:
         t0 = time.perf_counter()
         ref = Program.load(ROOT / "recordings" / "programs" / f"{name}.program.json")
@@ -102,9 +127,10 @@ def main() -> None:
             dist = edit_distance(labels(prog), labels(ref))
             ok, replay = success(prog, rec, args) if args.trials > 0 else (float("nan"), float("nan"))
             rows.append((len(prog.macros), dist, ok, replay))
+            corner = corner_margin(rec) if name == "peg_in_hole" else ""
             print(f"{name:<12} {k:>4} {len(prog.macros):>6} {len(prog.macros) / len(ref.macros):>5.2f} "
-                  f"{dist:>4} {'yes' if dist == 0 else 'no':>4} {_pct(ok):>7} {_pct(replay):>6}  "
-                  f"{' '.join(labels(prog))}", flush=True)
+                  f"{dist:>4} {'yes' if dist == 0 else 'no':>4} {_pct(ok):>7} {_pct(replay):>6} "
+                  f"{corner:>9}  {' '.join(labels(prog))}", flush=True)
         same = sum(r[1] == 0 for r in rows)
         worst = max(r[0] for r in rows) / len(ref.macros)
         mean_ok = sum(r[2] for r in rows) / len(rows)

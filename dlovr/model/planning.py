@@ -24,8 +24,9 @@ where the gripper is. So a departure is planned from a *context*: a node and the
   joins the next macro's, as in :func:`dlovr.model.program.compile_program`); when no classed edge
   remains, a final macro that moves to the goal without detection.
 - **Successors**: the nodes the macro's first detected transition can lead to, with probabilities: the
-  targets of the applicable classed edges, and through applicable ``-`` edges those after them (a
-  ``-`` cycle is cut; the probabilities are normalised to sum 1). After a detection the executor
+  targets of the applicable classed edges, and through applicable ``-`` edges where a walk on through
+  ``-`` edges lands (round a ``-`` cycle as often as it goes; :meth:`NetworkProgram._walks`; the
+  probabilities are normalised to sum 1). After a detection the executor
   identifies the node reached with :func:`identify` from the sensed contact vector and calls
   :meth:`NetworkProgram.replan` there.
 """
@@ -191,6 +192,10 @@ class NetworkProgram:
         self._out: dict[str, tuple[Edge, ...]] = {n.id: network.out_edges(n.id) for n in network.nodes}
         self._nodes = {n.id: n for n in network.nodes}
         self._terminal = {e.id for e in network.edges if e.target == network.goal}
+        #: caches (the network does not change): applicable departures per context, and where a walk
+        #: on through ``-`` edges after each ``-`` edge lands (:meth:`_walks`, made when first needed)
+        self._applicable: dict[tuple[str, tuple[float, ...] | None], tuple[Edge, ...]] = {}
+        self._walk: dict[str, dict[str, Fraction]] | None = None
         self._value, self._next = self._solve()
 
     # ---------------------------------------------------------------------------------------------
@@ -199,12 +204,17 @@ class NetworkProgram:
 
     def applicable(self, node: str, position: Sequence[float] | None) -> tuple[Edge, ...]:
         """Departures from ``node`` applicable with the gripper at ``position`` (module docstring)."""
+        key = (node, None if position is None else tuple(float(x) for x in position))
+        found = self._applicable.get(key)
+        if found is not None:
+            return found
         es = self._out[node]
-        if position is None or not es:
-            return es
-        d = [max(0.0, _dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread) for e in es]
-        limit = min(d) + self.reach
-        return tuple(e for e, di in zip(es, d, strict=True) if di <= limit)
+        if position is not None and es:
+            d = [max(0.0, _dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread) for e in es]
+            limit = min(d) + self.reach
+            es = tuple(e for e, di in zip(es, d, strict=True) if di <= limit)
+        self._applicable[key] = es
+        return es
 
     def _solve(self) -> tuple[dict[str, _Key], dict[str, str | None]]:
         pred: dict[str, list[tuple[str, Fraction]]] = {}
@@ -282,23 +292,70 @@ class NetworkProgram:
             cast(Vec3, tuple(map(_r, rot))), _r(duration), last.detection,
         )
 
-    def _outcomes(
-        self, node: str, position: Sequence[float] | None, cut: frozenset[str]
-    ) -> dict[str, Fraction]:
+    def _passes(self, e: Edge) -> bool:
+        """Whether ``e`` is a ``-`` step that :meth:`_outcomes` follows on (no class, not into the goal)."""
+        return not e.classes and e.target != self.network.goal
+
+    def _walks(self) -> dict[str, dict[str, Fraction]]:
+        """For every ``-`` edge ``u`` (:meth:`_passes`): the nodes a walk on from ``u``'s end lands in
+        and their probabilities ``x_u``. The walk takes the departures applicable at each ``-`` edge's
+        end with their probabilities; a classed one (or one into the goal) lands at its target, a
+        ``-`` one walks on: ``x_u = sum_o p(o) (x_o if o is a - edge else [target(o)])``, solved
+        exactly (fractions; Gauss-Jordan on ``I - P``, which is regular once the edges that can never
+        land are left out: their walks, a ``-`` cycle without a way out, land nowhere). In a network
+        without ``-`` cycles this is the sum over the paths through ``-`` edges; with them a walk
+        may go round a cycle before it leaves it (counting each path that uses an edge at most once
+        instead grows exponentially with the network, minutes for fifty situations)."""
+        if self._walk is not None:
+            return self._walk
+        steps = {
+            e.id: self.applicable(e.target, e.motion.end_mean) for e in self.network.edges if self._passes(e)
+        }
+        live = {u for u, opts in steps.items() if any(not self._passes(o) for o in opts)}
+        grew = True
+        while grew:
+            grew = False
+            for u, opts in steps.items():
+                if u not in live and any(o.id in live for o in opts):
+                    live.add(u)
+                    grew = True
+        order = sorted(live)
+        rows: dict[str, dict[str, Fraction]] = {}
+        rhs: dict[str, dict[str, Fraction]] = {}
+        for u in order:
+            total = sum(o.count for o in steps[u])
+            row, b = {u: Fraction(1)}, {}
+            for o in steps[u]:
+                p = Fraction(o.count, total)
+                if not self._passes(o):
+                    b[o.target] = b.get(o.target, Fraction(0)) + p
+                elif o.id in live:
+                    row[o.id] = row.get(o.id, Fraction(0)) - p
+            rows[u], rhs[u] = row, b
+        for v in order:
+            _eliminate(v, rows, rhs)
+        self._walk = {u: rhs[u] for u in order}
+        return self._walk
+
+    def _outcomes(self, node: str, position: Sequence[float] | None) -> dict[str, Fraction]:
+        """Where a macro from ``(node, position)`` lands: the targets of the applicable classed edges
+        (and of those into the goal), and through the applicable ``-`` edges where their walks land
+        (:meth:`_walks`), with their probabilities."""
         opts = self.applicable(node, position)
         total = sum(e.count for e in opts)
+        walks = self._walks() if any(self._passes(e) for e in opts) else {}
         out: dict[str, Fraction] = {}
         for e in opts:
             p = Fraction(e.count, total)
-            if e.classes or e.target == self.network.goal:
+            if not self._passes(e):
                 out[e.target] = out.get(e.target, Fraction(0)) + p
-            elif e.id not in cut:
-                for k, q in self._outcomes(e.target, e.motion.end_mean, cut | {e.id}).items():
+            else:
+                for k, q in walks.get(e.id, {}).items():
                     out[k] = out.get(k, Fraction(0)) + p * q
         return out
 
     def _successors(self, node: str, position: Sequence[float] | None) -> tuple[Successor, ...]:
-        out = self._outcomes(node, position, frozenset())
+        out = self._outcomes(node, position)
         total = sum(out.values()) or Fraction(1)
         rows = sorted(out.items(), key=lambda kv: (-kv[1], int(kv[0][1:])))
         nodes = self._nodes
@@ -412,6 +469,26 @@ class NetworkProgram:
                 what = f"{' '.join(ch.macro.edges)}  {kind}, P(goal)={ch.reach_probability:.3f}"
             lines.append(f"  {n.id:<5} {what}")
         return "\n".join(lines) + "\n"
+
+
+def _eliminate(v: str, rows: dict[str, dict[str, Fraction]], rhs: dict[str, dict[str, Fraction]]) -> None:
+    """One Gauss-Jordan step on the sparse system ``rows`` (unknown -> coefficient) = ``rhs`` (node ->
+    value): row ``v`` divided by its pivot, and ``v`` eliminated from every other row."""
+    row, b = rows[v], rhs[v]
+    piv = row.pop(v)
+    for k in row:
+        row[k] /= piv
+    for k in b:
+        b[k] /= piv
+    for w, other in rows.items():
+        c = other.pop(v, None) if w != v else None
+        if not c:
+            continue
+        for k, a in row.items():
+            other[k] = other.get(k, Fraction(0)) - c * a
+        ob = rhs[w]
+        for k, a in b.items():
+            ob[k] = ob.get(k, Fraction(0)) - c * a
 
 
 def load_runnable(path: str | Path) -> Program | NetworkProgram:

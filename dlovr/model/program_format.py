@@ -200,9 +200,9 @@ class Program:
     and read from ``*.program.json`` (:meth:`dumps`, :meth:`from_json`, :meth:`load`; the format is
     ``dlovr/data/program.schema.json``). ``scene``: the scene the file names, if any; ``path``: the
     file it was read from. Neither is written. ``smoothing_s``: the moving-average window (s) the
-    demonstrated track and wrench were smoothed over (:mod:`dlovr.model.smoothing`; 0: taken as
-    recorded), and ``smoothing`` says why; both written only when not 0 (the executor follows the
-    demonstrated track smoothed the same way)."""
+    demonstrated wrench and orientation were smoothed over, the positions' tremor taken out
+    (:mod:`dlovr.model.smoothing`; 0: taken as recorded), and ``smoothing`` says why; both written
+    only when not 0 (the executor follows the demonstrated track treated the same way)."""
 
     name: str
     source: str

@@ -93,8 +93,9 @@ def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
     why = (
         f"the commanded track trembles (median acceleration {tremor:.2f} m/s^2, above "
         f"{sm.TREMOR_ACCEL:g}): "
-        f"motions and the executor's path are the track averaged over {sm.WINDOW_S:g} s "
-        f"({sm.PASSES} passes)"
+        f"motions and the executor's path are the track with its tremor taken out (per coordinate a "
+        f"sinusoid of {sm.TREMOR_BAND_HZ[0]:g}-{sm.TREMOR_BAND_HZ[1]:g} Hz fitted over {sm.FIT_S:g} s "
+        f"windows and subtracted; the orientation averaged over {sm.WINDOW_S:g} s, {sm.PASSES} passes)"
     )
     if wrench is not None and len(wrench.t):
         n = sm.samples(wrench.t, sm.WINDOW_S)

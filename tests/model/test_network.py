@@ -247,6 +247,21 @@ def test_a_step_without_class_joins_the_next_macro_and_a_final_macro_has_no_dete
     assert ch.macro.final and ch.macro.classes == () and ch.macro.target == ends_flat.goal
 
 
+def test_successors_through_a_cycle_of_steps_without_class_walk_round_it():
+    # LIE -> lie2 and back are '-' steps (no principal contact changes); the walk leaves the cycle
+    # by lie2 -> EP (C) or LIE -> TIP (C). From LIE: 1/3 TIP at once, 2/3 into the cycle, whose walk
+    # lands x = 1/2 EP + 1/2 (2/3 x + 1/3 TIP), x = 3/4 EP + 1/4 TIP: in all 1/2 EP, 1/2 TIP
+    # (counting only the paths that use an edge once gave 3/7 EP, 4/7 TIP)
+    lie2 = "V/G & E/N & E/F[box.F1] & E/E^P[box.F1,box.F2] & V/N"
+    net = build_network([demo("1", [TIP, LIE, lie2, EP]), demo("2", [TIP, LIE, lie2, LIE, TIP])])
+    prog = NetworkProgram(net)
+    out = prog._outcomes(node(net, LIE), None)
+    assert out == {node(net, EP): Fraction(1, 2), node(net, TIP): Fraction(1, 2)}
+    # with one way out (LIE -> TIP), every walk round the cycle leaves by it
+    loop = build_network([demo("1", [TIP, LIE, lie2, LIE, lie2]), demo("2", [TIP, LIE, TIP])])
+    assert NetworkProgram(loop)._outcomes(node(loop, LIE), None) == {node(loop, TIP): Fraction(1)}
+
+
 def test_the_gripper_position_tells_apart_two_visits_of_one_situation():
     # free at the start, touch, lift and move 0.2 m, free again, then into the groove
     t = np.array([0.0, 1.0, 2.0, 3.0])
