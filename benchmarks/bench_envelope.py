@@ -89,6 +89,17 @@ def _false(trials: list[dict[str, Any]]) -> tuple[int, int]:
     return sum(m["outcome"] == "false" for m in macros), len(macros)
 
 
+def _goal_check(trials: list[dict[str, Any]]) -> dict[str, int]:
+    """How the sensed goal check (``goal_sensed``) judged the program's runs against the truth: runs
+    that missed the goal and were caught (``caught`` of ``missed``), runs that reached it and were
+    doubted (``doubted`` of ``reached``); runs without a check are left out."""
+    checked = [t["program"] for t in trials if t["program"].get("goal_sensed") is not None]
+    missed = [p for p in checked if not p["goal_reached"]]
+    reached = [p for p in checked if p["goal_reached"]]
+    return {"missed": len(missed), "caught": sum(not p["goal_sensed"] for p in missed),
+            "reached": len(reached), "doubted": sum(not p["goal_sensed"] for p in reached)}
+
+
 def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """The row's columns: blind program with the replay, registered program, network program."""
     scene = base["scene"]
@@ -104,6 +115,9 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     out["program"] = _rate(blind, "program")
     out["replay"] = _rate(blind, "openloop") if replay else None
     out["false"], out["macros"] = _false(blind)
+    out["goal_check"] = _goal_check(blind)
+    failed = [t["program"] for t in blind if not t["program"]["success"]]
+    out["first_deviations"] = [p.get("first_deviation") for p in failed]
     if row.moves_objects and not args.blind_only:
         reg = run_trials(TrialSetup(program=base["program"], track=base["track"], registered=True, **common),
                          args.trials, workers=args.workers)
@@ -122,14 +136,21 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{x:.0%}"
 
 
+def _check_text(g: dict[str, int] | None) -> str:
+    if not g:
+        return "-"
+    return f"caught {g['caught']} of {g['missed']} missed, doubted {g['doubted']} of {g['reached']} reached"
+
+
 def table(results: list[dict[str, Any]]) -> str:
-    lines = ["| row | program (blind) | registered | network | replay | false detections |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| row | program (blind) | registered | network | replay | false detections | goal check |",
+             "|---|---|---|---|---|---|---|"]
     for r in results:
         below = " **below replay**" if r["replay"] is not None and r["program"] < r["replay"] else ""
         fd = f"{r['false']} of {r['macros']} ({r['false'] / max(r['macros'], 1):.1%})"
         cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r['program'])}{below}",
-                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd]
+                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd,
+                 _check_text(r.get("goal_check"))]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

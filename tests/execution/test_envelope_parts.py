@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dlovr.execution.executor import (
-    GOAL_FORCE_TOL,
+    GOAL_ANGLE_DEG,
     DemoTrack,
     ExecOptions,
     _Guard,
@@ -67,12 +67,25 @@ def test_first_deviation_is_the_first_macro_off_the_plan():
     assert first_deviation([_score(1, "ok"), _score(2, "not run")]) is None
 
 
-def test_goal_check_against_the_demonstrations_end_force():
-    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.0, 0.0, -0.5))
-    assert goal_check([0.0, 0.0, -0.5 + 0.5 * GOAL_FORCE_TOL], track, 0.0, 100)[0] is True
-    ok, d = goal_check([0.0, 0.0, -0.4], track, 0.0, 100)
-    assert ok is False and d == pytest.approx(0.1)
+def test_goal_check_compares_the_sensed_contact_vector_with_the_demonstrations():
+    # measured on peg_in_hole (docs/programs.md): the demonstration's end, a run that reached the goal
+    # (a stiffer cable pressing harder: another size, the same direction) and one that ended with the
+    # tip on the hole block's top
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.056, -0.070, 0.174),
+                      free_force=(0.0, 0.0, -0.245))
+    weight = (0.0, 0.0, -0.245)
+    ok, angle = goal_check([0.072, -0.085, 0.292], track, 0.0, 100, weight)
+    assert ok is True and angle < 1.0
+    missed, angle = goal_check([0.211, -0.011, 0.320], track, 0.0, 100, weight)
+    assert missed is False and angle > 2 * GOAL_ANGLE_DEG
+    # the weight the robot knows of its payload: a heavier cable's larger weight is no contact force
+    heavy = goal_check([0.056, -0.070, 0.174 - 0.05], track, 0.0, 100, (0.0, 0.0, -0.295))
+    assert heavy[0] is True and heavy[1] == pytest.approx(0.0, abs=1e-9)
+    assert goal_check([0.0, 0.0, -0.245], track, 0.0, 100)[0] is False  # hanging free: no contact at all
+    # much noise on few samples widens the angle allowed
+    assert goal_check([0.211, -0.011, 0.320], track, 5.0, 1, weight)[0] is True
     assert goal_check([0.0, 0.0, -0.4], replace(track, end_force=None), 0.0, 100) == (None, None)
+    assert goal_check([0.0, 0.0, -0.4], replace(track, free_force=None), 0.0, 100) == (None, None)
 
 
 def test_the_executor_sets_its_detectors_for_the_noise_it_assumes():
