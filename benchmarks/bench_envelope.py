@@ -16,7 +16,8 @@ Rows (each ``--trials`` trials from ``--seed``, the same perturbed scenes for ev
 
 Columns: the program blind, the program registered (rows that move objects), the network program
 (``--network``: a network program, e.g. from ``bench_network.py --keep DIR``), the replay of the
-demonstration's commands open loop, and the program's false detections over the macros it ran.
+demonstration's commands open loop, the program's false detections over the macros it ran, and
+how the sensed goal check judged the blind runs (missed goals it caught, reached goals it doubted).
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
 per row). ``--rows`` keeps the rows whose name contains one of the given words; ``--trials 5`` for a
 quick look; ``--no-replay`` and ``--blind-only`` leave columns out. The trials run through
