@@ -35,7 +35,7 @@ from typing import Any
 
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.run import find_recording, load_track, resolve_scene
-from dlovr.execution.trials import TrialSetup, run_trials
+from dlovr.execution.trials import TrialSetup, goal_check_counts, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces
 from dlovr.model.planning import load_runnable
@@ -90,17 +90,6 @@ def _false(trials: list[dict[str, Any]]) -> tuple[int, int]:
     return sum(m["outcome"] == "false" for m in macros), len(macros)
 
 
-def _goal_check(trials: list[dict[str, Any]]) -> dict[str, int]:
-    """How the sensed goal check (``goal_sensed``) judged the program's runs against the truth: runs
-    that missed the goal and were caught (``caught`` of ``missed``), runs that reached it and were
-    doubted (``doubted`` of ``reached``); runs without a check are left out."""
-    checked = [t["program"] for t in trials if t["program"].get("goal_sensed") is not None]
-    missed = [p for p in checked if not p["goal_reached"]]
-    reached = [p for p in checked if p["goal_reached"]]
-    return {"missed": len(missed), "caught": sum(not p["goal_sensed"] for p in missed),
-            "reached": len(reached), "doubted": sum(not p["goal_sensed"] for p in reached)}
-
-
 def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """The row's columns: blind program with the replay, registered program, network program."""
     scene = base["scene"]
@@ -116,7 +105,7 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     out["program"] = _rate(blind, "program")
     out["replay"] = _rate(blind, "openloop") if replay else None
     out["false"], out["macros"] = _false(blind)
-    out["goal_check"] = _goal_check(blind)
+    out["goal_check"] = goal_check_counts(blind)
     failed = [t["program"] for t in blind if not t["program"]["success"]]
     out["first_deviations"] = [p.get("first_deviation") for p in failed]
     if row.moves_objects and not args.blind_only:

@@ -214,6 +214,10 @@ def format_result(res: RunResult) -> str:
     if any(m.ended == "motion" for m in res.macros):
         lines.append("(by motion): the macro ended when its demonstrated motion was done, not by a detection")
     goal = " & ".join(res.goal) or "N"
+    if res.goal_sensed is not None and res.goal_angle is not None:
+        word = "confirms" if res.goal_sensed else "does NOT confirm"
+        lines.append(f"sensed goal check: the contact vector {word} the goal ({res.goal_angle:.1f} deg from "
+                     "the demonstration's at its end)")
     if res.success:
         lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s")
     else:

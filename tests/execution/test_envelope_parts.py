@@ -122,3 +122,13 @@ def test_a_gripper_started_elsewhere_goes_to_the_programs_start_and_a_registered
     assert any("to the program's start pose" in e.text for e in events)  # moved down with the table
     quiet = run_program(program, scene, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
     assert quiet.success and quiet.goal_sensed is not None
+
+
+def test_trials_count_how_the_goal_check_judged_the_runs():
+    from dlovr.execution.trials import goal_check_counts
+
+    def trial(reached: bool, sensed: bool | None) -> dict:
+        return {"program": {"goal_reached": reached, "goal_sensed": sensed}}
+
+    runs = [trial(True, True), trial(True, False), trial(False, False), trial(False, True), trial(False, None)]
+    assert goal_check_counts(runs) == {"missed": 2, "caught": 1, "reached": 2, "doubted": 1}
