@@ -359,6 +359,7 @@ GOAL_MIN_CONTACT_N = 0.01
 def goal_check(
     sensed: Sequence[float] | np.ndarray, track: DemoTrack | None, noise: float, n: int,
     weight: Sequence[float] | np.ndarray | None = None,
+    demo_weight: Sequence[float] | np.ndarray | None = None,
 ) -> tuple[bool | None, float | None]:
     """Whether the force sensed at the end of a run (mean of ``n`` samples, N, world) confirms the
     goal, and the angle (deg) it is judged by.
@@ -366,17 +367,18 @@ def goal_check(
     The **sensed contact vector** is the environment's share of the sensed force: the sensed force
     minus the cable's weight (``weight``, N world, as the robot knows its payload; default the
     demonstration's own, ``track.free_force``). It is compared with the one the demonstration sensed
-    at its end (``track.end_force`` minus ``track.free_force``): within :data:`GOAL_ANGLE_DEG` (plus
+    at its end (``track.end_force`` minus its cable's weight: ``demo_weight``, default
+    ``track.free_force``, what it sensed while the cable hung free): within :data:`GOAL_ANGLE_DEG` (plus
     the angle of 4 standard deviations of the mean's noise, white ``noise`` N a sample) the goal's
     contacts push the cable as they did at the demonstration's end. Its size is not compared: a
     stiffer or longer cable presses harder into the same contacts. (None, None) without a
     demonstrated end force and free force, or where either share is below
     :data:`GOAL_MIN_CONTACT_N` (then the sizes are compared: both no contact confirms)."""
-    if track is None or track.end_force is None or track.free_force is None or n <= 0:
+    demo_free = track.free_force if track is not None and demo_weight is None else demo_weight
+    if track is None or track.end_force is None or demo_free is None or n <= 0:
         return None, None
-    free = np.asarray(track.free_force if weight is None else weight, float)
-    run = np.asarray(sensed, float) - free
-    demo = np.asarray(track.end_force, float) - np.asarray(track.free_force, float)
+    run = np.asarray(sensed, float) - np.asarray(demo_free if weight is None else weight, float)
+    demo = np.asarray(track.end_force, float) - np.asarray(demo_free, float)
     a, b = norm(run.tolist()), norm(demo.tolist())
     if a < GOAL_MIN_CONTACT_N or b < GOAL_MIN_CONTACT_N:
         both_free = a < GOAL_MIN_CONTACT_N and b < GOAL_MIN_CONTACT_N
@@ -558,11 +560,21 @@ def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[N
         out.goal_torque = cast(Vec, tuple(float(x) for x in total_tq / n_sense))
         if track is not None and track.end_force is not None:
             out.goal_force_diff = math.dist(out.goal_force, track.end_force)
-        out.goal_sensed, out.goal_angle = goal_check(sensed, track, ses.opts.noise, n_sense, ses.weight())
+        if out.program.goal:  # a goal without contacts has no contact vector to compare
+            demo_weight = None if _starts_free(out.program) else ses.weight()
+            out.goal_sensed, out.goal_angle = goal_check(
+                sensed, track, ses.opts.noise, n_sense, ses.weight(), demo_weight)
         if out.goal_sensed is not None:
             word = "confirms" if out.goal_sensed else "does not confirm"
             ses.emit("end", 0, f"the sensed contact vector {word} the goal ({out.goal_angle:.1f} deg from "
                      "the demonstration's at its end)")
+
+
+def _starts_free(program: Program) -> bool:
+    """Whether the demonstration's cable hung free (no principal contacts) while its weight was
+    sensed (:data:`FREE_WINDOW_S`): its first transition came after that window."""
+    classed = program.classed
+    return not classed or (not classed[0].from_contacts and classed[0].t > FREE_WINDOW_S[1])
 
 
 def _classed_steps(

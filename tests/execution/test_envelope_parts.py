@@ -132,3 +132,14 @@ def test_trials_count_how_the_goal_check_judged_the_runs():
 
     runs = [trial(True, True), trial(True, False), trial(False, False), trial(False, True), trial(False, None)]
     assert goal_check_counts(runs) == {"missed": 2, "caught": 1, "reached": 2, "doubted": 1}
+
+
+def test_the_demonstrations_weight_is_sensed_only_where_its_cable_hung_free():
+    from dlovr.execution.executor import _starts_free
+
+    edges = Program.load(ROOT / "recordings/programs/edges.program.json")
+    assert _starts_free(PEG) and not _starts_free(edges)  # edges starts lying on concave90.F1
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.0, 0.0, -0.181),
+                      free_force=(0.0, 0.0, -0.093))  # edges: its "free" force is not its weight
+    ok, angle = goal_check([0.0, 0.0, -0.181], track, 0.0, 100, (0.0, 0.0, -0.196), (0.0, 0.0, -0.196))
+    assert ok is True and angle == pytest.approx(0.0, abs=1e-6)
