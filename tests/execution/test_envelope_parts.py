@@ -130,7 +130,8 @@ def test_trials_count_how_the_goal_check_judged_the_runs():
     def trial(reached: bool, sensed: bool | None) -> dict:
         return {"program": {"goal_reached": reached, "goal_sensed": sensed}}
 
-    runs = [trial(True, True), trial(True, False), trial(False, False), trial(False, True), trial(False, None)]
+    runs = [trial(True, True), trial(True, False), trial(False, False), trial(False, True),
+            trial(False, None)]
     assert goal_check_counts(runs) == {"missed": 2, "caught": 1, "reached": 2, "doubted": 1}
 
 
