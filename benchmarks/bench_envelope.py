@@ -16,7 +16,8 @@ Rows (each ``--trials`` trials from ``--seed``, the same perturbed scenes for ev
 
 Columns: the program blind, the program registered (rows that move objects), the network program
 (``--network``: a network program, e.g. from ``bench_network.py --keep DIR``), the replay of the
-demonstration's commands open loop, and the program's false detections over the macros it ran.
+demonstration's commands open loop, the program's false detections over the macros it ran, and
+how the sensed goal check judged the blind runs (missed goals it caught, reached goals it doubted).
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
 per row). ``--rows`` keeps the rows whose name contains one of the given words; ``--trials 5`` for a
 quick look; ``--no-replay`` and ``--blind-only`` leave columns out. The trials run through
@@ -34,7 +35,7 @@ from typing import Any
 
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.run import find_recording, load_track, resolve_scene
-from dlovr.execution.trials import TrialSetup, run_trials
+from dlovr.execution.trials import TrialSetup, goal_check_counts, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces
 from dlovr.model.planning import load_runnable
@@ -104,6 +105,9 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     out["program"] = _rate(blind, "program")
     out["replay"] = _rate(blind, "openloop") if replay else None
     out["false"], out["macros"] = _false(blind)
+    out["goal_check"] = goal_check_counts(blind)
+    failed = [t["program"] for t in blind if not t["program"]["success"]]
+    out["first_deviations"] = [p.get("first_deviation") for p in failed]
     if row.moves_objects and not args.blind_only:
         reg = run_trials(TrialSetup(program=base["program"], track=base["track"], registered=True, **common),
                          args.trials, workers=args.workers)
@@ -122,14 +126,21 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{x:.0%}"
 
 
+def _check_text(g: dict[str, int] | None) -> str:
+    if not g:
+        return "-"
+    return f"caught {g['caught']} of {g['missed']} missed, doubted {g['doubted']} of {g['reached']} reached"
+
+
 def table(results: list[dict[str, Any]]) -> str:
-    lines = ["| row | program (blind) | registered | network | replay | false detections |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| row | program (blind) | registered | network | replay | false detections | goal check |",
+             "|---|---|---|---|---|---|---|"]
     for r in results:
         below = " **below replay**" if r["replay"] is not None and r["program"] < r["replay"] else ""
         fd = f"{r['false']} of {r['macros']} ({r['false'] / max(r['macros'], 1):.1%})"
         cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r['program'])}{below}",
-                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd]
+                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd,
+                 _check_text(r.get("goal_check"))]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

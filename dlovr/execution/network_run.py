@@ -47,6 +47,7 @@ import numpy as np
 
 from dlovr.execution.executor import (
     ENDED_OK,
+    GRAVITY,
     START_TOL_M,
     DemoTrack,
     MacroRun,
@@ -61,9 +62,6 @@ from dlovr.model.planning import Choice, MacroPlan, NetworkProgram, Successor, i
 from dlovr.model.program import ContactSpec, Detection, Macro, Motion, PoseTrack, ProgramError, risk
 from dlovr.model.tracks import join
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix, unit
-
-#: Gravity (m/s^2) for the cable's weight, the force sensed in free space.
-GRAVITY = 9.81
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ import numpy as np
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import (
     FINAL_SETTLE_S,
+    FREE_WINDOW_S,
     GOAL_SENSE_S,
     START_TOL_DEG,
     START_TOL_M,
@@ -120,12 +121,21 @@ def load_track(path: str | Path) -> DemoTrack:
 
     rec = Recording(path)
     steps, pos, quat = rec.commands()
-    end_force = None
+    end_force = end_torque = free_force = None
     wrench = rec.wrench()
     if wrench is not None and len(wrench.t):
-        last = wrench.window(float(wrench.t[-1]) - GOAL_SENSE_S, float(wrench.t[-1]))
-        end_force = cast(tuple[float, float, float], tuple(float(x) for x in last.mean(axis=0)))
-    return DemoTrack(steps * rec.dt, pos, quat, end_force)
+        t1 = float(wrench.t[-1])
+        end_force = _mean3(wrench.window(t1 - GOAL_SENSE_S, t1))
+        end_torque = _mean3(wrench.torque[wrench.t >= t1 - GOAL_SENSE_S])
+        free_force = _mean3(wrench.window(*FREE_WINDOW_S))
+    return DemoTrack(steps * rec.dt, pos, quat, end_force, end_torque, free_force)
+
+
+def _mean3(rows: np.ndarray) -> tuple[float, float, float] | None:
+    """The mean of (k, 3) rows as a tuple; None without rows."""
+    if len(rows) == 0:
+        return None
+    return cast(tuple[float, float, float], tuple(float(x) for x in np.asarray(rows, float).mean(axis=0)))
 
 
 def demo_track(program: Program, recording: str | Path | None = None) -> DemoTrack | None:

@@ -14,8 +14,9 @@ The tracker's debounced situations are not used to steer a force-detected run, o
 - the **first deviation** is the first macro whose outcome differed from the plan (any outcome but
   *ok*: a false detection, a transition that did not come, ...): where a failed run went wrong, even
   when every macro "succeeded" as far as the executor could tell;
-- the **sensed goal check** (``goal_sensed``; what the robot itself can tell): the force sensed over
-  the last 0.2 s of the final hold against the demonstration's at its end
+- the **sensed goal check** (``goal_sensed``; what the robot itself can tell): the contact vector
+  sensed over the last 0.2 s of the final hold (the sensed force minus the cable's weight) against
+  the one the demonstration sensed at its end, by its angle ``goal_angle``
   (:func:`dlovr.execution.executor.goal_check`);
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
@@ -78,6 +79,11 @@ class RunResult:
     first_deviation: int | None = None
     goal_sensed: bool | None = None
     goal_force_diff: float | None = None
+    #: the force (N) and torque (N m) sensed over the last 0.2 s of the final hold (mean, world)
+    goal_force: tuple[float, float, float] | None = None
+    goal_torque: tuple[float, float, float] | None = None
+    #: the angle (deg) between the contact vector sensed at the end and the demonstration's
+    goal_angle: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -172,6 +178,9 @@ def score(ex: Execution, scene_name: str = "") -> RunResult:
         first_deviation=first_deviation(macros),
         goal_sensed=ex.goal_sensed,
         goal_force_diff=ex.goal_force_diff,
+        goal_force=ex.goal_force,
+        goal_torque=ex.goal_torque,
+        goal_angle=ex.goal_angle,
     )
 
 
@@ -205,6 +214,10 @@ def format_result(res: RunResult) -> str:
     if any(m.ended == "motion" for m in res.macros):
         lines.append("(by motion): the macro ended when its demonstrated motion was done, not by a detection")
     goal = " & ".join(res.goal) or "N"
+    if res.goal_sensed is not None and res.goal_angle is not None:
+        word = "confirms" if res.goal_sensed else "does NOT confirm"
+        lines.append(f"sensed goal check: the contact vector {word} the goal ({res.goal_angle:.1f} deg from "
+                     "the demonstration's at its end)")
     if res.success:
         lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s")
     else:

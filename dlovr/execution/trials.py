@@ -197,6 +197,18 @@ def _rate(xs: Sequence[bool]) -> float | None:
     return sum(xs) / len(xs) if xs else None
 
 
+def goal_check_counts(trials: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How the sensed goal check (``goal_sensed``, :func:`dlovr.execution.executor.goal_check`)
+    judged the program's runs against the tracker: of the ``missed`` runs that did not reach the
+    goal it ``caught`` those it did not confirm; of the ``reached`` ones it ``doubted`` those it did
+    not confirm. Runs without a check (no demonstrated end force) are left out."""
+    checked = [t["program"] for t in trials if t["program"].get("goal_sensed") is not None]
+    missed = [p for p in checked if not p["goal_reached"]]
+    reached = [p for p in checked if p["goal_reached"]]
+    return {"missed": len(missed), "caught": sum(not p["goal_sensed"] for p in missed),
+            "reached": len(reached), "doubted": sum(not p["goal_sensed"] for p in reached)}
+
+
 def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, Any]:
     """Success rates, detection figures and per-level rates of a set of trials."""
     prog = [bool(t["program"]["success"]) for t in trials]
@@ -256,6 +268,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "latencies": len(lat),
         "failures": failures,
         "first_deviations": deviations,
+        "goal_check": goal_check_counts(trials),
         "per_parameter": per,
         "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
         "retried_trials": sum(t.get("attempts", 1) > 1 for t in trials),

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dlovr.execution.executor import (
-    GOAL_FORCE_TOL,
+    GOAL_ANGLE_DEG,
     DemoTrack,
     ExecOptions,
     _Guard,
@@ -67,12 +67,25 @@ def test_first_deviation_is_the_first_macro_off_the_plan():
     assert first_deviation([_score(1, "ok"), _score(2, "not run")]) is None
 
 
-def test_goal_check_against_the_demonstrations_end_force():
-    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.0, 0.0, -0.5))
-    assert goal_check([0.0, 0.0, -0.5 + 0.5 * GOAL_FORCE_TOL], track, 0.0, 100)[0] is True
-    ok, d = goal_check([0.0, 0.0, -0.4], track, 0.0, 100)
-    assert ok is False and d == pytest.approx(0.1)
+def test_goal_check_compares_the_sensed_contact_vector_with_the_demonstrations():
+    # measured on peg_in_hole (docs/programs.md): the demonstration's end, a run that reached the goal
+    # (a stiffer cable pressing harder: another size, the same direction) and one that ended with the
+    # tip on the hole block's top
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.056, -0.070, 0.174),
+                      free_force=(0.0, 0.0, -0.245))
+    weight = (0.0, 0.0, -0.245)
+    ok, angle = goal_check([0.072, -0.085, 0.292], track, 0.0, 100, weight)
+    assert ok is True and angle < 1.0
+    missed, angle = goal_check([0.211, -0.011, 0.320], track, 0.0, 100, weight)
+    assert missed is False and angle > 2 * GOAL_ANGLE_DEG
+    # the weight the robot knows of its payload: a heavier cable's larger weight is no contact force
+    heavy = goal_check([0.056, -0.070, 0.174 - 0.05], track, 0.0, 100, (0.0, 0.0, -0.295))
+    assert heavy[0] is True and heavy[1] == pytest.approx(0.0, abs=1e-9)
+    assert goal_check([0.0, 0.0, -0.245], track, 0.0, 100)[0] is False  # hanging free: no contact at all
+    # much noise on few samples widens the angle allowed
+    assert goal_check([0.211, -0.011, 0.320], track, 5.0, 1, weight)[0] is True
     assert goal_check([0.0, 0.0, -0.4], replace(track, end_force=None), 0.0, 100) == (None, None)
+    assert goal_check([0.0, 0.0, -0.4], replace(track, free_force=None), 0.0, 100) == (None, None)
 
 
 def test_the_executor_sets_its_detectors_for_the_noise_it_assumes():
@@ -109,3 +122,25 @@ def test_a_gripper_started_elsewhere_goes_to_the_programs_start_and_a_registered
     assert any("to the program's start pose" in e.text for e in events)  # moved down with the table
     quiet = run_program(program, scene, ExecOptions(), track=track, pieces=pieces, on_event=events.append)
     assert quiet.success and quiet.goal_sensed is not None
+
+
+def test_trials_count_how_the_goal_check_judged_the_runs():
+    from dlovr.execution.trials import goal_check_counts
+
+    def trial(reached: bool, sensed: bool | None) -> dict:
+        return {"program": {"goal_reached": reached, "goal_sensed": sensed}}
+
+    runs = [trial(True, True), trial(True, False), trial(False, False), trial(False, True),
+            trial(False, None)]
+    assert goal_check_counts(runs) == {"missed": 2, "caught": 1, "reached": 2, "doubted": 1}
+
+
+def test_the_demonstrations_weight_is_sensed_only_where_its_cable_hung_free():
+    from dlovr.execution.executor import _starts_free
+
+    edges = Program.load(ROOT / "recordings/programs/edges.program.json")
+    assert _starts_free(PEG) and not _starts_free(edges)  # edges starts lying on concave90.F1
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), (0.0, 0.0, -0.181),
+                      free_force=(0.0, 0.0, -0.093))  # edges: its "free" force is not its weight
+    ok, angle = goal_check([0.0, 0.0, -0.181], track, 0.0, 100, (0.0, 0.0, -0.196), (0.0, 0.0, -0.196))
+    assert ok is True and angle == pytest.approx(0.0, abs=1e-6)

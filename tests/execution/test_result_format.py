@@ -36,3 +36,11 @@ def test_trial_files_carry_rounded_numbers(tmp_path, monkeypatch):
     for name in ("trial_000.json", "trials.csv", "summary.json"):
         text = (tmp_path / name).read_text()
         assert "0.30000000000000004" not in text and "0.4300000000000003" not in text, name
+
+
+def test_the_sensed_goal_check_is_printed_with_its_angle():
+    from dataclasses import replace
+
+    doubted = replace(_result("detected"), goal_sensed=False, goal_angle=14.2)
+    assert "contact vector does NOT confirm the goal (14.2 deg" in format_result(doubted)
+    assert "sensed goal check" not in format_result(_result("detected"))  # no check: nothing said
