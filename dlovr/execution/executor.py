@@ -76,9 +76,9 @@ HISTORY_S = 0.3
 
 #: How far (m) a program's start may lie from the scene's gripper pose, and by what angle (deg).
 START_TOL_M = 0.02
+START_TOL_DEG = 10.0
 #: Gravity (m/s^2): the cable's weight the robot knows (its payload).
 GRAVITY = 9.81
-START_TOL_DEG = 10.0
 
 
 @dataclass(frozen=True)
