@@ -174,3 +174,24 @@ def test_the_first_of_dlovr_s_code_takes_the_signals_over(how):
     lib = "import signal, dlovr\nassert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL\n"
     r = subprocess.run([sys.executable, "-c", lib], capture_output=True, text=True, env=env, timeout=60)
     assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_dlovr_serve_ends_on_a_signal_that_came_while_the_kernels_compiled(monkeypatch, sig):
+    """A signal inside numba's compiler is only noted (above): ``dlovr serve``, which compiles the
+    kernels after printing its URL, then ends as it would have (it ran on, serving, and ignored it)."""
+    import dlovr.sim.warmup as warmup
+    import dlovr.ui as ui
+
+    served = []
+    monkeypatch.setattr(warmup, "warm_up", lambda notice=None: signals.note(sig))  # the signal came then
+    monkeypatch.setattr(ui, "serve", lambda *a, **k: served.append(a))
+    result = CliRunner().invoke(main, ["serve", "--port", "8791"])
+    assert result.exit_code == signals.exit_code(sig) and not served, result.output
+    if sig == signal.SIGTERM:  # and the serving loop ends on one (SIGINT: it returns, as on Ctrl-C)
+        from dlovr.ui.server import serve
+
+        signals.clear()
+        signals.note(sig)
+        with pytest.raises(signals.SignalExit):
+            serve("table", port=8790)

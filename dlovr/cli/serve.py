@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from dlovr import signals
 from dlovr.cli.common import UserError
 
 if TYPE_CHECKING:
@@ -73,6 +74,7 @@ def _serve(early: StartingServer, scene_ref: str, host: str, recordings_dir: str
         early.say(f"{text}: about 30-40 s after a fresh install")
 
     warm_up(notice)
+    signals.check()  # SIGINT/SIGTERM while the kernels compiled is only noted (dlovr.signals): end now
     from dlovr.ui import serve
 
     try:

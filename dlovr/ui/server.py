@@ -30,6 +30,7 @@ from typing import Any, cast
 import numpy as np
 import viser
 
+from dlovr import signals
 from dlovr.geometry.scene_checks import load_checked_scene
 from dlovr.scene import Quat, Scene, Vec3
 from dlovr.transforms import quat_mul
@@ -432,6 +433,7 @@ def serve(
         with finish_on_sigterm():  # before the line that tells the server is up
             print(f"dlovr serve: scene {srv.session.scene.name} at {srv.url}  (Ctrl-C to stop)", flush=True)
             while True:
+                signals.check()  # a signal that came while it could not interrupt (the kernels compiling)
                 time.sleep(0.5)
     except KeyboardInterrupt:
         pass
