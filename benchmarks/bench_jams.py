@@ -11,7 +11,7 @@ model as it is; the default compares it with the contacts' impedance before the 
 (``{"solimp": [0.95, 0.99, 0.001, 0.5, 2]}``).
 
 The cases: ``v60_along25`` / ``v60_along40`` (a 12 cm cable of 1 GPa lying along a 60° V groove, its
-held end pushed 25 / 40 mm into the V: the wedge of ``tests/sim/test_v_grooves.py``),
+held end pushed 25 / 40 mm into the V: the wedge of ``tests/sim/v_groove_scenes.py``),
 ``v60_along40_soft`` (a 20 MPa cable), ``v60_along60`` (the script's 60 mm, of which the gripper's top
 speed leaves about 55 mm), ``v90_along40``,
 ``v60_down25`` / ``v60_down50`` (hanging, pushed tip first into the V), ``v60_across25`` (across the V,
@@ -46,7 +46,7 @@ from dlovr.script import load_script
 from dlovr.sim import SimulationDiverged, Simulator
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "sim"))
-from test_v_grooves import v_groove  # pyright: ignore[reportMissingImports]  (the test's scene writer)
+from v_groove_scenes import v_groove  # pyright: ignore[reportMissingImports]  (the tests' scene writer)
 
 BEFORE = {"solimp": [0.95, 0.99, 0.001, 0.5, 2]}
 CASES = (
