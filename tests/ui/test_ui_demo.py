@@ -300,6 +300,7 @@ def test_the_essentials_are_on_the_first_screen_and_the_legend_explains(demo: De
         page.get_by_text("Discrete:").first,
     ]
     for loc in essentials:
+        loc.wait_for(state="visible", timeout=10_000)  # the panel is built again after the scene load
         box = loc.bounding_box()
         assert box is not None and box["y"] + box["height"] <= HEIGHT, (loc, box)
     page.get_by_text("Legend", exact=True).click()
