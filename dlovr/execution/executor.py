@@ -335,8 +335,6 @@ class DemoTrack:
     #: the force (N, world) the demonstration sensed at its end (mean over its last
     #: :data:`GOAL_SENSE_S`), where the recording has a wrench channel: what the goal feels like
     end_force: tuple[float, float, float] | None = None
-    #: the torque (N m, world, about the gripper) sensed over the same time
-    end_torque: tuple[float, float, float] | None = None
     #: the force (N, world) the demonstration sensed while its cable hung free at its start (mean over
     #: :data:`FREE_WINDOW_S`): the demonstrated cable's weight, as its sensor read it
     free_force: tuple[float, float, float] | None = None
@@ -561,9 +559,10 @@ def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[N
         if track is not None and track.end_force is not None:
             out.goal_force_diff = math.dist(out.goal_force, track.end_force)
         if out.program.goal:  # a goal without contacts has no contact vector to compare
-            demo_weight = None if _starts_free(out.program) else ses.weight()
+            weight = ses.weight()
+            demo_weight = None if _starts_free(out.program) else weight
             out.goal_sensed, out.goal_angle = goal_check(
-                sensed, track, ses.opts.noise, n_sense, ses.weight(), demo_weight)
+                sensed, track, ses.opts.noise, n_sense, weight, demo_weight)
         if out.goal_sensed is not None:
             word = "confirms" if out.goal_sensed else "does not confirm"
             ses.emit("end", 0, f"the sensed contact vector {word} the goal ({out.goal_angle:.1f} deg from "

@@ -121,14 +121,13 @@ def load_track(path: str | Path) -> DemoTrack:
 
     rec = Recording(path)
     steps, pos, quat = rec.commands()
-    end_force = end_torque = free_force = None
+    end_force = free_force = None
     wrench = rec.wrench()
     if wrench is not None and len(wrench.t):
         t1 = float(wrench.t[-1])
         end_force = _mean3(wrench.window(t1 - GOAL_SENSE_S, t1))
-        end_torque = _mean3(wrench.torque[wrench.t >= t1 - GOAL_SENSE_S])
         free_force = _mean3(wrench.window(*FREE_WINDOW_S))
-    return DemoTrack(steps * rec.dt, pos, quat, end_force, end_torque, free_force)
+    return DemoTrack(steps * rec.dt, pos, quat, end_force, free_force)
 
 
 def _mean3(rows: np.ndarray) -> tuple[float, float, float] | None:
