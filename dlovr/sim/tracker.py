@@ -42,6 +42,7 @@ from dlovr.model.transitions import (
 )
 from dlovr.sim import track_kernels as tk
 from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT, T_WIDTH
+from dlovr.transforms import dot
 
 
 @dataclass(frozen=True)
@@ -460,10 +461,9 @@ def _turned(edge_vectors: list[tuple[int, list[float]]], pts: np.ndarray) -> boo
     n = len(pts) - 1
     for i, v in edge_vectors:
         a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
-        d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-        dot = d[0] * v[0] + d[1] * v[1] + d[2] * v[2]
-        nn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        if nn <= 0.0 or dot < 0.0 or dot * dot < _COS2_TURN * nn:
+        d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
+        dv, nn = dot(d, v), dot(d, d) * dot(v, v)
+        if nn <= 0.0 or dv < 0.0 or dv * dv < _COS2_TURN * nn:
             return True
     return False
 
