@@ -169,7 +169,12 @@ def _text_box(x: float, baseline: float, text: str, px: float) -> Box:
 def _place(candidates: list[list[Box]], taken: list[Box]) -> int:
     """The first candidate (a set of boxes) that overlaps none of ``taken``, else the one that overlaps
     the fewest."""
-    counts = [sum(_overlaps(b, t) for b in cand for t in taken) for cand in candidates]
+    counts: list[int] = []
+    for cand in candidates:
+        count = sum(_overlaps(b, t) for b in cand for t in taken)
+        if count == 0:
+            return len(counts)
+        counts.append(count)
     return counts.index(min(counts))
 
 
@@ -275,7 +280,7 @@ def _edge_texts(
     net: Network, curves: dict[str, tuple[str, tuple[float, float]]], px: float, taken: list[Box]
 ) -> dict[str, str]:
     """Each edge's label (class ×count · probability) as SVG text at the middle of its curve, moved
-    up or down (by up to 4 lines) to overlap no circle and no label placed before."""
+    up or down (by up to 14 lines), or aside, to overlap no circle and no label placed before."""
     out = {}
     for e in net.edges:
         mx, my = curves[e.id][1]
