@@ -17,6 +17,7 @@ from pathlib import Path
 from dlovr.model.network import Network, NetworkError, load_network
 from dlovr.recording import RecordingError
 from dlovr.recording.network_html import CSS, network_svg
+from dlovr.ui.page_js import on_drawn
 
 LIVE_COLOR = "#1f77b4"
 TEXT_PX = 20.0
@@ -123,7 +124,7 @@ def network_view_html(net: Network, live: str | None, situation: str = "", note:
         f"<style>{css}</style>{head}<div>{buttons}</div>"
         f'<div class="dlovr-net-scroll" style="border:1px solid #ddd;overflow:auto;max-height:60vh">'
         f"{sized}"
-        f'<img alt="" src="data:," style="display:none" onerror="{keep}"></div></div>'
+        f"{on_drawn(keep)}</div></div>"
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dlovr.ui.jog import keys_js
-from dlovr.ui.page_js import POST_JS, with_input
+from dlovr.ui.page_js import POST_JS, on_drawn, with_input
 from dlovr.ui.timeline import _pick_handlers
 
 
@@ -25,3 +25,9 @@ def test_a_widget_id_that_is_not_one_is_refused(uuid: str):
     with pytest.raises(ValueError, match="not a widget id"):
         keys_js(uuid)
     assert _pick_handlers(uuid) == ""
+
+
+def test_a_script_run_as_its_html_is_drawn_is_escaped_for_its_attribute():
+    html = on_drawn("document.title=\"a<b\" && f('x')")
+    assert html.startswith('<img alt="" src="data:," style="display:none" onerror="')
+    assert html.count('"') == 8 and "<b" not in html.removeprefix("<img")  # nothing leaves the attribute

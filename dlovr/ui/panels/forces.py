@@ -4,7 +4,6 @@ program runs (:mod:`dlovr.ui.panels.run`), its current macro's detector signal a
 
 from __future__ import annotations
 
-from html import escape
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,6 +22,7 @@ from dlovr.ui.forces import (
     readout_js,
     signal_arrays,
 )
+from dlovr.ui.page_js import on_drawn
 from dlovr.ui.panels.run import RunPanel
 from dlovr.ui.timeline import Timeline
 
@@ -90,9 +90,8 @@ class ForcePanel:
                 height=190,
             )
             self.caption = gui.add_markdown("")
-            js = escape(readout_js(), quote=True)  # the legend's read-out (forces.READOUT_JS)
-            img = f'<img alt="" src="data:," style="display:none" onerror="{js}">'
-            gui.add_html(f"<style>{READOUT_CSS}</style>{img}")
+            # the legend's read-out (forces.READOUT_JS)
+            gui.add_html(f"<style>{READOUT_CSS}</style>{on_drawn(readout_js())}")
 
     def show_live(self) -> None:
         """The last seconds of the live simulation (the server calls this at ``PANEL_HZ``)."""

@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dlovr.ui.page_js import on_drawn
+
 if TYPE_CHECKING:
     import viser
 
@@ -126,9 +128,8 @@ class StatusPanel:
             return
         self._shown = (text, title + speed)
         # the title is set, and the key followers installed, by the page itself as the line is drawn
-        # (an image that fails to load runs its onerror)
-        js = escape(f"document.title={title!r};{speed}{self.script}", quote=True)
-        self.html.content = text + f'<img alt="" src="data:," style="display:none" onerror="{js}">'
+        # (page_js.on_drawn)
+        self.html.content = text + on_drawn(f"document.title={title!r};{speed}{self.script}")
 
 
 def _swatch(rgb: tuple[int, int, int] | str, shape: str = "border-radius:2px") -> str:
