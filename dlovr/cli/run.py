@@ -73,6 +73,19 @@ _VARY_HELP = (
 )
 @click.option("--recording", metavar="FILE", help="The demonstration (default: the program's source).")
 @click.option(
+    "--network",
+    "network_path",
+    metavar="NET-PROGRAM.json",
+    help="A network program of the scene (dlovr compile --network): where the sensed goal check says "
+    "the goal was missed, plan again through it from the sensed situation.",
+)
+@click.option(
+    "--replans",
+    "replans_raw",
+    metavar="K",
+    help="With --network: plan again at most K times (default 2).",
+)
+@click.option(
     "--frame",
     metavar="world|relative",
     default="world",
@@ -106,7 +119,11 @@ def run_cmd(**given: Any) -> None:
     Prints a table per macro (class, detected at, true transition at, latency, outcome) and the result.
     A network program (from `dlovr compile --network`) runs with sensing and re-planning: after each
     detection the sensed contact vector picks the node reached, and the planner chooses from there; a
-    situation outside the network stops the run (dlovr.execution.network_run).
+    situation outside the network stops the run (dlovr.execution.network_run). A compiled program
+    given --network NET-PROGRAM.json recovers through it: where its sensed goal check says the goal
+    was missed (after the last macro, or at a macro that failed), it identifies the sensed situation
+    in the network, plans again from there and checks the goal again, at most --replans times
+    (dlovr.execution.recovery).
     Exit code: 0 the goal was reached, 1 the run failed (a macro's transition never came, the goal
     was not reached, the simulation diverged), 2 bad input.
 
@@ -131,6 +148,8 @@ def run_cmd(**given: Any) -> None:
 
     runnable = load_runnable(a.program_path)  # a ProgramError is an InputError: one line, exit 2
     if isinstance(runnable, NetworkProgram):
+        if a.network_path or a.replans_raw:
+            raise UserError(f"{a.program_path}: --network and --replans are for a compiled program")
         if a.baseline or a.recording or a.path_mode == "demo":
             why = "a network program has no single demonstration to replay or follow"
             raise UserError(f"{a.program_path}: {why}")
@@ -139,13 +158,32 @@ def run_cmd(**given: Any) -> None:
     program = runnable
     scene, track = _scene_track(program, a)
     opts = _exec_options(a, n)
+    recovery = _recovery(program, a)
     use_track = a.path_mode != "program" and track is not None
     if n.trials is not None:
-        _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline)), a, n)
+        _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline), recovery), a, n)
         return
     if a.registered:
         opts = _registered(program, scene, opts, a)
-    _single(program, scene, opts, track if use_track else None, a)
+    _single(program, scene, opts, track if use_track else None, a, recovery)
+
+
+def _recovery(program: Any, a: RunArgs) -> Any:
+    """The network a compiled program recovers through (``--network``, ``--replans``), or None."""
+    if a.replans_raw is not None and not a.network_path:
+        raise UserError("--replans needs --network NET-PROGRAM.json")
+    if not a.network_path:
+        return None
+    from dlovr.execution.recovery import MAX_REPLANS, Recovery, check_recovery
+    from dlovr.model.planning import NetworkProgram, load_runnable
+
+    replans = _number("--replans", a.replans_raw, integer=True, minimum=0)
+    nprog = load_runnable(a.network_path)  # a bad file: one line, exit 2
+    if not isinstance(nprog, NetworkProgram):
+        why = "not a network program (make one with dlovr compile --network)"
+        raise UserError(f"--network {a.network_path}: {why}")
+    check_recovery(program, nprog)  # a ProgramError: one line, exit 2
+    return Recovery(nprog, MAX_REPLANS if replans is None else replans)
 
 
 def _registered(program: Any, scene: Any, opts: Any, a: RunArgs) -> Any:
@@ -174,6 +212,8 @@ class RunArgs:
     registered: bool
     path_mode: str
     recording: str | None
+    network_path: str | None
+    replans_raw: str | None
     frame: str
     settle_raw: str | None
     allowance_raw: str | None
@@ -206,7 +246,8 @@ class Numbers:
 @dataclass(frozen=True)
 class TrialsArgs:
     """What the trials of a program run: the program, its scene, the demonstration's track (or
-    None), whether macros follow it, the executor's options, whether the open-loop replay runs too."""
+    None), whether macros follow it, the executor's options, whether the open-loop replay runs too,
+    the network a compiled program recovers through (or None)."""
 
     program: Any
     scene: Any
@@ -214,6 +255,7 @@ class TrialsArgs:
     use_track: bool
     opts: Any
     baseline: bool
+    recovery: Any = None
 
 
 def _numbers(a: RunArgs) -> Numbers:
@@ -298,9 +340,9 @@ def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
     return scene, track
 
 
-def _single(program: Any, scene: Any, opts: Any, track: Any, a: RunArgs) -> None:
+def _single(program: Any, scene: Any, opts: Any, track: Any, a: RunArgs, recovery: Any = None) -> None:
     """One run of ``program`` (recorded to ``a.out`` when given, replacing a file there only with
-    ``a.force``); exit 0 when it reached the goal."""
+    ``a.force``; recovering through ``recovery``'s network); exit 0 when it reached the goal."""
     import json
 
     from dlovr.execution.engine import format_result
@@ -312,13 +354,13 @@ def _single(program: Any, scene: Any, opts: Any, track: Any, a: RunArgs) -> None
 
         try:
             prepare_output(out)
-            res = record_run(program, scene, out, opts, track=track, overwrite=a.force)
+            res = record_run(program, scene, out, opts, track=track, overwrite=a.force, recovery=recovery)
         except OSError as e:
             raise UserError(str(output_error(out, e))) from None
     else:
         from dlovr.execution.run import run_program
 
-        res = run_program(program, scene, opts, track=track)
+        res = run_program(program, scene, opts, track=track, recovery=recovery)
     if a.as_json:
         click.echo(json.dumps(rounded(res.to_json()), indent=1))
     else:
@@ -386,6 +428,7 @@ def _trials(t: TrialsArgs, a: RunArgs, n: Numbers) -> None:
         record_dir=record_dir,
         registered=a.registered,
         force=a.force,
+        recovery=t.recovery,
     )
     check_writable_dir(out)  # before the batch: a folder that takes no file fails now, not after it
     try:
@@ -461,6 +504,10 @@ def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
         line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
         line += f" ({fr:.1%})"
     click.echo(line)
+    rp = summary.get("replans") or {}
+    if rp.get("replanned"):
+        click.echo(f"planned again through the network in {rp['replanned']} trials, "
+                   f"{rp['recovered']} of them reached the goal")
     if summary["retried_trials"] or summary["lost_trials"]:
         lost = f"{summary['retried_trials']} trials retried (a worker died), {summary['lost_trials']} lost"
         click.echo(lost)

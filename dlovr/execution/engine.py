@@ -19,6 +19,7 @@ from typing import Any
 
 from dlovr.execution.executor import DemoTrack, Event, ExecOptions, Execution, Session, Steps, program_steps
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult, format_network_result, network_steps
+from dlovr.execution.recovery import Recovery, recovering_steps
 from dlovr.execution.scoring import RunResult, score
 from dlovr.execution.scoring import format_result as format_program_result
 from dlovr.model.planning import NetworkProgram
@@ -33,8 +34,9 @@ class Engine:
     macros follow (:func:`dlovr.execution.executor.program_steps`); ``scene``: the ``dlovr.scene.Scene``
     simulated (its name goes into the result; a network program needs it for the cable's weight);
     ``network``: a network program's options. ``on_step(record)`` sees every step, ``on_event(event)``
-    every :class:`dlovr.execution.executor.Event`. A diverged simulation ends the run with its reason
-    in the result (never raises).
+    every :class:`dlovr.execution.executor.Event`. ``recovery``: a compiled program that misses its
+    goal plans again through this network (:mod:`dlovr.execution.recovery`). A diverged simulation
+    ends the run with its reason in the result (never raises).
     """
 
     def __init__(
@@ -48,8 +50,10 @@ class Engine:
         network: NetworkOptions | None = None,
         on_step: Callable[[Any], None] | None = None,
         on_event: Callable[[Event], None] | None = None,
+        recovery: Recovery | None = None,
     ) -> None:
         self.program, self.sim, self.track, self.scene = program, sim, smoothed(program, track), scene
+        self.recovery = recovery
         self.opts = opts if opts is not None else ExecOptions()
         self.network = network if network is not None else NetworkOptions()
         self._on_step, self._on_event = on_step, on_event
@@ -71,6 +75,9 @@ class Engine:
         ses = self.session = Session(self.sim, self.opts, on_step=self._on_step, on_event=self._on_event)
         if isinstance(self.program, Program):  # the one place where programs and networks part
             self.execution = Execution(self.program, self.opts, events=ses.events)
+            if self.recovery is not None:
+                scene = self.scene if self.scene is not None else getattr(self.sim, "scene", None)
+                return recovering_steps(self.program, ses, self.execution, self.track, self.recovery, scene)
             return program_steps(self.program, ses, self.execution, self.track)
         if isinstance(self.program, NetworkProgram):
             return network_steps(self.program, ses, self.scene, self.network)

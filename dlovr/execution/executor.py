@@ -206,11 +206,33 @@ class MacroRun:
     resume_at: float | None = None  # demonstration time (s) its motion reached, when short of its end
 
 
+@dataclass(frozen=True)
+class Replan:
+    """One recovery of a compiled program through a transition network
+    (:mod:`dlovr.execution.recovery`): after the sensed goal check did not confirm the goal, the
+    situation sensed (``node``, its ``situation``; ``sensed`` the contact vector, world, unit or zero;
+    ``node`` empty when none fitted), the network loop's path and whether it arrived at the goal node
+    (``arrived``; ``reason`` why not), and the goal check after it (``goal_sensed``, ``goal_angle``
+    deg). Times ``started_at``/``ended_at`` in s of simulated time."""
+
+    node: str
+    situation: str
+    sensed: tuple[float, float, float] | None
+    path: tuple[str, ...]
+    arrived: bool
+    reason: str
+    goal_sensed: bool | None
+    goal_angle: float | None
+    started_at: float
+    ended_at: float
+
+
 @dataclass
 class Execution:
     """The raw outcome of a program's run (:func:`dlovr.execution.engine.execute`): per-macro runs,
     the tracker's debounced situations (``kept``: list of ``dlovr.model.transitions.Kept``), the
-    events and where it stopped."""
+    events and where it stopped; ``replans``: the recoveries through a network after the goal was
+    missed (:mod:`dlovr.execution.recovery`)."""
 
     program: Program
     options: ExecOptions
@@ -226,6 +248,7 @@ class Execution:
     goal_sensed: bool | None = None
     goal_force_diff: float | None = None
     goal_angle: float | None = None
+    replans: list[Replan] = field(default_factory=list)
 
 
 def principal_states(situation: Any) -> tuple[str, ...]:

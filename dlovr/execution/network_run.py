@@ -297,7 +297,7 @@ def _true_node(nprog: NetworkProgram, sim: Any) -> tuple[str, tuple[str, ...]]:
     return "?", have
 
 
-def _rounded(v: np.ndarray | None) -> tuple[float, float, float] | None:
+def rounded_vector(v: np.ndarray | None) -> tuple[float, float, float] | None:
     """A sensed vector for the report: 4 decimals, no -0.0."""
     return None if v is None else _v3([round(float(x), 4) + 0.0 for x in v])
 
@@ -305,10 +305,18 @@ def _rounded(v: np.ndarray | None) -> tuple[float, float, float] | None:
 class _NetworkRun:
     """A network program's run in progress (the loop of the module docstring) and what it found."""
 
-    def __init__(self, nprog: NetworkProgram, ses: Session, scene: Any, nopts: NetworkOptions):
+    def __init__(
+        self, nprog: NetworkProgram, ses: Session, scene: Any, nopts: NetworkOptions, *,
+        start: str | None = None, settle: bool = True,
+    ):
+        """``start``: the node the loop starts from (default the network's start; a compiled
+        program's recovery starts where it sensed it is, :mod:`dlovr.execution.recovery`);
+        ``settle``: hold ``final_settle`` s after the goal (the recovery's caller holds itself)."""
         self.nprog, self.ses, self.scene, self.nopts = nprog, ses, scene, nopts
         self.net = nprog.network
-        self.node, self.path, self.replans = self.net.start, [self.net.start], 0
+        first = self.net.start if start is None else start
+        self.node, self.path, self.replans = first, [first], 0
+        self.settle = settle
         self.macros: list[NetMacro] = []
         self.tare = np.array([0.0, 0.0, -float(scene.dlo.mass) * GRAVITY])  # the cable's weight
         self.ref_track = reference_track(nprog)
@@ -321,7 +329,7 @@ class _NetworkRun:
         from dlovr.sim import SimulationDiverged
 
         net, ses = self.net, self.ses
-        head = f"network program {self.nprog.name}: start {net.start}, goal {net.goal}"
+        head = f"network program {self.nprog.name}: start {self.node}, goal {net.goal}"
         ses.emit("start", 0, f"{head}, detection {ses.opts.detect}")
         try:
             while len(self.macros) < self.nopts.max_macros:
@@ -385,7 +393,7 @@ class _NetworkRun:
         tn, _ = _true_node(self.nprog, self.ses.sim)
         sensed = sensed_contact_vector(self.ses.f, self.tare, _free_force(m, self.nopts.free_force))
         found = self._identify(choice, run, sensed, tn)
-        sv = _rounded(sensed)
+        sv = rounded_vector(sensed)
         if found is None:
             self._outside(k, choice, run, sv, t0)
             return False
@@ -475,7 +483,8 @@ class _NetworkRun:
                 len(self.macros) + 1, self.nprog, self.node, _Final(target=self.node), self.ses.sim, ref, span
             )
             yield from run_final(fin, self.ses, ref)
-        yield from _hold_target(self.ses, self.ses.opts.final_settle)
+        if self.settle:
+            yield from _hold_target(self.ses, self.ses.opts.final_settle)
         self.ses.emit("end", 0, "network program done")
 
     def result(self, wall_time: float) -> NetworkRunResult:
@@ -506,6 +515,19 @@ def network_steps(
     run = _NetworkRun(nprog, ses, scene, nopts)
     yield from run.steps()
     return run.result(time.perf_counter() - wall0)
+
+
+def network_steps_from(
+    nprog: NetworkProgram, ses: Session, scene: Any, nopts: NetworkOptions, start: str
+) -> Steps[tuple[NetworkRunResult, bool]]:
+    """The loop of :func:`network_steps` from the node ``start`` (where the run sensed it is) and
+    the gripper's pose now, without the final hold (a compiled program's recovery,
+    :mod:`dlovr.execution.recovery`, holds and checks the goal itself); its result and whether the
+    loop arrived at the goal node (as far as it sensed)."""
+    wall0 = time.perf_counter()
+    run = _NetworkRun(nprog, ses, scene, nopts, start=start, settle=False)
+    yield from run.steps()
+    return run.result(time.perf_counter() - wall0), run.arrived
 
 
 def failed_start(nprog: NetworkProgram, scene: Any, detect: str, why: str) -> NetworkRunResult:

@@ -22,6 +22,7 @@ from typing import Any, overload
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import DemoTrack, Event, ExecOptions
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult
+from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import fresh_simulator, not_started
 from dlovr.execution.scoring import RunResult
 from dlovr.model.planning import NetworkProgram
@@ -110,6 +111,7 @@ def record_run(
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
     overwrite: bool = False,
+    recovery: Recovery | None = None,
 ) -> RunResult: ...
 
 
@@ -125,6 +127,7 @@ def record_run(
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
     overwrite: bool = False,
+    recovery: Recovery | None = None,
 ) -> NetworkRunResult: ...
 
 
@@ -139,10 +142,11 @@ def record_run(
     pieces: Any = None,
     extra_metadata: dict[str, str] | None = None,
     overwrite: bool = False,
+    recovery: Recovery | None = None,
 ) -> RunResult | NetworkRunResult:
     """Run ``program`` (compiled or network) in ``scene`` like :func:`dlovr.execution.run.run_program`
     while recording it to ``path`` (an existing file is replaced only with ``overwrite``, once the
-    new one is finished). A run that cannot start writes no file."""
+    new one is finished; ``recovery`` as there). A run that cannot start writes no file."""
     from dlovr.recording import DemoRecorder
 
     opts = opts if opts is not None else ExecOptions()
@@ -160,7 +164,7 @@ def record_run(
             rec.rec.message(ev.step, TOPIC_EVENTS, ev.payload())
 
         eng = Engine(program, sim, opts, track=track, scene=scene, network=network, on_step=rec.step,
-                     on_event=on_event)
+                     on_event=on_event, recovery=recovery)
         res = eng.run()
         diverged = eng.execution.diverged if eng.execution is not None else _diverged(res.reason)
         if diverged:

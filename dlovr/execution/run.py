@@ -36,6 +36,7 @@ from dlovr.execution.executor import (
     principal_states,
 )
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult, failed_start
+from dlovr.execution.recovery import Recovery
 from dlovr.execution.scoring import RunResult
 from dlovr.model.planning import NetworkProgram
 from dlovr.model.program import Program, ProgramError, Runnable
@@ -165,6 +166,7 @@ def run_program(
     pieces: Any = None,
     on_step: Any = None,
     on_event: Any = None,
+    recovery: Recovery | None = None,
 ) -> RunResult: ...
 
 
@@ -179,6 +181,7 @@ def run_program(
     pieces: Any = None,
     on_step: Any = None,
     on_event: Any = None,
+    recovery: Recovery | None = None,
 ) -> NetworkRunResult: ...
 
 
@@ -192,15 +195,18 @@ def run_program(
     pieces: Any = None,
     on_step: Any = None,
     on_event: Any = None,
+    recovery: Recovery | None = None,
 ) -> RunResult | NetworkRunResult:
     """Execute ``program`` (compiled or network) in a fresh simulation of ``scene`` and judge it
-    (:class:`dlovr.execution.engine.Engine`); a run that cannot start is a failed result."""
+    (:class:`dlovr.execution.engine.Engine`; ``recovery``: a compiled program that misses its goal
+    plans again through that network); a run that cannot start is a failed result."""
     opts = opts if opts is not None else ExecOptions()
     sim, why = fresh_simulator(scene, pieces)
     if sim is None:
         return not_started(program, scene, opts, str(why))
     eng = Engine(
-        program, sim, opts, track=track, scene=scene, network=network, on_step=on_step, on_event=on_event
+        program, sim, opts, track=track, scene=scene, network=network, on_step=on_step, on_event=on_event,
+        recovery=recovery,
     )
     return eng.run()
 

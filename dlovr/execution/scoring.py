@@ -20,7 +20,11 @@ The tracker's debounced situations are not used to steer a force-detected run, o
   (:func:`dlovr.execution.executor.goal_check`);
 - the run reaches its **goal** when the last debounced situation has the principal contacts of the
   program's goal situation (the demonstration's last one; extra lower-card contacts do not count,
-  being no principal contacts).
+  being no principal contacts);
+- **replans** (with a network to recover through, :mod:`dlovr.execution.recovery`): each time the
+  goal check did not confirm the goal, the situation sensed, the network loop's path and the goal
+  check after it; the run is **recovered** when it planned again and then reached the goal, and a
+  recovered run succeeds even where one of its macros failed.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from dlovr.execution.executor import Execution, MacroRun, principal_states, transition_seen
+from dlovr.execution.executor import Execution, MacroRun, Replan, principal_states, transition_seen
 
 #: How long after a detection the tracker may take to see the transition it detected (s): force
 #: detection may lead the geometric contact label by a fraction of a millimetre of motion.
@@ -84,6 +88,10 @@ class RunResult:
     goal_torque: tuple[float, float, float] | None = None
     #: the angle (deg) between the contact vector sensed at the end and the demonstration's
     goal_angle: float | None = None
+    #: the recoveries through a network after the goal check failed (:mod:`dlovr.execution.recovery`)
+    replans: tuple[Replan, ...] = ()
+    #: whether a replan brought the run to its goal
+    recovered: bool = False
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -160,7 +168,10 @@ def score(ex: Execution, scene_name: str = "") -> RunResult:
         reason = f"final situation {final_p or ('N',)} is not the goal {goal or ('N',)}"
     if reason and ex.diverged is not None and failed_index is None:
         reached = False
-    success = reached and failed_index is None and ex.diverged is None
+    recovered = bool(ex.replans) and reached and ex.diverged is None
+    if recovered:
+        reason = ""
+    success = reached and (failed_index is None or recovered) and ex.diverged is None
     return RunResult(
         program=ex.program.name,
         scene=scene_name,
@@ -181,7 +192,21 @@ def score(ex: Execution, scene_name: str = "") -> RunResult:
         goal_force=ex.goal_force,
         goal_torque=ex.goal_torque,
         goal_angle=ex.goal_angle,
+        replans=tuple(ex.replans),
+        recovered=recovered,
     )
+
+
+def _replan_line(k: int, r: Replan) -> str:
+    """One recovery attempt of ``dlovr run``'s report."""
+    if not r.node:
+        return f"replan {k}: {r.reason}"
+    path = " -> ".join(r.path)
+    got = "arrived at the goal node" if r.arrived else f"stopped: {r.reason}"
+    check = "-" if r.goal_sensed is None else ("confirms" if r.goal_sensed else "does NOT confirm")
+    angle = f" ({r.goal_angle:.1f} deg)" if r.goal_angle is not None else ""
+    head = f"replan {k}: sensed {r.node} ({r.situation}); network path {path}"
+    return f"{head}: {got}; goal check {check}{angle}"
 
 
 def first_deviation(macros: Any) -> int | None:
@@ -218,8 +243,10 @@ def format_result(res: RunResult) -> str:
         word = "confirms" if res.goal_sensed else "does NOT confirm"
         lines.append(f"sensed goal check: the contact vector {word} the goal ({res.goal_angle:.1f} deg from "
                      "the demonstration's at its end)")
+    lines += [_replan_line(k, r) for k, r in enumerate(res.replans, 1)]
     if res.success:
-        lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s")
+        how = f" after {len(res.replans)} replan(s) through the network" if res.recovered else ""
+        lines.append(f"result: goal reached ({goal}) at t = {res.sim_time:.3f} s{how}")
     else:
         lines.append(f"result: FAILED: {res.reason}")
         lines.append(f"        goal {goal}: {'reached' if res.goal_reached else 'not reached'}")

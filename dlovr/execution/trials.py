@@ -26,6 +26,7 @@ from typing import Any
 
 from dlovr.execution.executor import DemoTrack, ExecOptions
 from dlovr.execution.network_run import NetworkRunResult
+from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import run_openloop, run_program
 from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, object_shifts, perturb
@@ -49,6 +50,8 @@ class TrialSetup:
     :func:`dlovr.execution.variation.object_shifts`); else it runs blind. ``force``: an existing
     ``trial_KKK.mcap`` is replaced (else the trial fails: its recording is kept).
     ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
+    ``recovery``: a compiled program that misses its goal plans again through this network
+    (:mod:`dlovr.execution.recovery`).
     """
 
     program: Program | NetworkProgram
@@ -63,6 +66,7 @@ class TrialSetup:
     record_dir: str | None = None
     registered: bool = False
     force: bool = False
+    recovery: Recovery | None = None
 
     @property
     def name(self) -> str:
@@ -93,10 +97,12 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         meta = _trial_metadata(setup, trial, values)
         res = record_run(
             setup.program, scene, path, opts, track=track, pieces=setup.pieces, extra_metadata=meta,
-            overwrite=setup.force,
+            overwrite=setup.force, recovery=setup.recovery,
         )
     else:
-        res = run_program(setup.program, scene, opts, track=track, pieces=setup.pieces)
+        res = run_program(
+            setup.program, scene, opts, track=track, pieces=setup.pieces, recovery=setup.recovery
+        )
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, **_trial_result(res)}
     if setup.baseline and setup.track is not None and isinstance(setup.program, Program):
         out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
@@ -209,6 +215,15 @@ def goal_check_counts(trials: Sequence[dict[str, Any]]) -> dict[str, int]:
             "reached": len(reached), "doubted": sum(not p["goal_sensed"] for p in reached)}
 
 
+def replan_counts(trials: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How the recovery through a network went (:mod:`dlovr.execution.recovery`): the trials that
+    planned again (``replanned``), those it brought to the goal (``recovered``) and the attempts in
+    all (``attempts``)."""
+    done = [t["program"] for t in trials if t["program"].get("replans")]
+    return {"replanned": len(done), "recovered": sum(bool(p.get("recovered")) for p in done),
+            "attempts": sum(len(p["replans"]) for p in done)}
+
+
 def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, Any]:
     """Success rates, detection figures and per-level rates of a set of trials."""
     prog = [bool(t["program"]["success"]) for t in trials]
@@ -269,6 +284,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "failures": failures,
         "first_deviations": deviations,
         "goal_check": goal_check_counts(trials),
+        "replans": replan_counts(trials),
         "per_parameter": per,
         "wall_time_per_trial_s": statistics.mean(walls) if walls else None,
         "retried_trials": sum(t.get("attempts", 1) > 1 for t in trials),

@@ -152,3 +152,39 @@ def test_a_macro_without_force_signal_is_taken_to_reach_its_planned_target(net):
     raw["edges"][0]["detection"] = [jump, det]
     res = run_program(program(raw), load_scene("table"), ExecOptions(), network=NetworkOptions(tolerance=0.3))
     assert not res.success and res.macros[0].ended == "outside"
+
+
+@pytest.mark.slow
+def test_a_program_that_missed_its_goal_plans_again_through_the_network(net, touch, tmp_path):
+    """The table 8 cm lower than demonstrated: the program's one macro (lower until the tip touches)
+    reaches its allowance with the cable hanging free; the goal check says so, the run senses free
+    space (n1), plans again through the network from there and reaches the goal (issue 28, item 3).
+    Without the network the same run fails."""
+    from dataclasses import replace
+
+    from dlovr.execution.recovery import Recovery
+
+    d, _ = net
+    program, scene, track, _ = touch
+    low = replace(scene, objects=tuple(replace(o, pos=(*o.pos[:2], o.pos[2] - 0.08)) for o in scene.objects))
+    alone = run_program(program, low, ExecOptions(), track=track)
+    assert not alone.success and alone.failed_macro == 1 and alone.replans == ()
+    nprog = NetworkProgram.from_json(json.loads((d / "prog.json").read_text()))
+    res = run_program(program, low, ExecOptions(), track=track, recovery=Recovery(nprog))
+    assert res.success and res.recovered and res.goal_reached, res.reason
+    (r,) = res.replans
+    assert r.node == "n1" and r.path == ("n1", "n2") and r.arrived and r.goal_sensed
+    assert res.failed_macro == 1 and res.macros[0].outcome in ("missed", "no transition")
+
+
+def test_run_network_option_is_checked_in_one_line(net, touch):
+    d, _ = net
+    program, *_ = touch
+    r = cli("run", program.path, "--replans", 1)
+    assert r.exit_code == 2 and "--replans needs --network" in r.output
+    r = cli("run", program.path, "--network", program.path)
+    assert r.exit_code == 2 and "not a network program" in r.output
+    r = cli("run", d / "prog.json", "--network", d / "prog.json")
+    assert r.exit_code == 2 and "--network and --replans are for a compiled program" in r.output
+    r = cli("run", program.path, "--network", d / "prog.json", "--replans", -1)
+    assert r.exit_code == 2 and "--replans: must be >= 0" in r.output

@@ -1,0 +1,156 @@
+"""Recovery by replanning: a compiled program that missed its goal plans again through a transition
+network from the situation it senses (issue 28, item 3; docs/programs.md, "Recovery").
+
+A compiled program repeats one demonstration; where the scene differs more than it can absorb (the
+objects a centimetre away and not registered) every macro may "succeed" and the run still end in the
+wrong place. The sensed goal check (:func:`dlovr.execution.executor.goal_check`) tells the robot so
+from the wrench alone. Given a network program of the same scene (``dlovr run PROGRAM --network
+NET-PROGRAM``), the run then:
+
+1. takes the program's end, or the macro it stopped at (one that reached its allowance undetected),
+   holds the pose ``final_settle`` s and checks the goal (after the last macro this was done
+   already);
+2. where the check does not confirm the goal, **identifies the sensed situation**: the contact
+   vector sensed over the hold's last 0.2 s (the sensed force minus the cable's weight, as the
+   network runs sense it, :func:`dlovr.execution.network_run.sensed_contact_vector`) against the
+   expected vector of every node of the network but the goal (the goal check has just said the goal
+   does not fit) that has a demonstrated path to the goal from the gripper's position
+   (:func:`sensed_node`: the nearest within the network options' ``tolerance``; a tie goes to the
+   node visited more often, then the smaller id);
+3. runs the network loop from that node (:func:`dlovr.execution.network_run.network_steps_from`:
+   plan, guarded macro, sense, identify, plan again ... until it arrives at the goal node, or a
+   situation outside the network, a node without a path or a failed macro stops it);
+4. holds and checks the goal again; steps 2-4 are repeated while the check does not confirm the goal,
+   at most ``max_replans`` times (:data:`MAX_REPLANS` by default), and not after a sensed situation
+   that fits no node (sensing again would find the same).
+
+Each attempt is a :class:`dlovr.execution.executor.Replan` in the run's result (``replans``). The run
+is judged as any other (:mod:`dlovr.execution.scoring`): the goal is reached when the tracker's last
+situation has the goal's principal contacts; a run whose macro failed but that a replan brought to
+the goal counts as a success (``recovered``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dlovr.execution.executor import (
+    ENDED_OK,
+    DemoTrack,
+    Execution,
+    Replan,
+    Session,
+    Steps,
+    final_hold,
+    program_steps,
+)
+from dlovr.execution.network_run import (
+    NetworkOptions,
+    network_steps_from,
+    rounded_vector,
+    sensed_contact_vector,
+)
+from dlovr.model.planning import NetworkProgram, Successor, _expected, identify
+from dlovr.model.program import Program, ProgramError
+
+#: How many times by default a run plans again through the network after its goal check failed.
+MAX_REPLANS = 2
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """What a compiled program recovers through: the network program (of the same scene and goal),
+    the most replans (:data:`MAX_REPLANS`) and the network loop's options."""
+
+    network: NetworkProgram
+    max_replans: int = MAX_REPLANS
+    options: NetworkOptions = field(default_factory=NetworkOptions)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_replans, int) and self.max_replans >= 0):
+            raise ValueError(f"max_replans must be an integer >= 0, got {self.max_replans!r}")
+
+
+def check_recovery(program: Program, nprog: NetworkProgram) -> None:
+    """Raise :class:`ProgramError` when ``nprog`` cannot recover ``program``: another scene, or a
+    goal node whose principal contacts are not the program's goal."""
+    net = nprog.network
+    if program.scene and net.scene_name and program.scene != net.scene_name:
+        raise ProgramError(
+            f"network program {nprog.name or '-'}: made in scene {net.scene_name}, "
+            f"the program in {program.scene}"
+        )
+    goal = tuple(sorted(net.node(net.goal).principal))
+    if goal != tuple(program.goal):
+        raise ProgramError(
+            f"network program {nprog.name or '-'}: its goal {net.goal} ({' + '.join(goal) or 'N'}) is not "
+            f"the program's ({' + '.join(program.goal) or 'N'})"
+        )
+
+
+def sensed_node(
+    nprog: NetworkProgram, vector: Any, position: Any, tolerance: float | None
+) -> Successor | None:
+    """The node of ``nprog`` the sensed contact ``vector`` (world; None or zero: no contact) shows,
+    with the gripper at ``position`` (m, world): the nearest expected vector among the nodes other
+    than the goal that have a demonstrated path to the goal from there (ties: more visits, then the
+    smaller id); None when none is within ``tolerance`` (a situation outside the network)."""
+    net = nprog.network
+    nodes = [n for n in net.nodes if n.id != net.goal and nprog.replan(n.id, position) is not None]
+    total = sum(n.visits for n in nodes) or 1
+    cands = [Successor(n.id, n.situation, n.principal, _expected(n), n.visits / total) for n in nodes]
+    return identify(cands, vector, tolerance)
+
+
+def recovering_steps(
+    program: Program, ses: Session, out: Execution, track: DemoTrack | None, recovery: Recovery, scene: Any
+) -> Steps[None]:
+    """The steps of ``program`` (:func:`dlovr.execution.executor.program_steps`), then the recovery
+    of the module docstring; the attempts land in ``out.replans``."""
+    from dlovr.sim import SimulationDiverged
+
+    yield from program_steps(program, ses, out, track)
+    if out.diverged is not None or not program.goal:
+        return
+    try:
+        if out.runs and out.runs[-1].ended not in ENDED_OK:  # stopped at a macro: what was reached?
+            yield from final_hold(ses, out, track)
+        while out.goal_sensed is False and len(out.replans) < recovery.max_replans:
+            attempt = yield from _replan(ses, out, track, recovery, scene)
+            out.replans.append(attempt)
+            if not attempt.node:
+                break
+    except SimulationDiverged as e:
+        out.diverged = str(e)
+        ses.emit("failed", 0, f"simulation diverged while planning again: {e.reason}")
+    sim = ses.sim
+    out.kept = list(sim.tracker.kept) if sim.tracker is not None else []
+    out.sim_time = float(sim.time)
+
+
+def _replan(
+    ses: Session, out: Execution, track: DemoTrack | None, recovery: Recovery, scene: Any
+) -> Steps[Replan]:
+    """One attempt: identify the sensed situation, run the network loop from it, hold, check."""
+    sim, nopts, t0 = ses.sim, recovery.options, float(ses.sim.time)
+    weight = ses.weight()
+    tare = weight if weight is not None else np.zeros(3)
+    force = out.goal_force if out.goal_force is not None else ses.f
+    v = sensed_contact_vector(force, tare, nopts.free_force)
+    sv = rounded_vector(v)
+    pos = tuple(float(x) for x in sim.data.mocap_pos[sim.built.mocap_id])
+    found = sensed_node(recovery.network, v, pos, nopts.tolerance)
+    if found is None:
+        why = (f"the sensed contact vector {list(sv) if sv else 'none (free space)'} fits no situation of "
+               "the network with a path to the goal: not planning again")
+        ses.emit("outside", 0, why)
+        return Replan("", "", sv, (), False, why, out.goal_sensed, out.goal_angle, t0, float(sim.time))
+    what = f"the goal check did not confirm the goal; sensed {found.node} ({found.situation})"
+    ses.emit("replan", 0, f"{what}: planning again through the network")
+    res, arrived = yield from network_steps_from(recovery.network, ses, scene, nopts, found.node)
+    yield from final_hold(ses, out, track)
+    return Replan(found.node, found.situation, sv, res.path, arrived, res.reason, out.goal_sensed,
+                  out.goal_angle, t0, float(sim.time))
