@@ -40,7 +40,13 @@ from dlovr.execution.motion import (
     last_start,
     local_twist,
 )
-from dlovr.model.derivation import THRESHOLD_PARAM
+from dlovr.model.derivation import (
+    FREE_WINDOW_S,
+    GOAL_MIN_CONTACT_N,
+    GOAL_MIN_TOLERANCE_DEG,
+    GOAL_SENSE_S,
+    THRESHOLD_PARAM,
+)
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
     Detector,
@@ -363,24 +369,24 @@ class DemoTrack:
     free_force: tuple[float, float, float] | None = None
 
 
-#: The time (s) over which the sensed force at the end of a run (and of the demonstration) is averaged.
-GOAL_SENSE_S = 0.2
-#: Where (s from its start) a demonstration's cable hangs free and settled, its weight sensed
-#: (the first 0.2 s still ring from the start).
-FREE_WINDOW_S = (0.2, 0.4)
-#: How far (degrees) the contact vector sensed at the end of a run may turn from the one the
-#: demonstration sensed at its end for the goal to count as confirmed (plus the angle 4 standard
-#: deviations of the mean's noise make). Measured on peg_in_hole: runs that reached the goal 0.5-3
-#: deg, runs that ended with the tip on the hole block's top 14-16 deg (docs/programs.md).
-GOAL_ANGLE_DEG = 6.0
-#: An environment share below this (N) is no contact: its direction is not compared.
-GOAL_MIN_CONTACT_N = 0.01
+#: The time (s) over which the sensed force at the end of a run (and of the demonstration) is
+#: averaged (:data:`dlovr.model.derivation.GOAL_SENSE_S`); where a demonstration's cable hangs free and
+#: settled, its weight sensed (s from its start; the first 0.2 s still ring from the start); an
+#: environment share below :data:`GOAL_MIN_CONTACT_N` (N) is no contact (its direction not compared).
+#: :data:`GOAL_ANGLE_DEG`: how far (degrees) the contact vector sensed at the end of a run may turn
+#: from the one the demonstration sensed at its end for the goal to count as confirmed, where the
+#: program gives no tolerance of its own (``Program.goal_tolerance_deg``, derived from the
+#: demonstration's own spread in its goal: :func:`dlovr.model.derivation.goal_tolerance_deg`; this is
+#: its floor). Measured on peg_in_hole: runs that reached the goal 0.5-3 deg, runs that ended with the
+#: tip on the hole block's top 14-16 deg (docs/programs.md).
+GOAL_ANGLE_DEG = GOAL_MIN_TOLERANCE_DEG
 
 
 def goal_check(
     sensed: Sequence[float] | np.ndarray, track: DemoTrack | None, noise: float, n: int,
     weight: Sequence[float] | np.ndarray | None = None,
     demo_weight: Sequence[float] | np.ndarray | None = None,
+    tolerance: float = GOAL_ANGLE_DEG,
 ) -> tuple[bool | None, float | None]:
     """Whether the force sensed at the end of a run (mean of ``n`` samples, N, world) confirms the
     goal, and the angle (deg) it is judged by.
@@ -389,7 +395,8 @@ def goal_check(
     minus the cable's weight (``weight``, N world, as the robot knows its payload; default the
     demonstration's own, ``track.free_force``). It is compared with the one the demonstration sensed
     at its end (``track.end_force`` minus its cable's weight: ``demo_weight``, default
-    ``track.free_force``, what it sensed while the cable hung free): within :data:`GOAL_ANGLE_DEG` (plus
+    ``track.free_force``, what it sensed while the cable hung free): within ``tolerance`` degrees
+    (the program's own, else :data:`GOAL_ANGLE_DEG`; plus
     the angle of 4 standard deviations of the mean's noise, white ``noise`` N a sample) the goal's
     contacts push the cable as they did at the demonstration's end. Its size is not compared: a
     stiffer or longer cable presses harder into the same contacts. (None, None) without a
@@ -406,7 +413,7 @@ def goal_check(
         return both_free, 0.0 if both_free else 90.0
     angle = angle_deg(run, demo)
     slack = math.degrees(math.atan(min(4.0 * noise / math.sqrt(n) / a, 1.0)))
-    return angle <= GOAL_ANGLE_DEG + slack, angle
+    return angle <= tolerance + slack, angle
 
 
 class Session:
@@ -584,8 +591,10 @@ def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[N
         if out.program.goal:  # a goal without contacts has no contact vector to compare
             weight = ses.weight()
             demo_weight = None if _starts_free(out.program) else weight
+            tol = out.program.goal_tolerance_deg
             out.goal_sensed, out.goal_angle = goal_check(
-                sensed, track, ses.opts.noise, n_sense, weight, demo_weight)
+                sensed, track, ses.opts.noise, n_sense, weight, demo_weight,
+                GOAL_ANGLE_DEG if tol is None else tol)
         if out.goal_sensed is not None:
             word = "confirms" if out.goal_sensed else "does not confirm"
             ses.emit("end", 0, f"the sensed contact vector {word} the goal ({out.goal_angle:.1f} deg from "

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dlovr.transforms import dot, norm, unit
+from dlovr.transforms import angle_deg, dot, norm, unit
 
 #: The classes' default parameters (forces N, angles degrees, times s, rates Hz): used where the
 #: demonstration gives no signal (the same values as :data:`dlovr.model.detection.DEFAULTS`).
@@ -326,3 +326,51 @@ def _cone(
     elif cls in CONE_CLASSES:
         why = "no step along " + name if has_dirs else "no expected contact vector to compare the step with"
         texts["max_angle_deg"] = f"default: {why}"
+
+
+#: The goal check's tolerance (degrees) at least: the angle a reached goal's sensed contact vector
+#: may turn from the demonstration's end one through the cable's and the scene's variation alone
+#: (measured on peg_in_hole: reached 0.5-3 deg, the tip on the hole block's top 14-16 deg).
+GOAL_MIN_TOLERANCE_DEG = 6.0
+#: Where (s from its start) a demonstration's cable hangs free and settled, its weight sensed.
+FREE_WINDOW_S = (0.2, 0.4)
+#: The time (s) a sensed contact vector of the goal check is averaged over.
+GOAL_SENSE_S = 0.2
+#: An environment share of the sensed force below this (N) is no contact: no direction.
+GOAL_MIN_CONTACT_N = 0.01
+
+
+def goal_tolerance_deg(
+    wrench: WrenchSeries, t_goal: float, *, skip_s: float = 0.2, step_s: float = 0.05, quantile: float = 0.9
+) -> float | None:
+    """The goal check's tolerance (degrees) of a program whose demonstration entered its goal
+    situation at ``t_goal`` (s): how far the contact vector the demonstration itself sensed turned
+    while it held its goal. The contact vector is the mean force over :data:`GOAL_SENSE_S` minus the
+    cable's weight as sensed over :data:`FREE_WINDOW_S`; every window from ``skip_s`` after the entry
+    (the entry still rings) on, ``step_s`` apart, is compared with the last one (the demonstration's
+    end, what a run is compared with); the ``quantile`` of those angles (a passing jolt left out),
+    at least :data:`GOAL_MIN_TOLERANCE_DEG`. None without a contact at the end (below
+    :data:`GOAL_MIN_CONTACT_N`: the goal check then compares sizes) or without the free windows."""
+    t = wrench.t
+    if len(t) == 0:
+        return None
+    free = wrench.window(*FREE_WINDOW_S)
+    t1 = float(t[-1])
+    end = wrench.window(t1 - GOAL_SENSE_S, t1)
+    if len(free) == 0 or len(end) == 0:
+        return None
+    weight = free.mean(axis=0)
+    end_v = end.mean(axis=0) - weight
+    if norm(end_v.tolist()) < GOAL_MIN_CONTACT_N:
+        return None
+    angles: list[float] = []
+    a = t_goal + skip_s
+    while a + GOAL_SENSE_S <= t1 - GOAL_SENSE_S + 1e-9:
+        rows = wrench.window(a, a + GOAL_SENSE_S)
+        a += step_s
+        v = rows.mean(axis=0) - weight if len(rows) else None
+        if v is None or norm(v.tolist()) < GOAL_MIN_CONTACT_N:
+            continue
+        angles.append(angle_deg(v, end_v))
+    spread = float(np.quantile(angles, quantile)) if angles else 0.0
+    return round(max(GOAL_MIN_TOLERANCE_DEG, spread), 1)

@@ -202,7 +202,12 @@ class Program:
     file it was read from. Neither is written. ``smoothing_s``: the moving-average window (s) the
     demonstrated wrench and orientation were smoothed over, the positions' tremor taken out
     (:mod:`dlovr.model.smoothing`; 0: taken as recorded), and ``smoothing`` says why; both written
-    only when not 0 (the executor follows the demonstrated track treated the same way)."""
+    only when not 0 (the executor follows the demonstrated track treated the same way).
+    ``goal_tolerance_deg``: how far (degrees) the contact vector sensed at a run's end may turn from
+    the demonstration's end one for the goal check to confirm the goal, derived from how far it turned
+    in the demonstration while the goal held (:func:`dlovr.model.derivation.goal_tolerance_deg`);
+    None (not written): no contact at the goal, or a program compiled before it existed (the executor's
+    default then)."""
 
     name: str
     source: str
@@ -213,6 +218,7 @@ class Program:
     path: Path | None = None
     smoothing_s: float = 0.0
     smoothing: str = ""
+    goal_tolerance_deg: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -222,6 +228,8 @@ class Program:
         out = {"version": d["version"], "name": d["name"], "source": d["source"]}
         if self.smoothing_s > 0:
             out |= {"smoothing_s": self.smoothing_s, "smoothing": self.smoothing}
+        if self.goal_tolerance_deg is not None:
+            out["goal_tolerance_deg"] = self.goal_tolerance_deg
         return {**out, "macros": d["macros"], "summary": d["summary"]}
 
     def dumps(self) -> str:
@@ -515,6 +523,9 @@ def _read_program(raw: Any, source: str | Path) -> Program:
     smoothing = raw.get("smoothing_s", 0.0)
     if not isinstance(smoothing, int | float) or isinstance(smoothing, bool) or not 0 <= smoothing <= 10:
         raise r.err("smoothing_s", f"must be a number of seconds in [0, 10], got {smoothing!r}")
+    tol = raw.get("goal_tolerance_deg")
+    if tol is not None and (not isinstance(tol, int | float) or isinstance(tol, bool) or not 0 < tol <= 180):
+        raise r.err("goal_tolerance_deg", f"must be a number of degrees in (0, 180], got {tol!r}")
     return Program(
         name=str(raw.get("name", Path(path).stem)),
         source=str(raw.get("source", "")),
@@ -524,4 +535,5 @@ def _read_program(raw: Any, source: str | Path) -> Program:
         path=Path(path) if path != "<program>" else None,
         smoothing_s=float(smoothing),
         smoothing=str(raw.get("smoothing", "")),
+        goal_tolerance_deg=None if tol is None else float(tol),
     )

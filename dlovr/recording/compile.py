@@ -35,7 +35,21 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     if smoothing:
         prog = _smoothed_program(prog, smoothing)
+    prog = _with_goal_tolerance(prog, wrench)
     return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+
+
+def _with_goal_tolerance(prog: Any, wrench: Any) -> Any:
+    """``prog`` with the goal check's tolerance its demonstration shows
+    (:func:`dlovr.model.derivation.goal_tolerance_deg`; none without a wrench or goal contacts)."""
+    from dataclasses import replace
+
+    from dlovr.model.derivation import goal_tolerance_deg
+
+    classed = prog.classed
+    if wrench is None or not classed or not prog.goal:
+        return prog
+    return replace(prog, goal_tolerance_deg=goal_tolerance_deg(wrench, classed[-1].t))
 
 
 def _smoothed_program(prog: Any, why: str) -> Any:

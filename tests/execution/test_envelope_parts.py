@@ -4,6 +4,7 @@ check, and the executor's assumption about its sensor."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -144,3 +145,43 @@ def test_the_demonstrations_weight_is_sensed_only_where_its_cable_hung_free():
                       free_force=(0.0, 0.0, -0.093))  # edges: its "free" force is not its weight
     ok, angle = goal_check([0.0, 0.0, -0.181], track, 0.0, 100, (0.0, 0.0, -0.196), (0.0, 0.0, -0.196))
     assert ok is True and angle == pytest.approx(0.0, abs=1e-6)
+
+
+def _wrench(t_goal: float, t_end: float, turn_deg: float, share: float = 0.5):
+    """A demonstration's wrench at 500 Hz: the cable's weight (1 N down) while it hangs free, then
+    from ``t_goal`` on a contact pushing up by ``share`` N whose direction turns by ``turn_deg``
+    (in x-z) steadily to its end direction at ``t_end``."""
+    from dlovr.model.derivation import WrenchSeries
+
+    t = np.arange(0.0, t_end + 1e-9, 0.002)
+    f = np.tile([0.0, 0.0, -1.0], (len(t), 1))
+    after = t >= t_goal
+    a = np.radians(turn_deg * (t_end - t[after]) / (t_end - t_goal))
+    f[after] += share * np.stack([np.sin(a), np.zeros(len(a)), np.cos(a)], axis=1)
+    return WrenchSeries(t, f, np.zeros_like(f))
+
+
+def test_the_goal_tolerance_is_how_far_the_demonstrations_own_contact_vector_turned_in_its_goal():
+    from dlovr.model.derivation import GOAL_MIN_TOLERANCE_DEG, goal_tolerance_deg
+
+    # turning 20 deg over 2 s: windows from 0.2 s after the entry to the end's, the 90th percentile
+    tol = goal_tolerance_deg(_wrench(1.0, 3.0, 20.0), 1.0)
+    assert tol is not None and 14.0 < tol < 17.0
+    assert goal_tolerance_deg(_wrench(1.0, 3.0, 1.0), 1.0) == GOAL_MIN_TOLERANCE_DEG  # at least the floor
+    assert goal_tolerance_deg(_wrench(1.0, 3.0, 20.0, share=0.001), 1.0) is None  # no contact at the end
+    # each sample program carries its own; its nominal run is not doubted (docs/programs.md)
+    tols = {n: Program.load(ROOT / f"recordings/programs/{n}.program.json").goal_tolerance_deg
+            for n in ("table", "l_block", "edges", "corners", "peg_in_hole")}
+    assert tols == {"table": None, "l_block": 22.2, "edges": 6.0, "corners": 6.0, "peg_in_hole": 6.0}
+
+
+def test_the_goal_check_takes_the_programs_tolerance():
+    track = DemoTrack(np.zeros(1), np.zeros((1, 3)), np.zeros((1, 4)), (0.0, 0.0, -0.5), (0.0, 0.0, -1.0))
+    ten = [0.5 * np.sin(np.radians(10.0)), 0.0, -1.0 + 0.5 * np.cos(np.radians(10.0))]
+    assert goal_check(ten, track, 0.0, 100)[0] is False  # 10 deg: beyond the default 6
+    ok, angle = goal_check(ten, track, 0.0, 100, tolerance=22.2)
+    assert ok and angle == pytest.approx(10.0)
+    raw = json.loads(PEG.dumps())
+    assert Program.from_json({**raw, "goal_tolerance_deg": 12.5}).goal_tolerance_deg == 12.5
+    with pytest.raises(ValueError, match="goal_tolerance_deg: must be a number of degrees"):
+        Program.from_json({**raw, "goal_tolerance_deg": -1})
