@@ -36,7 +36,8 @@ _PATH_HELP = (
 )
 _VARY_HELP = (
     "Perturb the scene per trial: dlo.length=10%, dlo.young=0.5..2, dlo.friction=30%, "
-    "objects.pos=0.005 (metres), gripper.pos=0.005 (repeatable; see dlovr.execution.variation)."
+    "objects.pos=0.005 (metres), objects.yaw=5 (degrees), gripper.pos=0.005 (repeatable; see "
+    "dlovr.execution.variation)."
 )
 
 
@@ -191,13 +192,14 @@ def _registered(program: Any, scene: Any, opts: Any, a: RunArgs) -> Any:
     from dataclasses import replace
 
     from dlovr.execution.run import find_recording, resolve_scene
-    from dlovr.execution.variation import object_shifts
+    from dlovr.execution.variation import object_shifts, object_turns
 
     try:
         nominal = resolve_scene(program, None, find_recording(program, a.recording))
     except ValueError as e:
         raise UserError(f"--registered: {e}") from None
-    return replace(opts, object_shifts=object_shifts(nominal, scene))
+    shifts, turns = object_shifts(nominal, scene), object_turns(nominal, scene)
+    return replace(opts, object_shifts=shifts, object_turns=turns)
 
 
 @dataclass(frozen=True)

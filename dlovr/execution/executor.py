@@ -35,6 +35,7 @@ from dlovr.execution.motion import (
     ScrewPath,
     ShiftedPath,
     TrackPath,
+    TurnedPath,
     Vec,
     eased,
     last_start,
@@ -59,7 +60,7 @@ from dlovr.model.detection import (
 )
 from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
-from dlovr.transforms import angle_deg, dot, norm, quat_rotate, slerp
+from dlovr.transforms import angle_deg, dot, norm, quat_mul, quat_normalize, quat_rotate, slerp
 
 T = TypeVar("T")
 #: A run's work between two simulation steps: a generator that yields after each step and returns
@@ -119,7 +120,11 @@ class ExecOptions:
     ``object_shifts``: (object name, shift m world) pairs, where the objects really are against the
     demonstration (a registered run, ``dlovr run --registered``; empty: blind): each macro moves in
     the frame of the object its principal contacts name (:mod:`dlovr.execution.motion`, "Frames of
-    objects").
+    objects"). ``object_turns``: (object name, rotation wxyz world) pairs of the objects that are also
+    turned (``R`` of the rigid motion ``p -> R p + t`` that takes the demonstration's object to the
+    real one, ``t`` then its ``object_shifts`` entry): a registered run turns the program's start pose
+    and its world-frame motions with them, expects its contact vectors turned, and checks the goal in
+    their frame.
     """
 
     detect: str = "force"
@@ -142,6 +147,7 @@ class ExecOptions:
     min_snr: float = 8.0
     sensor_noise: float | None = None
     object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
+    object_turns: tuple[tuple[str, tuple[float, float, float, float]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.detect not in DETECT_MODES:
@@ -166,8 +172,8 @@ class ExecOptions:
 
     @property
     def registered(self) -> bool:
-        """Whether the executor is told where the objects are (``object_shifts``)."""
-        return bool(self.object_shifts)
+        """Whether the executor is told where the objects are (``object_shifts``, ``object_turns``)."""
+        return bool(self.object_shifts or self.object_turns)
 
     @property
     def assumed_noise(self) -> float:
@@ -277,6 +283,20 @@ def expectation(m: Macro) -> Expectation:
     return Expectation(tuple(c.vector for c in m.released), tuple(c.vector for c in m.established), axes)
 
 
+def turned(exp: Expectation, turn: Quat) -> Expectation:
+    """``exp`` with its vectors and axes turned by ``turn`` (wxyz, world): what a registered run
+    expects of objects that are turned."""
+    if tuple(turn) == (1.0, 0.0, 0.0, 0.0):
+        return exp
+    q = np.asarray(turn, float)
+
+    def rot(v: Any) -> Any:
+        return None if v is None else cast(Vec, tuple(float(x) for x in quat_rotate(q, np.asarray(v, float))))
+
+    return Expectation(tuple(rot(v) for v in exp.released), tuple(rot(v) for v in exp.established),
+                       tuple(rot(a) for a in exp.axes))
+
+
 def pace(m: Macro, opts: ExecOptions) -> float:
     """Seconds for the demonstrated motion (s from 0 to 1): the demonstrated duration, but no
     faster than the speed bounds and no shorter than ``min_duration``."""
@@ -288,14 +308,14 @@ def pace(m: Macro, opts: ExecOptions) -> float:
 class _Guard:
     """The sensing side of one macro: the force detectors of its classes, or the oracle."""
 
-    def __init__(self, m: Macro, opts: ExecOptions, rate_hz: float):
+    def __init__(self, m: Macro, opts: ExecOptions, rate_hz: float, turn: Quat = (1.0, 0.0, 0.0, 0.0)):
         self.macro = m
         self.oracle = opts.detect == "oracle"
         self.detectors: list[Detector] = []
         sigma = opts.assumed_noise
         params = [for_sensor(d.cls, d.params, sigma, 1.0 / rate_hz)[0] for d in m.detection]
         if not self.oracle:
-            exp = expectation(m)
+            exp = turned(expectation(m), turn)
             pairs = zip(m.detection, params, strict=True)
             self.detectors = [make_detector(d.cls, p, exp, rate_hz) for d, p in pairs]
         self.peak = 0.0
@@ -437,6 +457,8 @@ class Session:
         self.tool_known = False
         #: the shift (m, world) of the objects the motion is in the frame of, as applied so far
         self.shift: Vec = (0.0, 0.0, 0.0)
+        #: the turn (wxyz, world) of the objects the motion is in the frame of (registered runs)
+        self.turn: Quat = IDENTITY
         self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
@@ -503,7 +525,8 @@ def program_steps(
     try:
         yield from ses.hold(*ses.mocap_pose(), opts.start_settle)
         first = macro_shift(classed[0], opts) if classed else None
-        yield from to_start(program.start.start_pos, program.start.start_quat, ses, first)
+        turn = macro_turn(classed[0], opts) if classed else None
+        yield from to_start(program.start.start_pos, program.start.start_quat, ses, first, turn)
         if (yield from _classed_steps(classed, ses, out, track)):
             final = program.final
             if final is None and track is not None and classed:
@@ -540,17 +563,43 @@ def macro_shift(m: Macro, opts: ExecOptions) -> Vec | None:
     return None
 
 
+def macro_turn(m: Macro, opts: ExecOptions) -> Quat | None:
+    """The turn (wxyz, world) of the objects ``m``'s principal contacts name, as :func:`macro_shift`
+    picks them (an object not in ``opts.object_turns`` is not turned; several: their normalised
+    sum); None where it names none or no object is turned."""
+    if not opts.object_turns:
+        return None
+    shifts, turns = dict(opts.object_shifts), dict(opts.object_turns)
+    known = shifts.keys() | turns.keys()
+    for contacts in (m.established, m.released):
+        names = sorted({o for c in contacts for o in c.objects if o in known})
+        if names:
+            qs = [turns.get(o, IDENTITY) for o in names]
+            total = [sum(q[i] for q in qs) for i in range(4)]
+            return cast(Quat, tuple(float(x) for x in quat_normalize(total)))
+    return None
+
+
+#: The quaternion of no turn (wxyz).
+IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
+
+
 def to_start(
-    start_pos: Any, start_quat: Any, ses: Session, shift: Vec | None = None
+    start_pos: Any, start_quat: Any, ses: Session, shift: Vec | None = None, turn: Quat | None = None
 ) -> Steps[None]:
-    """Move the gripper to the program's start pose (world; plus ``shift``, the registered shift of
-    the first macro's objects) where it starts more than 0.1 mm or 1 mrad from it: the robot knows
-    its own pose, and the demonstration started there (smoothly, at :data:`START_SPEED`). Nothing
-    where it is there already."""
-    goal = [float(start_pos[i]) + (shift[i] if shift is not None else 0.0) for i in range(3)]
-    here_p, here_q = ses.sim.target_pos.copy(), ses.sim.target_quat.copy()
+    """Move the gripper to the program's start pose (world; turned by ``turn`` and moved by
+    ``shift``, the registered motion ``p -> R p + t`` of the first macro's objects) where it starts
+    more than 0.1 mm or 1 mrad from it: the robot knows its own pose, and the demonstration started
+    there (smoothly, at :data:`START_SPEED`). Nothing where it is there already."""
+    start = [float(x) for x in start_pos]
     gq = np.asarray(start_quat, dtype=float)
     gq = gq / math.sqrt(float((gq * gq).sum()))
+    if turn is not None:
+        start = [float(x) for x in quat_rotate(np.asarray(turn, float), np.asarray(start))]
+        gq = quat_normalize(quat_mul(np.asarray(turn, float), gq))
+        ses.turn = turn
+    goal = [start[i] + (shift[i] if shift is not None else 0.0) for i in range(3)]
+    here_p, here_q = ses.sim.target_pos.copy(), ses.sim.target_quat.copy()
     c = min(1.0, abs(dot(here_q.tolist(), gq.tolist())))
     angle = 2.0 * math.acos(c)
     dist = math.dist(goal, here_p.tolist())
@@ -584,6 +633,7 @@ def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[N
         yield
     if n_sense > 0:
         sensed = total / n_sense
+        judged = _unturned(sensed, ses)
         out.goal_force = cast(Vec, tuple(float(x) for x in sensed))
         out.goal_torque = cast(Vec, tuple(float(x) for x in total_tq / n_sense))
         if track is not None and track.end_force is not None:
@@ -593,12 +643,24 @@ def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[N
             demo_weight = None if _starts_free(out.program) else weight
             tol = out.program.goal_tolerance_deg
             out.goal_sensed, out.goal_angle = goal_check(
-                sensed, track, ses.opts.noise, n_sense, weight, demo_weight,
+                judged, track, ses.opts.noise, n_sense, weight, demo_weight,
                 GOAL_ANGLE_DEG if tol is None else tol)
         if out.goal_sensed is not None:
             word = "confirms" if out.goal_sensed else "does not confirm"
             ses.emit("end", 0, f"the sensed contact vector {word} the goal ({out.goal_angle:.1f} deg from "
                      "the demonstration's at its end)")
+
+
+def _unturned(sensed: np.ndarray, ses: Session) -> np.ndarray:
+    """The force sensed (N, world) in the demonstration's frame where the run's objects are turned
+    (registered): its environment share (minus the cable's weight) turned back."""
+    if ses.turn == IDENTITY:
+        return sensed
+    w = ses.weight()
+    w = np.zeros(3) if w is None else w
+    q = np.asarray(ses.turn, float)
+    back = quat_rotate(np.array([q[0], -q[1], -q[2], -q[3]]), sensed - w)
+    return w + back
 
 
 def _starts_free(program: Program) -> bool:
@@ -733,7 +795,7 @@ def run_macro(
     period = _period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
     allowed = opts.allowance * scale
-    guard = ses.guard = _Guard(m, opts, 1.0 / ses.dt)
+    guard = ses.guard = _Guard(m, opts, 1.0 / ses.dt, ses.turn)
     arm = _arm_at(m, opts, track, period)
     t0 = float(sim.time)
     force = not guard.oracle
@@ -788,8 +850,17 @@ def run_macro(
 
 
 def _in_object_frame(path: Any, m: Macro, ses: Session) -> tuple[Any, Vec]:
-    """``path`` moved into the frame of the objects ``m`` names (registered runs): the difference
-    between their shift and the shift applied so far is added along the motion; and that difference."""
+    """``path`` moved into the frame of the objects ``m`` names (registered runs): a world-frame
+    motion turned with them (:class:`dlovr.execution.motion.TurnedPath`, about where it starts; the
+    turn is taken at once, not blended from the previous macro's), and the difference between their
+    shift and the shift applied so far added along the motion; and that difference."""
+    turn = macro_turn(m, ses.opts)
+    if turn is not None:
+        ses.turn = turn
+    if ses.turn != IDENTITY and (m.frame or ses.opts.frame) == "world":
+        pos, quat = path.at(0.0)
+        path = TurnedPath(path, ses.turn, cast(Vec, tuple(float(x) for x in pos)),
+                          cast(Quat, tuple(float(x) for x in quat)))
     target = macro_shift(m, ses.opts)
     if target is None:
         return path, (0.0, 0.0, 0.0)

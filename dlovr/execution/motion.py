@@ -287,6 +287,30 @@ class ShiftedPath:
         return np.array([float(pos[i]) + k * self.shift[i] for i in range(3)]), quat
 
 
+@dataclass(frozen=True)
+class TurnedPath:
+    """A path (anything with ``at(s)``) that starts at ``pos``, ``quat`` (world), turned about that
+    start by ``turn`` (wxyz, world): its displacements turned, ``pos + R (p(s) - pos)``, and its
+    change of orientation turned with them, ``R (q(s) q0^-1) R^-1 q0`` (a registered run whose objects
+    are turned repeats a world-frame motion in their frame)."""
+
+    path: Any
+    turn: Quat
+    pos: Vec
+    quat: Quat
+
+    def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        p, q = self.path.at(s)
+        r = np.asarray(self.turn, float)
+        r_inv = np.array([r[0], -r[1], -r[2], -r[3]])
+        q0 = np.asarray(self.quat, float)
+        q0_inv = np.array([q0[0], -q0[1], -q0[2], -q0[3]])
+        d = quat_rotate(r, np.array([float(p[i]) - self.pos[i] for i in range(3)]))
+        change = quat_mul(quat_mul(r, quat_mul(np.asarray(q, float), q0_inv)), r_inv)
+        return (np.array([self.pos[i] + float(d[i]) for i in range(3)]),
+                quat_normalize(quat_mul(change, q0)))
+
+
 def eased(a: Vec, b: Vec, s: float) -> Vec:
     """The point ``s`` (0-1) of the way from ``a`` to ``b`` (m) with a smooth start and stop
     (``(1 - cos(pi s)) / 2``)."""

@@ -29,7 +29,7 @@ from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import run_openloop, run_program
 from dlovr.execution.scoring import RunResult
-from dlovr.execution.variation import Variation, object_shifts, perturb
+from dlovr.execution.variation import Variation, object_shifts, object_turns, perturb
 from dlovr.model.planning import NetworkProgram
 from dlovr.model.program import Program
 from dlovr.outputs import rounded
@@ -47,7 +47,8 @@ class TrialSetup:
     ``use_track`` and by the open-loop baseline when ``baseline``; ``record_dir``: when given, each
     trial's program run is also recorded there as ``trial_KKK.mcap`` (:mod:`dlovr.execution.recorded`).
     ``registered``: the program is told where the trial's objects are (their shifts from ``scene``,
-    :func:`dlovr.execution.variation.object_shifts`); else it runs blind. ``force``: an existing
+    :func:`dlovr.execution.variation.object_shifts`, and their turns,
+    :func:`~dlovr.execution.variation.object_turns`); else it runs blind. ``force``: an existing
     ``trial_KKK.mcap`` is replaced (else the trial fails: its recording is kept).
     ``program``: a compiled program or a :class:`dlovr.model.planning.NetworkProgram`.
     ``recovery``: a compiled program that misses its goal plans again through this network
@@ -87,7 +88,8 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
 
     opts = replace(setup.opts, seed=setup.seed * 100003 + trial)  # noise differs between trials
     if setup.registered:
-        opts = replace(opts, object_shifts=object_shifts(setup.scene, scene))
+        opts = replace(opts, object_shifts=object_shifts(setup.scene, scene),
+                       object_turns=object_turns(setup.scene, scene))
     track = setup.track if setup.use_track else None
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
@@ -353,6 +355,8 @@ def _level_label(key: str, level: Sequence[float] | None) -> str:
         return ""
     if key.endswith(".pos"):
         return f"{level[0] * 1000:.1f}-{level[1] * 1000:.1f} mm"
+    if key.endswith(".yaw"):
+        return f"{level[0]:.1f}-{level[1]:.1f} deg"
     return f"x{level[0]:.2f}-{level[1]:.2f}"
 
 

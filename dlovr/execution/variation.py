@@ -7,6 +7,8 @@ Keys name scene-file entries (docs/scenes.md):
 - ``gripper.pos``: the gripper's start position (the cable hangs from it);
 - ``objects.pos``: the positions of all objects together (one common shift: the environment as a
   whole sits elsewhere); ``objects.NAME.pos``: the position of the object ``NAME`` alone;
+- ``objects.yaw``: the objects turned together about the vertical through their common centre (the
+  mean of their positions), the angle (degrees) drawn uniformly from ``[-DEG, DEG]``;
 - ``demo.KEY`` (``dlovr record --trials`` only): the person-like demonstrator
   (:mod:`dlovr.recording.person`, docs/people.md): ``demo.person=S`` (drift and tremor ``S`` times the
   defaults), ``demo.drift=M`` (m), ``demo.turn=DEG``, ``demo.tremor=M`` (m), ``demo.pace=A..B``,
@@ -19,7 +21,7 @@ Specs:
 - ``A..B`` (numbers only): a factor drawn from ``[A, B]``, log-uniformly (``0.5..2`` makes halving
   as likely as doubling); ``0 < A <= B``;
 - ``D`` (positions only): an absolute offset in metres, each coordinate drawn uniformly from
-  ``[-D, D]``.
+  ``[-D, D]``; ``DEG`` (``objects.yaw`` only): the bound of the angle in degrees (at most 45).
 
 Draws are deterministic: trial ``k`` of seed ``s`` draws key ``K`` from a generator seeded with
 ``(s, k, crc32(K))``, so a trial's perturbation does not depend on the other keys or trials.
@@ -38,6 +40,7 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.inputs import InputError
+from dlovr.transforms import quat_mul, quat_normalize, quat_rotate
 
 NUMBER_KEYS = ("length", "radius", "young", "damping", "mass", "poisson", "friction")
 #: ``demo.KEY`` keys (the person-like demonstrator's levels; ``pace`` a range, the others numbers).
@@ -66,6 +69,10 @@ class Variation:
     def is_position(self) -> bool:
         return self.key.endswith(".pos")
 
+    @property
+    def is_angle(self) -> bool:
+        return self.kind == "angle"
+
     def draw(self, seed: int, trial: int) -> float | tuple[float, ...]:
         """This variation's value in ``trial`` of ``seed``: a factor, or an offset (m, world); a
         demonstrator level is the level itself (a number, or ``(lo, hi)`` for a range)."""
@@ -77,12 +84,14 @@ class Variation:
             return cast(tuple[float, float, float], offset)
         if self.kind == "range":
             return float(math.exp(rng.uniform(math.log(self.lo), math.log(self.hi))))
+        if self.kind == "angle":
+            return float(rng.uniform(-self.hi, self.hi))
         return float(rng.uniform(self.lo, self.hi))
 
     def level(self, value: float | Sequence[float]) -> float:
-        """A scalar for plotting: the factor, or the offset's length (m)."""
+        """A scalar for plotting: the factor, the angle's size (deg), or the offset's length (m)."""
         if isinstance(value, int | float):
-            return float(value)
+            return abs(float(value)) if self.kind == "angle" else float(value)
         return float(math.sqrt(sum(float(x) ** 2 for x in value)))
 
 
@@ -118,6 +127,11 @@ def parse_vary(item: str, scene: Any = None, demo: bool = False) -> Variation:
                 f"--vary {item!r}: demo.* keys vary demonstrations (dlovr record --script S --trials N)"
             )
         return _parse_demo(item, key, spec)
+    if key == "objects.yaw":
+        if re.fullmatch(_NUM, spec) is None or not 0 <= float(spec) <= 45:
+            why = "objects.yaw is an angle bound in [0, 45] degrees, e.g. objects.yaw=5"
+            raise VaryError(f"--vary {item!r}: {why}")
+        return Variation(key, "angle", 0.0, float(spec), spec)
     valid = (
         (len(parts) == 2 and parts[0] == "dlo" and parts[1] in NUMBER_KEYS)
         or key in ("gripper.pos", "objects.pos")
@@ -125,7 +139,8 @@ def parse_vary(item: str, scene: Any = None, demo: bool = False) -> Variation:
     )
     if not valid:
         known = ", ".join(
-            [*(f"dlo.{k}" for k in NUMBER_KEYS), "gripper.pos", "objects.pos", "objects.NAME.pos"]
+            [*(f"dlo.{k}" for k in NUMBER_KEYS), "gripper.pos", "objects.pos", "objects.NAME.pos",
+             "objects.yaw"]
         )
         raise VaryError(f"--vary {item!r}: unknown key {key!r} (known: {known})")
     if len(parts) == 3 and scene is not None and parts[1] not in {o.name for o in scene.objects}:
@@ -189,6 +204,8 @@ def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) 
             gripper = replace(gripper, pos=_shift(gripper.pos, off))
         elif v.key == "objects.pos":
             objects = [replace(o, pos=_shift(o.pos, off)) for o in objects]
+        elif v.key == "objects.yaw":
+            objects = _turned(objects, float(cast(float, x)))
         else:
             objects = [replace(o, pos=_shift(o.pos, off)) if o.name == parts[1] else o for o in objects]
     if not -1.0 < dlo.poisson < 0.5:
@@ -196,14 +213,56 @@ def perturb(scene: Any, variations: Sequence[Variation], seed: int, trial: int) 
     return replace(scene, dlo=dlo, gripper=gripper, objects=tuple(objects)), values
 
 
+def _turned(objects: Sequence[Any], deg: float) -> list[Any]:
+    """``objects`` turned together by ``deg`` about the vertical through the mean of their positions
+    (positions and orientations)."""
+    if not objects or deg == 0.0:
+        return list(objects)
+    c = [sum(float(o.pos[i]) for o in objects) / len(objects) for i in range(3)]
+    half = math.radians(deg) / 2.0
+    q = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+    out = []
+    for o in objects:
+        d = quat_rotate(q, np.array([float(o.pos[i]) - c[i] for i in range(3)]))
+        pos = (c[0] + float(d[0]), c[1] + float(d[1]), c[2] + float(d[2]))
+        quat = quat_normalize(quat_mul(q, np.asarray(o.quat, float)))
+        out.append(replace(o, pos=pos, quat=tuple(float(x) for x in quat)))
+    return out
+
+
+def object_turns(nominal: Any, actual: Any) -> tuple[tuple[str, tuple[float, float, float, float]], ...]:
+    """How each object of ``actual`` is turned against the same object of ``nominal`` (the rotation
+    ``R = R_actual R_nominal^T`` as a unit quaternion wxyz, world), by name, for those turned by more
+    than 1e-9 rad: what a registered run is told besides :func:`object_shifts`."""
+    before = {o.name: np.asarray(o.quat, float) for o in nominal.objects}
+    out = []
+    for o in actual.objects:
+        if o.name not in before:
+            continue
+        q0 = before[o.name]
+        r = quat_normalize(quat_mul(np.asarray(o.quat, float), np.array([q0[0], -q0[1], -q0[2], -q0[3]])))
+        if r[0] < 0.0:
+            r = -r
+        if math.sqrt(float(r[1]) ** 2 + float(r[2]) ** 2 + float(r[3]) ** 2) > 1e-9:
+            out.append((o.name, cast(tuple[float, float, float, float], tuple(float(x) for x in r))))
+    return tuple(out)
+
+
 def object_shifts(nominal: Any, actual: Any) -> tuple[tuple[str, tuple[float, float, float]], ...]:
-    """Where each object of ``actual`` (a scene) sits against the same object of ``nominal`` (its
-    position's shift, m, world), by name: what a registered run is told
-    (:class:`dlovr.execution.executor.ExecOptions` ``object_shifts``). Objects only one scene has are
-    left out. Rotations are not compared: no ``--vary`` key turns an object."""
+    """Where each object of ``actual`` (a scene) sits against the same object of ``nominal``, by
+    name: the translation ``t`` of the rigid motion ``p -> R p + t`` (m, world) that takes the
+    nominal object to the actual one, ``R`` its turn (:func:`object_turns`; for an object that is
+    not turned, ``t`` is its position's shift): what a registered run is told
+    (:class:`dlovr.execution.executor.ExecOptions` ``object_shifts``). Objects only one scene has
+    are left out."""
     before = {o.name: o.pos for o in nominal.objects}
-    return tuple(
-        (o.name, (float(o.pos[0]) - float(before[o.name][0]), float(o.pos[1]) - float(before[o.name][1]),
-                  float(o.pos[2]) - float(before[o.name][2])))
-        for o in actual.objects if o.name in before
-    )
+    turns = dict(object_turns(nominal, actual))
+    out = []
+    for o in actual.objects:
+        if o.name not in before:
+            continue
+        p0 = np.array([float(x) for x in before[o.name]])
+        moved = quat_rotate(np.asarray(turns[o.name], float), p0) if o.name in turns else p0
+        out.append((o.name, (float(o.pos[0]) - float(moved[0]), float(o.pos[1]) - float(moved[1]),
+                             float(o.pos[2]) - float(moved[2]))))
+    return tuple(out)

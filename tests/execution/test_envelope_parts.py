@@ -185,3 +185,79 @@ def test_the_goal_check_takes_the_programs_tolerance():
     assert Program.from_json({**raw, "goal_tolerance_deg": 12.5}).goal_tolerance_deg == 12.5
     with pytest.raises(ValueError, match="goal_tolerance_deg: must be a number of degrees"):
         Program.from_json({**raw, "goal_tolerance_deg": -1})
+
+
+def test_objects_turned_together_are_told_as_a_rigid_motion_per_object():
+    from dlovr.execution.variation import object_turns
+    from dlovr.transforms import quat_rotate
+
+    scene = load_scene("peg_in_hole")
+    (v,) = parse_varies(["objects.yaw=5"], scene)
+    with pytest.raises(ValueError, match=r"angle bound in \[0, 45\] degrees"):
+        parse_varies(["objects.yaw=50"], scene)
+    turned, values = perturb(scene, (v,), 0, 3)
+    deg = values["objects.yaw"]
+    assert 0 < abs(deg) <= 5 and v.level(deg) == abs(deg)
+    turns, shifts = dict(object_turns(scene, turned)), dict(object_shifts(scene, turned))
+    assert set(turns) == {o.name for o in scene.objects}
+    for before, after in zip(scene.objects, turned.objects, strict=True):
+        r = np.asarray(turns[before.name])
+        assert 2 * np.degrees(np.arctan2(r[3], r[0])) == pytest.approx(deg)  # about z
+        moved = quat_rotate(r, np.asarray(before.pos)) + np.asarray(shifts[before.name])
+        assert moved == pytest.approx(np.asarray(after.pos), abs=1e-12)  # p -> R p + t
+    assert object_turns(scene, scene) == ()
+
+
+def test_a_world_motion_turns_with_its_objects():
+    from dlovr.execution.executor import expectation, macro_turn, turned
+    from dlovr.execution.motion import TurnedPath
+    from dlovr.transforms import quat_rotate
+
+    yaw90 = (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5))
+    # a screw along +x while turning 0.2 rad about x; turned 90 deg about z: along +y, about y
+    path = ScrewPath((0.1, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.2, 0.0, 0.0), (0.02, 0.0, 0.0),
+                     (1.0, 0.0, 0.0, 0.0), "world")
+    turned_path = TurnedPath(path, yaw90, (0.1, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0))
+    p, q = turned_path.at(1.0)
+    assert p == pytest.approx([0.1, 0.02, 0.5], abs=1e-12)
+    assert q == pytest.approx([np.cos(0.1), 0.0, np.sin(0.1), 0.0], abs=1e-12)
+    assert turned_path.at(0.0)[0] == pytest.approx([0.1, 0.0, 0.5], abs=1e-15)
+    opts = ExecOptions(object_shifts=(("block", (0.0, 0.0, 0.0)),), object_turns=(("holeblock", yaw90),))
+    first, groove = PEG.classed[0], PEG.classed[4]  # block; block + holeblock: half the turn
+    assert macro_turn(first, opts) == pytest.approx((1.0, 0.0, 0.0, 0.0))
+    half = macro_turn(groove, opts)
+    assert half is not None and 2 * np.degrees(np.arctan2(half[3], half[0])) == pytest.approx(45.0)
+    assert macro_turn(first, ExecOptions(object_shifts=opts.object_shifts)) is None
+    exp = turned(expectation(groove), yaw90)
+    (v,) = exp.established
+    assert v == pytest.approx(quat_rotate(np.asarray(yaw90), np.asarray(groove.established[0].vector)))
+
+
+@pytest.mark.slow
+def test_a_registered_run_moves_in_the_frame_of_a_tilted_table(touch):
+    """The table tilted 3 degrees about the x axis through the point under the gripper: registered,
+    the program's start pose and its motion turn with the table, and the gripper ends where the
+    nominal run ends, turned with it."""
+    from dlovr.execution.run import run_program
+    from dlovr.execution.variation import object_turns
+    from dlovr.transforms import quat_mul, quat_rotate
+
+    program, scene, track, pieces = touch
+    a = np.radians(3.0) / 2
+    r = np.array([np.cos(a), np.sin(a), 0.0, 0.0])
+    tilted = replace(scene, objects=tuple(
+        replace(o, pos=tuple(float(x) for x in quat_rotate(r, np.asarray(o.pos))),
+                quat=tuple(float(x) for x in quat_mul(r, np.asarray(o.quat)))) for o in scene.objects))
+
+    opts = ExecOptions(object_shifts=object_shifts(scene, tilted), object_turns=object_turns(scene, tilted))
+    last: dict = {}
+
+    def keep(rec):
+        last["pos"], last["quat"] = np.asarray(rec.gripper_pos, float), np.asarray(rec.gripper_quat, float)
+
+    nominal = run_program(program, scene, ExecOptions(), track=track, pieces=pieces, on_step=keep)
+    p0, q0 = last["pos"], last["quat"]
+    reg = run_program(program, tilted, opts, track=track, pieces=pieces, on_step=keep)
+    assert nominal.success and reg.success and reg.goal_sensed
+    assert last["pos"] == pytest.approx(quat_rotate(r, p0), abs=5e-4)
+    assert abs(float(np.dot(last["quat"], quat_mul(r, q0)))) > np.cos(np.radians(0.25))
