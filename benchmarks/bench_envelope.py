@@ -11,11 +11,15 @@ Rows (each ``--trials`` trials from ``--seed``, the same perturbed scenes for ev
 - ``noise 0.01`` / ``0.02`` / ``0.05``: the same with that white force noise (N, ``--noise``);
 - ``shift 5`` / ``10`` / ``15`` mm: the objects shifted together (``objects.pos``), blind and
   registered (``--registered``: the executor is told where they are);
+- ``turn 5`` / ``10`` deg: the objects turned together about the vertical (``objects.yaw``), blind
+  and registered (the executor also told their turns);
 - ``gripper+young``: the gripper's start +-5 mm and the stiffness x0.3-3;
 - each ``--vary`` key alone at two sizes (``dlo.length`` 5 / 10 %, ...).
 
 Columns: the program blind, the program registered (rows that move objects), the network program
-(``--network``: a network program, e.g. from ``bench_network.py --keep DIR``), the replay of the
+(``--network``: a network program, e.g. from ``bench_network.py --keep DIR``), with ``--replan`` the
+blind program recovering through that network where its goal check says it missed the goal
+(:mod:`dlovr.execution.recovery`), the replay of the
 demonstration's commands open loop, the program's false detections over the macros it ran, and
 how the sensed goal check judged the blind runs (missed goals it caught, reached goals it doubted).
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
@@ -34,8 +38,9 @@ from pathlib import Path
 from typing import Any
 
 from dlovr.execution.executor import ExecOptions
+from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import find_recording, load_track, resolve_scene
-from dlovr.execution.trials import TrialSetup, goal_check_counts, run_trials
+from dlovr.execution.trials import TrialSetup, goal_check_counts, replan_counts, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces
 from dlovr.model.planning import load_runnable
@@ -74,6 +79,7 @@ def rows() -> list[Row]:
     out = [Row("standard", STANDARD)]
     out += [Row(f"standard + noise {n:g} N", STANDARD, n) for n in (0.01, 0.02, 0.05)]
     out += [Row(f"shift {mm} mm", (f"objects.pos={mm / 1000:g}",)) for mm in (5, 10, 15)]
+    out += [Row(f"turn {deg} deg", (f"objects.yaw={deg}",)) for deg in (5, 10)]
     out += [Row("gripper+young", ("gripper.pos=0.005", "dlo.young=0.3..3"))]
     out += [Row(f"{key} {size}", (f"{key}={size}",)) for key, a, b in SINGLE for size in (a, b)]
     return out
@@ -113,7 +119,13 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
                          args.trials, workers=args.workers)
         out["registered"] = _rate(reg, "program")
         out["false_registered"] = _false(reg)[0]
-    if base["network"] is not None:
+    if base["network"] is not None and args.replan:
+        rec = Recovery(base["network"])
+        again = run_trials(TrialSetup(program=base["program"], track=base["track"], recovery=rec, **common),
+                           args.trials, workers=args.workers)
+        out["replan"] = _rate(again, "program")
+        out["replans"] = replan_counts(again)
+    if base["network"] is not None and not args.replan_only:
         net = run_trials(TrialSetup(program=base["network"], track=None, use_track=False, **common),
                          args.trials, workers=args.workers)
         out["network"] = _rate(net, "program")
@@ -133,13 +145,14 @@ def _check_text(g: dict[str, int] | None) -> str:
 
 
 def table(results: list[dict[str, Any]]) -> str:
-    lines = ["| row | program (blind) | registered | network | replay | false detections | goal check |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| row | program (blind) | registered | blind + replan | network | replay | false detections "
+             "| goal check |", "|---|---|---|---|---|---|---|---|"]
     for r in results:
         below = " **below replay**" if r["replay"] is not None and r["program"] < r["replay"] else ""
         fd = f"{r['false']} of {r['macros']} ({r['false'] / max(r['macros'], 1):.1%})"
         cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r['program'])}{below}",
-                 _pct(r.get("registered")), _pct(r.get("network")), _pct(r.get("replay")), fd,
+                 _pct(r.get("registered")), _pct(r.get("replan")), _pct(r.get("network")),
+                 _pct(r.get("replay")), fd,
                  _check_text(r.get("goal_check"))]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -152,11 +165,12 @@ def plot(results: list[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     cols = [("program", "program (blind)", "tab:blue"), ("registered", "registered", "tab:green"),
-            ("network", "network", "tab:purple"), ("replay", "replay", "tab:orange")]
+            ("replan", "blind + replan", "tab:red"), ("network", "network", "tab:purple"),
+            ("replay", "replay", "tab:orange")]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.55 * len(results) + 2), 4.0))
-    w = 0.2
+    w = 0.16
     for k, (key, label, color) in enumerate(cols):
-        xs = [i + (k - 1.5) * w for i, r in enumerate(results) if r.get(key) is not None]
+        xs = [i + (k - 2) * w for i, r in enumerate(results) if r.get(key) is not None]
         ys = [r[key] for r in results if r.get(key) is not None]
         if ys:
             ax.bar(xs, ys, width=w, label=label, color=color)
@@ -175,6 +189,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--program", default=str(ROOT / "recordings/programs/peg_in_hole.program.json"))
     ap.add_argument("--network", help="a network program to run beside it")
+    ap.add_argument("--replan", action="store_true",
+                    help="with --network: also the blind program recovering through it (a column)")
+    ap.add_argument("--replan-only", action="store_true",
+                    help="with --replan: leave the network program's own column out (faster)")
     ap.add_argument("--trials", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
@@ -201,7 +219,8 @@ def main() -> None:
         results.append(run_row(row, base, args))
         r = results[-1]
         print(f"{row.name}: program {_pct(r['program'])}, registered {_pct(r.get('registered'))}, "
-              f"network {_pct(r.get('network'))}, replay {_pct(r.get('replay'))}, "
+              f"replan {_pct(r.get('replan'))}, network {_pct(r.get('network'))}, "
+              f"replay {_pct(r.get('replay'))}, "
               f"false {r['false']}/{r['macros']} ({r['wall_s']} s)", flush=True)
         (out / "envelope.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
     text = table(results)
