@@ -14,9 +14,10 @@ NET-PROGRAM``), the run then:
    vector sensed over the hold's last 0.2 s (the sensed force minus the cable's weight, as the
    network runs sense it, :func:`dlovr.execution.network_run.sensed_contact_vector`) against the
    expected vector of every node of the network but the goal (the goal check has just said the goal
-   does not fit) that has a demonstrated path to the goal from the gripper's position
-   (:func:`sensed_node`: the nearest within the network options' ``tolerance``; a tie goes to the
-   node visited more often, then the smaller id);
+   does not fit) that has a demonstrated path to the goal from the gripper's position and that the
+   demonstrations entered near that position (:func:`near_nodes`) (:func:`sensed_node`: the nearest
+   within the network options' ``tolerance``; a tie goes to the node visited more often, then the
+   smaller id);
 3. runs the network loop from that node (:func:`dlovr.execution.network_run.network_steps_from`:
    plan, guarded macro, sense, identify, plan again ... until it arrives at the goal node, or a
    situation outside the network, a node without a path or a failed macro stops it);
@@ -32,6 +33,7 @@ the goal counts as a success (``recovered``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -95,14 +97,36 @@ def sensed_node(
     nprog: NetworkProgram, vector: Any, position: Any, tolerance: float | None
 ) -> Successor | None:
     """The node of ``nprog`` the sensed contact ``vector`` (world; None or zero: no contact) shows,
-    with the gripper at ``position`` (m, world): the nearest expected vector among the nodes other
-    than the goal that have a demonstrated path to the goal from there (ties: more visits, then the
-    smaller id); None when none is within ``tolerance`` (a situation outside the network)."""
+    with the gripper at ``position`` (m, world): among the nodes other than the goal that have a
+    demonstrated path to the goal from there, those the demonstrations were in near ``position``
+    (:func:`near_nodes`), the nearest expected vector (ties: more visits, then the smaller id); None
+    when none is within ``tolerance`` (a situation outside the network)."""
     net = nprog.network
     nodes = [n for n in net.nodes if n.id != net.goal and nprog.replan(n.id, position) is not None]
+    nodes = near_nodes(nprog, nodes, position)
     total = sum(n.visits for n in nodes) or 1
     cands = [Successor(n.id, n.situation, n.principal, _expected(n), n.visits / total) for n in nodes]
     return identify(cands, vector, tolerance)
+
+
+def near_nodes(nprog: NetworkProgram, nodes: list[Any], position: Any) -> list[Any]:
+    """Those of ``nodes`` the demonstrations entered near ``position`` (m, world), by the rule the
+    planner picks departures by (:meth:`dlovr.model.planning.NetworkProgram.applicable`): a node's
+    distance is the least ``max(0, |x - s(e)| - 2 spread(e))`` over its out-edges ``e`` (``s(e)`` the
+    mean gripper position where the demonstrations entered it); kept are those within the planner's
+    ``reach`` of the nearest. Many situations push the gripper alike (a tip resting on any top face
+    senses ``-z``); where the gripper is tells them apart. All of them where ``position`` is None."""
+    if position is None or not nodes:
+        return nodes
+
+    def dist(n: Any) -> float:
+        out = nprog.network.out_edges(n.id)
+        return min((max(0.0, math.dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread)
+                    for e in out), default=math.inf)
+
+    d = {n.id: dist(n) for n in nodes}
+    limit = min(d.values()) + nprog.reach
+    return [n for n in nodes if d[n.id] <= limit]
 
 
 def recovering_steps(

@@ -27,6 +27,7 @@ VECTORS = {
     "V/F[block.F2]": (0.0, 0.0, -1.0),
     "V/F[wall.F1]": (0.0, -1.0, 0.0),
     "V/F[block.F3]": (-1.0, 0.0, 0.0),
+    "V/F[block.F4]": (0.0, 0.0, -1.0),
     "V/E^LS[block.F1,floor.F1]": (-0.6, 0.0, -0.8),
 }
 
@@ -36,10 +37,13 @@ def S(text: str) -> DiscreteSituation:
     return DiscreteSituation(tuple(replace(c, vector=VECTORS.get(c.format())) for c in s.contacts))
 
 
-def demo(name: str, seq: list[str]) -> Demonstration:
+def demo(name: str, seq: list[str], xs: list[float] | None = None) -> Demonstration:
+    """Situations a second each; the gripper at ``x`` (m) of ``xs`` as each begins (else still)."""
     states = tuple(TimedSituation(float(i), 1.0, S(s)) for i, s in enumerate(seq))
-    still = PoseTrack(np.array([0.0]), np.array([[0.0, 0.0, 0.3]]), np.array([[1.0, 0.0, 0.0, 0.0]]))
-    return Demonstration(name, states, still, "box", "abc")
+    xs = xs or [0.0] * len(seq)
+    pos = np.array([[x, 0.0, 0.3] for x in xs])
+    poses = PoseTrack(np.arange(len(seq), dtype=float), pos, np.tile([1.0, 0.0, 0.0, 0.0], (len(seq), 1)))
+    return Demonstration(name, states, poses, "box", "abc")
 
 
 @pytest.fixture(scope="module")
@@ -100,3 +104,14 @@ def test_a_run_that_a_replan_brought_to_the_goal_succeeds_and_says_so(touch):
     assert not res.success and not res.recovered
     trials = [{"program": score(ex).to_json()}, {"program": {"success": True}}]
     assert replan_counts(trials) == {"replanned": 1, "recovered": 0, "attempts": 1}
+
+
+def test_where_the_gripper_is_tells_apart_situations_that_push_alike():
+    """Two tops push the gripper alike (-z): the one the demonstrations were on near the gripper is
+    the one sensed."""
+    top2 = "V/G & E/N & V/F[block.F4]"
+    net = build_network([demo("a", [FREE, TOP, GOAL], [0.0, 0.1, 0.1]),
+                         demo("b", [FREE, top2, GOAL], [0.0, -0.1, -0.1])])
+    prog = NetworkProgram(net)
+    assert sensed_node(prog, (0, 0, -1), (0.1, 0.0, 0.3), 0.8).node == net.locate(S(TOP))
+    assert sensed_node(prog, (0, 0, -1), (-0.1, 0.0, 0.3), 0.8).node == net.locate(S(top2))
