@@ -19,6 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cached_property
 from typing import Any, Literal, cast
 
 import numpy as np
@@ -137,9 +138,10 @@ class DiscreteState:
             return 2
         return 3 - self.dim_dlo  # concave corner V
 
-    @property
+    @cached_property
     def card(self) -> int:
-        """card = dim_DLO + 2·DoF_trans + 3·DoF_blocked (eq. 3)."""
+        """card = dim_DLO + 2·DoF_trans + 3·DoF_blocked (eq. 3); worked out once per object (the
+        state is frozen; the transitions ask it many times a step)."""
         return self.dim_dlo + 2 * self.dof_trans + 3 * self.dof_blocked
 
     @property
@@ -415,8 +417,9 @@ class DiscreteContact:
     def card(self) -> int:
         return self.state.card
 
-    @property
+    @cached_property
     def objects(self) -> frozenset[str]:
+        """The objects of its faces; worked out once per object (the contact is frozen)."""
         return frozenset(face_object(f) for f in self.faces)
 
     def format(self, unicode: bool = False) -> str:
@@ -489,13 +492,19 @@ def _from_parts(
 ) -> DiscreteContact:
     """The discrete contact of ``contact`` from its :data:`_Parts` (``band_deg``: the point or line
     decision's band, for a contact that was a line contact a moment ago; see :func:`_point_or_line`)."""
-    st, crease, real, vec, axis = parts
+    _, _, real, vec, axis = parts
+    return DiscreteContact(_state_of(parts, contact, params, band_deg), real, vec, contact.dlo.span, axis)
+
+
+def _state_of(parts: _Parts, contact: Contact, params: ModelParams, band_deg: float = 0.0) -> DiscreteState:
+    """The state of :func:`_from_parts`' discrete contact (the point or line decision made here)."""
+    st, crease = parts[0], parts[1]
     if not isinstance(st, DiscreteState):  # an E contact on an edge: its stability class and crease
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
         assert crease is not None
         st = _point_or_line(st, crease, contact.dlo.vector, params, band_deg)
-    return DiscreteContact(st, real, vec, contact.dlo.span, axis)
+    return st
 
 
 def discretize_contact(
@@ -592,12 +601,14 @@ class Discretizer:
         if last is not None and last.span == contact.dlo.span and got[0][1] is None:
             return last
         band = self.line_band_deg if key in self._lines else 0.0
-        dc = _from_parts(got[0], contact, self.params, band)
-        if self._now is not None and got[0][1] is not None and dc.state.env == "E^L":
+        parts = got[0]
+        st = _state_of(parts, contact, self.params, band)
+        if self._now is not None and parts[1] is not None and st.env == "E^L":
             self._now.add(key)
-        if last is not None and last.span == dc.span and last.state == dc.state:
-            return last
-        got[1] = dc
+        span = contact.dlo.span
+        if last is not None and last.span == span and last.state == st:
+            return last  # what _from_parts would make, without making it
+        dc = got[1] = DiscreteContact(st, parts[2], parts[3], span, parts[4])
         return dc
 
 

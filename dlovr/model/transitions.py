@@ -499,9 +499,29 @@ class Kept(Generic[S]):
 def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: DiscreteSituation) -> bool:
     """Is ``before -> free -> after`` a flight: an instable principal contact released to ``N``, then
     a contact established again?"""
-    released = any(is_instable(ch.x) and not ch.y for ch in changes(before, free))
-    landed = any(not ch.x and ch.y for ch in changes(free, after))
-    return released and landed
+    released = any(is_instable(ch.x) and not ch.y for ch in _changes_of(before, free))
+    return released and any(not ch.x and ch.y for ch in _changes_of(free, after))
+
+
+_CHANGES_KEPT = 4
+"""How many pairs' changes :func:`_changes_of` keeps."""
+
+_changes_memo: list[tuple[DiscreteSituation, DiscreteSituation, tuple[Change, ...]]] = []
+
+
+def _changes_of(a: DiscreteSituation, b: DiscreteSituation) -> tuple[Change, ...]:
+    """:func:`changes` of ``a -> b`` (no flight), kept for the last few pairs of the very same objects
+    (situations are frozen, so the same objects give the same changes): a debouncer asks
+    :func:`is_flight` of the last two kept situations and the new one, so the pair ``free -> after``
+    of one step is the pair ``before -> free`` of the next, and a step may ask twice."""
+    memo = _changes_memo
+    for x, y, got in tuple(memo):  # a copy: another thread may change the list meanwhile
+        if x is a and y is b:
+            return got
+    got = tuple(changes(a, b))
+    memo.insert(0, (a, b, got))
+    del memo[_CHANGES_KEPT:]
+    return got
 
 
 #: :class:`Debouncer`'s default ``lands``, for S = DiscreteSituation (the debouncer of the tracker, of a

@@ -451,3 +451,23 @@ def test_a_flight_flags_only_the_changes_that_flew():
     # landing on a ridge or corner: the instable -> instable change flew
     assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]"), through_free=True) == ("S", "E")
     assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]")) == ("I",)
+
+
+def test_the_flight_test_remembers_changes_by_the_very_same_situations_only():
+    """is_flight keeps the changes of the last few pairs of situation objects (the per-step path asks
+    twice of the same pair): a pair asked again, reversed, or of equal but other objects gives what
+    :func:`changes` gives, and so does is_flight."""
+    from dlovr.model.transitions import _changes_of, is_flight
+
+    ridge, free, landed = RIDGE, FREE, LANDED
+    assert _changes_of(ridge, free) == tuple(changes(ridge, free))
+    assert _changes_of(ridge, free) is _changes_of(ridge, free)  # remembered
+    assert _changes_of(free, ridge) == tuple(changes(free, ridge)) != _changes_of(ridge, free)
+    twin = P(ridge.format())
+    assert twin == ridge and twin is not ridge
+    assert _changes_of(twin, free) == tuple(changes(ridge, free))
+    assert is_flight(ridge, free, landed) and is_flight(twin, P(free.format()), landed)
+    assert not is_flight(landed, free, ridge) and not is_flight(ridge, free, free)
+    state = ridge.contacts[-1].state
+    assert state.card == state.dim_dlo + 2 * state.dof_trans + 3 * state.dof_blocked
+    assert ridge.contacts[-1].objects == frozenset({"a"})
