@@ -589,6 +589,11 @@ class Debouncer(Generic[S]):
             through = True
         k.append(Kept(situation, t, t, through))
 
+    def extend(self, t: float) -> None:
+        """The situation pushed last holds at ``t`` too: what :meth:`push` does with one equal to it,
+        for a caller that knows so already (the tracker compared it with the last step's)."""
+        self.kept[-1].end = t
+
     def _flies(self, t: float, situation: S) -> bool:
         """Does ``situation`` end a flight that began with the last kept situation?"""
         k = self.kept
