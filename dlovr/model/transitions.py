@@ -499,6 +499,8 @@ class Kept(Generic[S]):
 def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: DiscreteSituation) -> bool:
     """Is ``before -> free -> after`` a flight: an instable principal contact released to ``N``, then
     a contact established again?"""
+    if not any(c.state.stability_class is Stability.INSTABLE for c in before.contacts):
+        return False  # nothing instable to release: what the changes would say, without them
     released = any(is_instable(ch.x) and not ch.y for ch in _changes_of(before, free))
     return released and any(not ch.x and ch.y for ch in _changes_of(free, after))
 
@@ -577,14 +579,16 @@ class Debouncer(Generic[S]):
                 k[j].end, k[j].left = t, None
                 return
         through = False
-        if not self._flies(t, situation) and len(k) >= 2:
+        flies = self._flies(t, situation)
+        if not flies and len(k) >= 2:
             b = k[-1]
             if b.duration < self.hold and not self.transient(b.situation):  # brief stable noise
                 k.pop()
                 if not b.through_free:  # after a flight the one before keeps its end (when it was left)
                     k[-1].end = b.end
                 through = b.through_free
-        if self._flies(t, situation):
+                flies = self._flies(t, situation)  # asked again of the kept ones left
+        if flies:
             k.pop()  # the free interval; the one before it keeps its end (when it was left)
             through = True
         k.append(Kept(situation, t, t, through))

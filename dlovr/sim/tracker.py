@@ -438,11 +438,12 @@ def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
     cost (no contraction of every point's primitives)."""
     n = len(pts) - 1
+    xyz = pts.tolist()  # once: a contact's two points as Python floats
     contacts = []
     for c in sit.contacts:
         d, env = c.dlo, c.env
         i = cast(int, d.index)
-        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+        a, b = (xyz[i - 1], xyz[i]) if i == n else (xyz[i], xyz[i + 1])
         vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
         if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
             env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)

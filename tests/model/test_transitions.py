@@ -471,3 +471,20 @@ def test_the_flight_test_remembers_changes_by_the_very_same_situations_only():
     state = ridge.contacts[-1].state
     assert state.card == state.dim_dlo + 2 * state.dof_trans + 3 * state.dof_blocked
     assert ridge.contacts[-1].objects == frozenset({"a"})
+
+
+def test_extend_is_push_of_the_situation_pushed_last():
+    """Debouncer.extend (the tracker's step whose discrete situation equals the last one) does what
+    push does with an equal situation, flicker and flights unchanged."""
+    samples = [(RIDGE, 50), (FREE, 30), (LANDED, 50), (RIDGE, 3), (LANDED, 40)]
+    a, b = Debouncer(0.02, is_transient), Debouncer(0.02, is_transient)
+    t = 0.0
+    for sit, n in samples:
+        for k in range(n):
+            t += 0.002
+            a.push(t, P(sit.format()))
+            if k:
+                b.extend(t)
+            else:
+                b.push(t, sit)
+    assert a.kept == b.kept and [k.situation for k in a.kept] == [RIDGE, LANDED]
