@@ -29,6 +29,10 @@ of raw contacts per step and how often the tracker labelled all queried points o
 against segments and against contacts per step (matplotlib); ``--from LOG...`` draws it from tables
 this script printed before (measuring nothing), so a long run can be done in parts.
 
+``--parts`` then plays each case once more with the pipeline's parts timed inside the running loop
+(``mj_step``, the record, the tracker's kernel call, situation, discrete situation, forces and
+debouncer, and the garbage collector's pauses), in µs per step.
+
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
 charges to whichever variant ran then.
@@ -209,8 +213,77 @@ def read_rows(paths: list[Path]) -> list[Row]:
     return rows
 
 
+# the parts of a tracked step that --parts times: (owner module or class, attribute, label)
+_PARTS = (
+    ("dlovr.sim.simulator:Simulator", "record", "the record (Simulator.record)"),
+    ("dlovr.sim.tracker:ContactTracker", "update", "the tracker in all (ContactTracker.update)"),
+    ("dlovr.sim.tracker:ContactTracker", "_label_step", "  its kernel and the Python by it (_label_step)"),
+    ("dlovr.sim.tracker:ContactTracker", "classify", "  the situation (classify), of it:"),
+    ("dlovr.sim.tracker", "situation_from_points", "    made again (situation_from_points)"),
+    ("dlovr.sim.tracker", "_refreshed", "    refreshed (_refreshed)"),
+    ("dlovr.sim.tracker", "_turned", "    the edge vectors' turn check (_turned)"),
+    ("dlovr.model.discrete:Discretizer", "__call__", "  the discrete situation (Discretizer)"),
+    ("dlovr.sim.tracker:ContactTracker", "_forces", "  the forces made again (_forces)"),
+    ("dlovr.model.transitions:Debouncer", "push", "  the debouncer (Debouncer.push)"),
+)
+
+
+def parts(case: str, segments: int | None, max_stretch: float) -> tuple[int, dict[str, float]]:
+    """One tracked pass along the case's commands with the parts of :data:`_PARTS`, ``mj_step`` and the
+    garbage collector's pauses timed inside the running loop (``perf_counter``: a thread-clock read
+    costs about 2 µs here): steps, and µs per step by part (the parts nest as indented)."""
+    import gc
+    import importlib
+
+    scene, script = case_scene(case, segments)
+    targets, _ = _commands(scene, script, max_stretch)
+    clock, spent = time.perf_counter_ns, dict.fromkeys(["mj_step", *(p[2] for p in _PARTS), "gc"], 0)
+    saved = []
+
+    def timed(f, label):
+        def run(*a, **k):
+            t0 = clock()
+            try:
+                return f(*a, **k)
+            finally:
+                spent[label] += clock() - t0
+        return run
+
+    for where, name, label in (("mujoco", "mj_step", "mj_step"), *_PARTS):
+        mod, _, cls = where.partition(":")
+        owner = getattr(importlib.import_module(mod), cls) if cls else importlib.import_module(mod)
+        saved.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, timed(getattr(owner, name), label))
+    gc_at = [0]
+
+    def on_gc(phase, _info):
+        if phase == "start":
+            gc_at[0] = clock()
+        else:
+            spent["gc"] += clock() - gc_at[0]
+
+    gc.callbacks.append(on_gc)
+    try:
+        sim = Simulator(scene, max_stretch=max_stretch, track=True)
+        for pos, quat in targets:
+            sim.target_pos, sim.target_quat = pos, quat
+            sim.step()
+    finally:
+        gc.callbacks.remove(on_gc)
+        for owner, name, f in saved:
+            setattr(owner, name, f)
+    return len(targets), {k: v / len(targets) / 1e3 for k, v in spent.items()}
+
+
+def print_parts(case: str, segments: int | None, max_stretch: float) -> None:
+    n, got = parts(case, segments, max_stretch)
+    print(f"{case}: µs per step inside the running loop ({n} steps, wall clock, one pass)")
+    for label, us in got.items():
+        print(f"  {label:<58} {us:8.1f}")
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "bench_sim").splitlines()[0])
     ap.add_argument("--case", nargs="+", default=list(CASES), help=f"default: {' '.join(CASES)}")
     ap.add_argument("--scene", dest="case", nargs="+", help=argparse.SUPPRESS)  # the old name
     ap.add_argument(
@@ -225,6 +298,8 @@ def main() -> None:
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall clock")
     ap.add_argument("--from", dest="logs", type=Path, nargs="+", default=None,
                     help="with --plot: draw the tables of earlier runs' output instead of measuring")
+    ap.add_argument("--parts", action="store_true",
+                    help="after the table, one pass per case timing the pipeline's parts")
     args = ap.parse_args()
     if args.logs:
         if args.plot is None:
@@ -258,6 +333,9 @@ def main() -> None:
                   f"(rounds {', '.join(f'{r:.2f}' for r in row.ratios)}), target <= {target}: {met}")
     if args.plot is not None and rows:
         plot(rows, args.plot)
+    if args.parts:
+        for case in args.case:
+            print_parts(case, segments[0], args.max_stretch)
 
 
 if __name__ == "__main__":

@@ -16,9 +16,11 @@ value.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cached_property
 from typing import Any, Literal, cast
 
 import numpy as np
@@ -40,7 +42,7 @@ from dlovr.model.topology import (
     sort_faces,
     successional_runs,
 )
-from dlovr.transforms import norm, unit
+from dlovr.transforms import dot, norm, unit
 
 # --------------------------------------------------------------------------------------------------
 # States
@@ -137,9 +139,10 @@ class DiscreteState:
             return 2
         return 3 - self.dim_dlo  # concave corner V
 
-    @property
+    @cached_property
     def card(self) -> int:
-        """card = dim_DLO + 2·DoF_trans + 3·DoF_blocked (eq. 3)."""
+        """card = dim_DLO + 2·DoF_trans + 3·DoF_blocked (eq. 3); worked out once per object (the
+        state is frozen; the transitions ask it many times a step)."""
         return self.dim_dlo + 2 * self.dof_trans + 3 * self.dof_blocked
 
     @property
@@ -308,7 +311,7 @@ def classify_contact(
     stab, normals = got
     if facts.dlo_vector is None:
         raise ValueError(_NO_VECTOR)
-    return _point_or_line(stab, _crease(facts, normals), facts.dlo_vector, params)
+    return _point_or_line(stab, _crease(facts, normals).tolist(), facts.dlo_vector, params)
 
 
 def _classify_faces(
@@ -368,17 +371,35 @@ _NO_VECTOR = "an E contact on an edge needs the DLO vector (point or line contac
 
 
 def _point_or_line(
-    stab: StabilityLetter, crease: np.ndarray, dlo_vector: Vec3, params: ModelParams, band_deg: float = 0.0
+    stab: StabilityLetter, crease: list[float], dlo_vector: Vec3, params: ModelParams, band_deg: float = 0.0
 ) -> DiscreteState:
     """Step 4 of :func:`classify_contact`: an E contact on an edge (stability ``stab``, unit
-    ``crease``) is a line contact when the DLO vector is within the parallel tolerance of the crease;
-    ``band_deg`` (degrees) widens that tolerance for a contact that was a line contact a moment ago
-    (the decision's hysteresis, :class:`Discretizer`)."""
-    d = _required(unit(dlo_vector))
-    angle = np.degrees(np.arccos(min(1.0, abs(float(d @ crease)))))
+    ``crease``, world frame, as Python floats) is a line contact when the DLO vector is within the
+    parallel tolerance of the crease; ``band_deg`` (degrees) widens that tolerance for a contact that
+    was a line contact a moment ago (the decision's hysteresis, :class:`Discretizer`).
+
+    In Python floats (:func:`dlovr.transforms.dot`, summed left to right: the same on every machine,
+    and a few µs where numpy's calls on 3-vectors took some 30): a simulation makes it for every
+    E contact on an edge whenever its situation is made again."""
+    v = list(dlo_vector) if type(dlo_vector) is tuple else np.asarray(dlo_vector, dtype=float).tolist()
+    n = norm(v)
+    if n == 0.0:
+        raise ValueError("zero-length vector")
+    cos = abs(dot([x / n for x in v], crease))
+    angle = math.acos(min(1.0, cos)) * _DEG_PER_RAD
     if angle <= params.parallel_tol_deg + band_deg:
-        return DiscreteState("E", "E^L", stab)
-    return DiscreteState("E", "E^P")
+        return _LINE_STATES[stab]
+    return _POINT_STATE
+
+
+_DEG_PER_RAD = 180.0 / math.pi
+"""Degrees per radian (as ``np.degrees`` multiplies)."""
+
+_LINE_STATES = {s: DiscreteState("E", "E^L", s) for s in ("S", "T", "I")}
+"""The line contacts on an edge by stability class (frozen: one object each, made once)."""
+
+_POINT_STATE = DiscreteState("E", "E^P")
+"""A point contact on an edge."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -415,8 +436,9 @@ class DiscreteContact:
     def card(self) -> int:
         return self.state.card
 
-    @property
+    @cached_property
     def objects(self) -> frozenset[str]:
+        """The objects of its faces; worked out once per object (the contact is frozen)."""
         return frozenset(face_object(f) for f in self.faces)
 
     def format(self, unicode: bool = False) -> str:
@@ -460,7 +482,7 @@ class DiscreteSituation:
 #: What a contact's discrete contact takes from the scene facts alone: the state (for an E contact on
 #: an edge, its stability class), the crease of such an edge (else ``None``), the real faces, the
 #: contact vector and the pinch axis.
-_Parts = tuple[DiscreteState | StabilityLetter, np.ndarray | None, tuple[str, ...], Vec3 | None, Vec3 | None]
+_Parts = tuple[DiscreteState | StabilityLetter, list[float] | None, tuple[str, ...], Vec3 | None, Vec3 | None]
 
 
 def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Parts:
@@ -472,7 +494,7 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
         return DiscreteState(dlo, "N"), None, (), (0.0, 0.0, 0.0), None
     facts = book.for_contact(contact)
     got = _classify_faces(dlo, facts, params, gripper)
-    st, crease = (got, None) if isinstance(got, DiscreteState) else (got[0], _crease(facts, got[1]))
+    st, crease = (got, None) if isinstance(got, DiscreteState) else (got[0], _crease(facts, got[1]).tolist())
     try:
         c = contact_vector(facts, gripper=gripper, merge_deg=params.normal_merge_deg)
         vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
@@ -480,7 +502,7 @@ def _contact_parts(contact: Contact, book: FactBook, params: ModelParams) -> _Pa
         vec = None
     a = None if gripper else pinch_axis(facts, params.normal_merge_deg)
     axis: Vec3 | None = None if a is None else (float(a[0]), float(a[1]), float(a[2]))
-    real = tuple(f.name for f in facts.faces if not f.internal)
+    real = sort_faces(f.name for f in facts.faces if not f.internal)  # as DiscreteContact keeps them
     return st, crease, real, vec, axis
 
 
@@ -489,13 +511,19 @@ def _from_parts(
 ) -> DiscreteContact:
     """The discrete contact of ``contact`` from its :data:`_Parts` (``band_deg``: the point or line
     decision's band, for a contact that was a line contact a moment ago; see :func:`_point_or_line`)."""
-    st, crease, real, vec, axis = parts
+    _, _, real, vec, axis = parts
+    return DiscreteContact(_state_of(parts, contact, params, band_deg), real, vec, contact.dlo.span, axis)
+
+
+def _state_of(parts: _Parts, contact: Contact, params: ModelParams, band_deg: float = 0.0) -> DiscreteState:
+    """The state of :func:`_from_parts`' discrete contact (the point or line decision made here)."""
+    st, crease = parts[0], parts[1]
     if not isinstance(st, DiscreteState):  # an E contact on an edge: its stability class and crease
         if contact.dlo.vector is None:
             raise ValueError(_NO_VECTOR)
         assert crease is not None
         st = _point_or_line(st, crease, contact.dlo.vector, params, band_deg)
-    return DiscreteContact(st, real, vec, contact.dlo.span, axis)
+    return st
 
 
 def discretize_contact(
@@ -592,13 +620,27 @@ class Discretizer:
         if last is not None and last.span == contact.dlo.span and got[0][1] is None:
             return last
         band = self.line_band_deg if key in self._lines else 0.0
-        dc = _from_parts(got[0], contact, self.params, band)
-        if self._now is not None and got[0][1] is not None and dc.state.env == "E^L":
+        parts = got[0]
+        st = _state_of(parts, contact, self.params, band)
+        if self._now is not None and parts[1] is not None and st.env == "E^L":
             self._now.add(key)
-        if last is not None and last.span == dc.span and last.state == dc.state:
-            return last
-        got[1] = dc
+        span = contact.dlo.span
+        if last is not None and last.span == span and last.state == st:
+            return last  # what _from_parts would make, without making it
+        dc = got[1] = _discrete_contact(st, parts[2], parts[3], span, parts[4])
         return dc
+
+
+def _discrete_contact(
+    state: DiscreteState, faces: tuple[str, ...], vector: Vec3 | None, span: tuple[int, int] | None,
+    axis: Vec3 | None,
+) -> DiscreteContact:
+    """``DiscreteContact(state, faces, vector, span, axis)`` for ``faces`` already in canonical order
+    (:data:`_Parts`' real faces), without the dataclass's ``__init__`` (which sets a frozen field at
+    a time) and its sorting: a simulation's discretizer makes one whenever a contact's span moves."""
+    dc = object.__new__(DiscreteContact)
+    dc.__dict__.update(state=state, faces=faces, vector=vector, span=span, axis=axis)
+    return dc
 
 
 # --------------------------------------------------------------------------------------------------

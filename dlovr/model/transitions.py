@@ -499,9 +499,31 @@ class Kept(Generic[S]):
 def is_flight(before: DiscreteSituation, free: DiscreteSituation, after: DiscreteSituation) -> bool:
     """Is ``before -> free -> after`` a flight: an instable principal contact released to ``N``, then
     a contact established again?"""
-    released = any(is_instable(ch.x) and not ch.y for ch in changes(before, free))
-    landed = any(not ch.x and ch.y for ch in changes(free, after))
-    return released and landed
+    if not any(c.state.stability_class is Stability.INSTABLE for c in before.contacts):
+        return False  # nothing instable to release: what the changes would say, without them
+    released = any(is_instable(ch.x) and not ch.y for ch in _changes_of(before, free))
+    return released and any(not ch.x and ch.y for ch in _changes_of(free, after))
+
+
+_CHANGES_KEPT = 4
+"""How many pairs' changes :func:`_changes_of` keeps."""
+
+_changes_memo: list[tuple[DiscreteSituation, DiscreteSituation, tuple[Change, ...]]] = []
+
+
+def _changes_of(a: DiscreteSituation, b: DiscreteSituation) -> tuple[Change, ...]:
+    """:func:`changes` of ``a -> b`` (no flight), kept for the last few pairs of the very same objects
+    (situations are frozen, so the same objects give the same changes): a debouncer asks
+    :func:`is_flight` of the last two kept situations and the new one, so the pair ``free -> after``
+    of one step is the pair ``before -> free`` of the next, and a step may ask twice."""
+    memo = _changes_memo
+    for x, y, got in tuple(memo):  # a copy: another thread may change the list meanwhile
+        if x is a and y is b:
+            return got
+    got = tuple(changes(a, b))
+    memo.insert(0, (a, b, got))
+    del memo[_CHANGES_KEPT:]
+    return got
 
 
 #: :class:`Debouncer`'s default ``lands``, for S = DiscreteSituation (the debouncer of the tracker, of a
@@ -557,17 +579,24 @@ class Debouncer(Generic[S]):
                 k[j].end, k[j].left = t, None
                 return
         through = False
-        if not self._flies(t, situation) and len(k) >= 2:
+        flies = self._flies(t, situation)
+        if not flies and len(k) >= 2:
             b = k[-1]
             if b.duration < self.hold and not self.transient(b.situation):  # brief stable noise
                 k.pop()
                 if not b.through_free:  # after a flight the one before keeps its end (when it was left)
                     k[-1].end = b.end
                 through = b.through_free
-        if self._flies(t, situation):
+                flies = self._flies(t, situation)  # asked again of the kept ones left
+        if flies:
             k.pop()  # the free interval; the one before it keeps its end (when it was left)
             through = True
         k.append(Kept(situation, t, t, through))
+
+    def extend(self, t: float) -> None:
+        """The situation pushed last holds at ``t`` too: what :meth:`push` does with one equal to it,
+        for a caller that knows so already (the tracker compared it with the last step's)."""
+        self.kept[-1].end = t
 
     def _flies(self, t: float, situation: S) -> bool:
         """Does ``situation`` end a flight that began with the last kept situation?"""

@@ -366,10 +366,11 @@ class ContactTracker:
             prev.topological is topo  # the cached situation, vectors and all: discretize is pure
             or (prev.topological == topo and _vector_independent(topo))
         ):
-            disc, new = prev.discrete, False
+            disc, same, new = prev.discrete, True, False
         else:
             disc = self._discretizer()(topo)
-            new = prev is None or prev.discrete != disc or prev.topological != topo
+            same = prev is not None and prev.discrete == disc
+            new = not same or cast(ContactState, prev).topological != topo
         if table is not None and len(table) and self._spans[0] is topo:  # the kernel's sums
             forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
@@ -383,7 +384,10 @@ class ContactTracker:
         if new:
             self.changes.append(state)
         self.current = state
-        self._debouncer.push(state.t, disc)
+        if same:  # the situation pushed at the last step again: the debouncer's push would compare it
+            self._debouncer.extend(state.t)
+        else:
+            self._debouncer.push(state.t, disc)
         return state
 
     def _discretizer(self) -> Discretizer:
@@ -434,11 +438,12 @@ def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
     cost (no contraction of every point's primitives)."""
     n = len(pts) - 1
+    xyz = pts.tolist()  # once: a contact's two points as Python floats
     contacts = []
     for c in sit.contacts:
         d, env = c.dlo, c.env
         i = cast(int, d.index)
-        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
+        a, b = (xyz[i - 1], xyz[i]) if i == n else (xyz[i], xyz[i + 1])
         vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
         if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
             env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
@@ -476,7 +481,12 @@ def _vector_independent(topo: Situation) -> bool:
 
 def _on_edge(contact: Contact) -> bool:
     """Is ``contact`` an E contact on an edge (whose discrete state is a point-or-line decision)?"""
-    return contact.dlo.kind == "E" and any(e.type == "E" for e in contact.env)
+    if contact.dlo.kind != "E":
+        return False
+    for e in contact.env:
+        if e.kind == "faces" and len(e.faces) == 2:  # an edge: EnvPrimitive.type "E"
+            return True
+    return False
 
 
 def _force_spans(topo: Situation) -> list[tuple[int, int]]:

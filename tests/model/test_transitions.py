@@ -451,3 +451,40 @@ def test_a_flight_flags_only_the_changes_that_flew():
     # landing on a ridge or corner: the instable -> instable change flew
     assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]"), through_free=True) == ("S", "E")
     assert classify_step(RIDGE, P("V/G & E/N & V/VI[a.F1,a.F2,a.F3]")) == ("I",)
+
+
+def test_the_flight_test_remembers_changes_by_the_very_same_situations_only():
+    """is_flight keeps the changes of the last few pairs of situation objects (the per-step path asks
+    twice of the same pair): a pair asked again, reversed, or of equal but other objects gives what
+    :func:`changes` gives, and so does is_flight."""
+    from dlovr.model.transitions import _changes_of, is_flight
+
+    ridge, free, landed = RIDGE, FREE, LANDED
+    assert _changes_of(ridge, free) == tuple(changes(ridge, free))
+    assert _changes_of(ridge, free) is _changes_of(ridge, free)  # remembered
+    assert _changes_of(free, ridge) == tuple(changes(free, ridge)) != _changes_of(ridge, free)
+    twin = P(ridge.format())
+    assert twin == ridge and twin is not ridge
+    assert _changes_of(twin, free) == tuple(changes(ridge, free))
+    assert is_flight(ridge, free, landed) and is_flight(twin, P(free.format()), landed)
+    assert not is_flight(landed, free, ridge) and not is_flight(ridge, free, free)
+    state = ridge.contacts[-1].state
+    assert state.card == state.dim_dlo + 2 * state.dof_trans + 3 * state.dof_blocked
+    assert ridge.contacts[-1].objects == frozenset({"a"})
+
+
+def test_extend_is_push_of_the_situation_pushed_last():
+    """Debouncer.extend (the tracker's step whose discrete situation equals the last one) does what
+    push does with an equal situation, flicker and flights unchanged."""
+    samples = [(RIDGE, 50), (FREE, 30), (LANDED, 50), (RIDGE, 3), (LANDED, 40)]
+    a, b = Debouncer(0.02, is_transient), Debouncer(0.02, is_transient)
+    t = 0.0
+    for sit, n in samples:
+        for k in range(n):
+            t += 0.002
+            a.push(t, P(sit.format()))
+            if k:
+                b.extend(t)
+            else:
+                b.push(t, sit)
+    assert a.kept == b.kept and [k.situation for k in a.kept] == [RIDGE, LANDED]

@@ -300,8 +300,13 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     lit = [i for i, b in enumerate(bands) if b.faces == {"table.F1": Stability.STABLE}]
     k = max(lit, key=lambda i: bands[i].end - bands[i].start)  # the longest: the easiest to hover
     on_table = page.locator(f'.dlovr-timeline > div[data-situation="{k}"]')
-    hover_until(page, on_table, lambda: faces.shown == {"table.F1": Stability.STABLE}, "the hovered faces")
-    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the hovered face drawn green")
+    # the live timeline's axis grows with the time, so the band slides from under a still mouse (onto the
+    # situation after it) within seconds, and a screenshot takes seconds on a loaded machine: the face
+    # must be drawn green while the band is hovered, a fresh hover each try as a person would
+    hover_until(
+        page, on_table, lambda: faces.shown == {"table.F1": Stability.STABLE} and green_fraction(page) > 0.05,
+        "the hovered face drawn green", timeout=30,
+    )
     shot(page, "faces-hovering-the-table-situation")
     page.mouse.move(5, 300)
     wait_for(lambda: faces.shown == {}, timeout=10, what="the live faces (none) back")
