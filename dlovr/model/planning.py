@@ -381,6 +381,34 @@ class NetworkProgram:
             node, pos = ch.macro.target, self._edges[ch.macro.edges[-1]].motion.end_mean
         return out
 
+    def reference_path(self) -> tuple[str, ...]:
+        """The edge ids the reference demonstration took, in its order (each edge's track is the
+        reference's first occurrence of it, so an edge it took twice appears once); () without one."""
+        ref = self.network.reference
+        if ref is None:
+            return ()
+        steps = [
+            (e.track.t0, e.id) for e in self.network.edges
+            if e.track is not None and e.track.demonstration == ref.demonstration
+        ]
+        return tuple(eid for _, eid in sorted(steps))
+
+    def path_probability(self, edges: Sequence[str], position: Sequence[float] | None = None) -> float:
+        """The probability the planner gives a path (edge ids) from the start of its first edge with
+        the gripper at ``position`` (m, world; None: unknown): the product of its departure
+        probabilities, each edge's context the previous one's mean end position (module docstring). 0
+        when an edge is not applicable where the path reaches its source. The best path from a context
+        never has a smaller one (what ``bench_network.py`` checks against :meth:`reference_path`)."""
+        p, pos = Fraction(1), None if position is None else tuple(float(x) for x in position)
+        for eid in edges:
+            e = self._edges[eid]
+            opts = self.applicable(e.source, pos)
+            if all(o.id != eid for o in opts):
+                return 0.0
+            p *= Fraction(e.count, sum(o.count for o in opts))
+            pos = e.motion.end_mean
+        return _r(p)
+
     # ---------------------------------------------------------------------------------------------
     # JSON and text
     # ---------------------------------------------------------------------------------------------

@@ -515,3 +515,28 @@ def test_a_network_without_chatter_has_the_shape_of_the_scripted_demonstrations(
     assert plans[0] == plans[1] and NetworkProgram(cleaned).plan_from_start()[0].reach_probability == 1.0
     assert Network.loads(cleaned.dumps()).chatter == cleaned.chatter
     assert "chatter" not in json.loads(as_recorded.dumps())
+
+
+def test_the_plan_is_never_less_likely_than_the_reference_demonstrations_own_path():
+    """``reference_path`` is the edges the reference took, in its order; ``path_probability`` gives a
+    path the planner's probability (departures applicable where it gets, 0 for one that is not);
+    the plan from the start is at least as likely (here more: two of three went the other way)."""
+    inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
+    goal = "V/G & E/N & V/F[box.F2]"
+
+    def d(name, seq):
+        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
+
+    demos = [d(n, [FREE, TIP, inst, goal]) for n, inst in (("A", inst_x), ("B", inst_y), ("C", inst_y))]
+    prog = NetworkProgram(build_network(demos))
+    net = prog.network
+    ids = {s: node(net, s) for s in (FREE, TIP, inst_x, inst_y, goal)}
+    ref = prog.reference_path()
+    assert ref == tuple(f"{ids[a]}->{ids[b]}" for a, b in ((FREE, TIP), (TIP, inst_x), (inst_x, goal)))
+    plan = prog.plan_from_start()
+    start = net.starts[0].position
+    assert prog.path_probability(ref, start) == round(1 / 3, 9) < plan[0].reach_probability == round(2 / 3, 9)
+    assert prog.path_probability([e for ch in plan for e in ch.macro.edges], start) == round(2 / 3, 9)
+    far = (start[0] + 1.0, start[1], start[2])
+    assert prog.path_probability(ref, far) == round(1 / 3, 9)  # the nearest departures still apply
+    assert NetworkProgram(build_network([replace(x, commands=None) for x in demos])).reference_path() == ()
