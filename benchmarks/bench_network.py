@@ -82,7 +82,7 @@ def trials(d: Path, program: str, a: argparse.Namespace, vary: list[str], *extra
 def reference_check(prog_path: Path) -> str:
     """The plan from the start against the reference demonstration's own path: their probabilities
     (docs/networks.md) and whether the plan never prefers a less likely path."""
-    from dlovr.model.planning import NetworkProgram, load_runnable  # the benchmark's own process
+    from dlovr.model.planning import NetworkProgram, load_runnable, reference_path  # in this process
 
     prog = load_runnable(prog_path)
     assert isinstance(prog, NetworkProgram)
@@ -90,8 +90,8 @@ def reference_check(prog_path: Path) -> str:
     start = next(p for p in net.starts if p.node == net.start)
     plan = prog.plan_from_start()
     p_plan = plan[0].reach_probability if plan else 0.0
-    p_ref = prog.path_probability(prog.reference_path(), start.position)
-    same = [e for ch in plan for e in ch.macro.edges] == list(prog.reference_path())
+    p_ref = prog.path_probability(reference_path(prog.network), start.position)
+    same = [e for ch in plan for e in ch.macro.edges] == list(reference_path(prog.network))
     verdict = "ok" if p_plan >= p_ref else "NOT MET"
     return (f"plan P(goal) {p_plan:.4f} vs the reference's own path {p_ref:.4f}: {verdict}"
             f"{' (the plan is the reference path)' if same else ''}")
