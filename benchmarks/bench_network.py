@@ -118,7 +118,7 @@ def main() -> None:
         tag = f"{a.source}{hand}-seed{a.demo_seed}-{a.demos}{'-nochatter' if a.without_chatter else ''}"
         net, prog_path = d / f"net-{tag}.json", d / f"net-{tag}.prog.json"
         # the sample demonstration first: the network's reference, whose tracks its macros follow
-        dlovr("network", "recordings/peg_in_hole.mcap", *map(str, demos), "-o", str(net),
+        dlovr("network", "recordings/peg_in_hole.mcap", *map(str, demos), "-o", str(net), "--force",
               *(["--without-chatter"] if a.without_chatter else []))
         dlovr("compile", "--network", str(net), "-o", str(prog_path))
         prog = json.loads(prog_path.read_text())
