@@ -120,7 +120,7 @@ def main() -> None:
         # the sample demonstration first: the network's reference, whose tracks its macros follow
         dlovr("network", "recordings/peg_in_hole.mcap", *map(str, demos), "-o", str(net), "--force",
               *(["--without-chatter"] if a.without_chatter else []))
-        dlovr("compile", "--network", str(net), "-o", str(prog_path))
+        dlovr("compile", "--network", str(net), "-o", str(prog_path), "--force")
         prog = json.loads(prog_path.read_text())
         check = reference_check(prog_path)
         runs = f"{a.trials}-seed{a.seed}"
