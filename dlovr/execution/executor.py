@@ -46,17 +46,17 @@ from dlovr.model.derivation import (
     GOAL_MIN_CONTACT_N,
     GOAL_MIN_TOLERANCE_DEG,
     GOAL_SENSE_S,
-    THRESHOLD_PARAM,
 )
 from dlovr.model.detection import (
     DEFAULT_FILTER_TAU_S,
+    MIN_SNR,
     Detector,
     Expectation,
     NoiseModel,
     WrenchConditioner,
     for_sensor,
     make_detector,
-    sensor_weak,
+    no_force_signal,
 )
 from dlovr.model.program import Macro, Program
 from dlovr.model.transitions import principal, successional_contacts
@@ -144,7 +144,7 @@ class ExecOptions:
     blank: float = 0.05
     arm: float = 0.5
     phase_blank: float = 0.15
-    min_snr: float = 8.0
+    min_snr: float = MIN_SNR
     sensor_noise: float | None = None
     object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
     object_turns: tuple[tuple[str, tuple[float, float, float, float]], ...] = ()
@@ -324,7 +324,7 @@ class _Guard:
         #: every detection's threshold is at or above the demonstrated step (or too close to it for the
         #: sensor's noise): no force signal to watch
         self.weak = bool(m.detection) and all(
-            _weak(d.cls, p, opts.min_snr) for d, p in zip(m.detection, params, strict=True)
+            no_force_signal(d.cls, p, opts.min_snr) for d, p in zip(m.detection, params, strict=True)
         )
 
     def start(
@@ -358,19 +358,6 @@ class _Guard:
             fired = hit or fired
             self.peak = max(self.peak, d.signal)
         return fired
-
-
-def _weak(cls: str, params: Any, min_snr: float = 0.0) -> bool:
-    """Whether a detection has no force signal to watch: its threshold is not below the step its
-    demonstration showed (``step_n``), or that step is less than ``min_snr`` times the noise seen
-    before it (``noise_n``; a gradual change, not a step a run would show again)."""
-    step, key = params.get("step_n"), THRESHOLD_PARAM.get(cls)
-    if step is None:
-        return False
-    step = float(step)
-    if step <= 0.0 or (key in params and float(params[key]) >= step) or sensor_weak(cls, params):
-        return True
-    return "noise_n" in params and step < min_snr * float(params["noise_n"])
 
 
 @dataclass(frozen=True)

@@ -512,6 +512,25 @@ def sensor_weak(cls: str, params: Mapping[str, float]) -> bool:
     return float(params[key]) > SENSOR_WEAK_FRACTION * float(params["step_n"])
 
 
+MIN_SNR = 8.0
+"""A demonstrated step smaller than this many times the noise before it is no force signal (a gradual
+change, not a step a run would show again): :func:`no_force_signal`'s default in runs."""
+
+
+def no_force_signal(cls: str, params: Mapping[str, float], min_snr: float = 0.0) -> bool:
+    """Whether a detection has no force signal to watch, so that its macro ends by its motion: its
+    threshold is not below the step its demonstration showed (``step_n``, N), or that step is less
+    than ``min_snr`` times the noise seen before it (``noise_n``), or the sensor's noise leaves it
+    none (:func:`sensor_weak`). False without a demonstrated step (the class's defaults)."""
+    step, key = params.get("step_n"), _THRESHOLD.get(cls, "jump_n" if cls == "S" else "")
+    if step is None:
+        return False
+    step = float(step)
+    if step <= 0.0 or (key in params and float(params[key]) >= step) or sensor_weak(cls, params):
+        return True
+    return "noise_n" in params and step < min_snr * float(params["noise_n"])
+
+
 _CLASSES: dict[str, type[Detector]] = {
     "E": EDetector, "C": CDetector, "T": TDetector, "I": IDetector, "S": SDetector,
 }

@@ -412,6 +412,21 @@ def merge_detections(per_occurrence: Sequence[Sequence[Detection]]) -> tuple[Det
     return tuple(out)
 
 
+def reference_detections(own: Sequence[Detection]) -> tuple[Detection, ...]:
+    """The detections of an edge the reference demonstration took: its own occurrence's, as a program
+    compiled from it has them (the macro follows its track there; a median over other demonstrations'
+    wrenches, a person's trembling one among them, can leave no signal where the reference has a
+    clean step), each derived parameter's text saying so."""
+    mark = " (the reference demonstration's own: its macro follows its track)"
+    return tuple(
+        replace(d, derivation={k: _own(t, mark) for k, t in d.derivation.items()}) for d in own
+    )
+
+
+def _own(text: str, mark: str) -> str:
+    return text + mark if text.startswith("derived") else text
+
+
 def _check(net: Network) -> None:
     ids = [n.id for n in net.nodes]
     if len(set(ids)) != len(ids):
@@ -611,7 +626,9 @@ def _edges(
         classes = tuple(c for c in CLASS_ORDER if c in union)
         motion = _motion_stats(xs)
         steps = seen.steps[(u, v)]
-        derived = merge_detections([detections(classes, a, b, w, None) for a, b, w in steps])
+        per = [detections(classes, a, b, w, None) for a, b, w in steps]
+        mine = [k for k, x in enumerate(xs) if x[0] == reference]
+        derived = reference_detections(per[mine[0]]) if mine else merge_detections(per)
         edges.append(
             Edge(u, v, classes, edge_risk(classes), len(xs), _r(len(xs) / departures[u]),
                  tuple(_r(x[1]) for x in xs), motion, tuple(x[0] for x in xs), derived,

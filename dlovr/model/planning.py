@@ -13,6 +13,9 @@ where the gripper is. So a departure is planned from a *context*: a node and the
 - **Departure probability** ``p(e | u, x) = count(e) / sum of count(e')`` over the applicable ``e'``
   (with ``x`` unknown this is the edge's probability in the network).
 - After ``e`` the gripper is at ``e``'s mean end position, the context of the next choice.
+- **Blind departures** (:func:`blind`: a deliberate transition whose detections have no force signal,
+  which a run takes to have happened without sensing) may be chosen only where they are the most
+  frequent applicable departure (:meth:`NetworkProgram.plannable`); they stay outcomes.
 - **Best path** from a context to the goal node: the path ``e1 … ek`` that maximises ``P``, the product
   of the departure probabilities along it (exact fractions); among equal ``P`` the one with fewer risky
   edges (``I``, ``S``), then fewer caution edges (``T``), then fewer edges, then the smallest edge ids.
@@ -45,6 +48,7 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.inputs import read_json, where_msg
+from dlovr.model.detection import MIN_SNR, no_force_signal
 from dlovr.model.network import RISKS, Edge, Network, NetworkError, Vec3
 from dlovr.model.program import Detection, Program, ProgramError
 from dlovr.transforms import norm
@@ -192,6 +196,7 @@ class NetworkProgram:
         self._out: dict[str, tuple[Edge, ...]] = {n.id: network.out_edges(n.id) for n in network.nodes}
         self._nodes = {n.id: n for n in network.nodes}
         self._terminal = {e.id for e in network.edges if e.target == network.goal}
+        self._blind = {e.id for e in network.edges if blind(e)}
         #: caches (the network does not change): applicable departures per context, and where a walk
         #: on through ``-`` edges after each ``-`` edge lands (:meth:`_walks`, made when first needed)
         self._applicable: dict[tuple[str, tuple[float, ...] | None], tuple[Edge, ...]] = {}
@@ -216,6 +221,14 @@ class NetworkProgram:
         self._applicable[key] = es
         return es
 
+    def plannable(self, opts: Sequence[Edge]) -> tuple[Edge, ...]:
+        """The applicable departures ``opts`` a plan may choose: all but a :func:`blind` one that is
+        not the most frequent of them. The executor takes a blind macro to have made its transition
+        without sensing (docs/networks.md), so a plan bets only on what the motion made most often
+        there, never on a rarer outcome that no sensing would correct."""
+        most = max((o.count for o in opts), default=0)
+        return tuple(o for o in opts if o.id not in self._blind or o.count == most)
+
     def _solve(self) -> tuple[dict[str, _Key], dict[str, str | None]]:
         pred: dict[str, list[tuple[str, Fraction]]] = {}
         for e1 in self.network.edges:
@@ -223,7 +236,7 @@ class NetworkProgram:
                 continue
             opts = self.applicable(e1.target, e1.motion.end_mean)
             total = sum(o.count for o in opts)
-            for e2 in opts:
+            for e2 in self.plannable(opts):
                 pred.setdefault(e2.id, []).append((e1.id, Fraction(e2.count, total)))
         value: dict[str, _Key] = {}
         nxt: dict[str, str | None] = {}
@@ -254,7 +267,7 @@ class NetworkProgram:
         opts = self.applicable(node, position)
         total = sum(e.count for e in opts)
         best: tuple[Fraction, int, int, int, str] | None = None
-        for e in opts:
+        for e in self.plannable(opts):
             v = self._value.get(e.id)
             if v is None:
                 continue
@@ -381,6 +394,22 @@ class NetworkProgram:
             node, pos = ch.macro.target, self._edges[ch.macro.edges[-1]].motion.end_mean
         return out
 
+    def path_probability(self, edges: Sequence[str], position: Sequence[float] | None = None) -> float:
+        """The probability the planner gives a path (edge ids) from the start of its first edge with
+        the gripper at ``position`` (m, world; None: unknown): the product of its departure
+        probabilities, each edge's context the previous one's mean end position (module docstring). 0
+        when an edge is not applicable where the path reaches its source. The best path from a context
+        never has a smaller one (what ``bench_network.py`` checks against :func:`reference_path`)."""
+        p, pos = Fraction(1), None if position is None else tuple(float(x) for x in position)
+        for eid in edges:
+            e = self._edges[eid]
+            opts = self.applicable(e.source, pos)
+            if all(o.id != eid for o in opts):
+                return 0.0
+            p *= Fraction(e.count, sum(o.count for o in opts))
+            pos = e.motion.end_mean
+        return _r(p)
+
     # ---------------------------------------------------------------------------------------------
     # JSON and text
     # ---------------------------------------------------------------------------------------------
@@ -469,6 +498,28 @@ class NetworkProgram:
                 what = f"{' '.join(ch.macro.edges)}  {kind}, P(goal)={ch.reach_probability:.3f}"
             lines.append(f"  {n.id:<5} {what}")
         return "\n".join(lines) + "\n"
+
+
+def reference_path(net: Network) -> tuple[str, ...]:
+    """The edge ids the network's reference demonstration took, in its order (each edge's track is
+    the reference's first occurrence of it, so an edge it took twice appears once); () without one."""
+    ref = net.reference
+    if ref is None:
+        return ()
+    mine = [e for e in net.edges if e.track is not None and e.track.demonstration == ref.demonstration]
+    steps = [(e.track.t0, e.id) for e in mine if e.track is not None]
+    return tuple(eid for _, eid in sorted(steps))
+
+
+def blind(e: Edge) -> bool:
+    """Whether a run takes edge ``e`` to have happened without sensing where it led: a deliberate
+    transition (classed, neither ``S`` nor ``I``) whose every detection has no force signal at a
+    run's signal-to-noise floor (:func:`dlovr.model.detection.no_force_signal`), so that its macro
+    ends by its motion. ``S`` is sensed after it all the same; an ``I`` the motion does not choose is
+    followed by the reference's motion and sensed at the spontaneous transition after it."""
+    if not e.classes or {"S", "I"} & set(e.classes) or not e.detection:
+        return False
+    return all(no_force_signal(d.cls, d.params, MIN_SNR) for d in e.detection)
 
 
 def _eliminate(v: str, rows: dict[str, dict[str, Fraction]], rhs: dict[str, dict[str, Fraction]]) -> None:

@@ -286,7 +286,8 @@ def test_bounces_and_weak_detections_end_by_motion():
     noise before it, has no force signal to watch."""
     from dataclasses import replace
 
-    from dlovr.execution.executor import _weak, bounces
+    from dlovr.execution.executor import bounces
+    from dlovr.model.detection import no_force_signal as _weak
     prog = Program.load(ROOT / "recordings" / "programs" / "table.program.json")
     ms = list(prog.classed)
     assert len(ms) >= 2

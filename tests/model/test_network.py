@@ -18,7 +18,7 @@ from dlovr.model.network import (
     build_network,
     edge_risk,
 )
-from dlovr.model.planning import NetworkProgram, Successor, identify
+from dlovr.model.planning import NetworkProgram, Successor, identify, reference_path
 from dlovr.model.program import PoseTrack, TimedSituation
 
 FREE = "V/G & E/N & V/N"
@@ -515,3 +515,52 @@ def test_a_network_without_chatter_has_the_shape_of_the_scripted_demonstrations(
     assert plans[0] == plans[1] and NetworkProgram(cleaned).plan_from_start()[0].reach_probability == 1.0
     assert Network.loads(cleaned.dumps()).chatter == cleaned.chatter
     assert "chatter" not in json.loads(as_recorded.dumps())
+
+
+def test_the_plan_is_never_less_likely_than_the_reference_demonstrations_own_path():
+    """``reference_path`` is the edges the reference took, in its order; ``path_probability`` gives a
+    path the planner's probability (departures applicable where it gets, 0 for one that is not);
+    the plan from the start is at least as likely (here more: two of three went the other way)."""
+    inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
+    goal = "V/G & E/N & V/F[box.F2]"
+
+    def d(name, seq):
+        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
+
+    demos = [d(n, [FREE, TIP, inst, goal]) for n, inst in (("A", inst_x), ("B", inst_y), ("C", inst_y))]
+    prog = NetworkProgram(build_network(demos))
+    net = prog.network
+    ids = {s: node(net, s) for s in (FREE, TIP, inst_x, inst_y, goal)}
+    ref = reference_path(prog.network)
+    assert ref == tuple(f"{ids[a]}->{ids[b]}" for a, b in ((FREE, TIP), (TIP, inst_x), (inst_x, goal)))
+    plan = prog.plan_from_start()
+    start = net.starts[0].position
+    assert prog.path_probability(ref, start) == round(1 / 3, 9) < plan[0].reach_probability == round(2 / 3, 9)
+    assert prog.path_probability([e for ch in plan for e in ch.macro.edges], start) == round(2 / 3, 9)
+    far = (start[0] + 1.0, start[1], start[2])
+    assert prog.path_probability(ref, far) == round(1 / 3, 9)  # the nearest departures still apply
+    assert reference_path(build_network([replace(x, commands=None) for x in demos])) == ()
+
+
+def test_a_plan_bets_on_a_transition_it_cannot_sense_only_where_the_motion_made_it_most_often():
+    """From B the demonstrations went on to W three times (never to the goal), to FREE twice (then to
+    the goal) and to EP once (then to the goal). Through FREE is the likelier path; but when B -> FREE
+    shows no force step (a run takes it to have happened without sensing), it is not the departure
+    the motion made most often there, and the plan goes through EP instead."""
+    from dlovr.model.planning import blind
+    from dlovr.model.program import Detection
+
+    w = "V/G & E/N & V/E^LI[box.F1,box.F2]"
+    ends = ("V/G & E/N & V/F[wall.F1]", "V/G & E/N & V/E^LS[box.F2,floor.F1]", GROOVE)
+    net = build_network([demo("ref", [A, B, EP, G]), demo("y1", [A, B, FREE, G]), demo("y2", [A, B, FREE, G]),
+                         *(demo(f"w{k}", [A, B, w, z]) for k, z in enumerate(ends))])
+    assert net.goal == node(net, G)
+    b, free, ep = node(net, B), node(net, FREE), node(net, EP)
+    ch = NetworkProgram(net).replan(b)
+    assert ch is not None and ch.path == (b, free, net.goal) and ch.reach_probability == round(1 / 3, 9)
+    weak = Detection("E", "release", {"force_threshold_n": 0.05, "step_n": 0.01})
+    edges = tuple(replace(e, detection=(weak,)) if e.id == f"{b}->{free}" else e for e in net.edges)
+    assert [blind(e) for e in edges if e.source == b] == [False, True, False]  # EP, FREE, W
+    ch = NetworkProgram(replace(net, edges=edges)).replan(b)
+    assert ch is not None and ch.path == (b, ep, net.goal) and ch.reach_probability == round(1 / 6, 9)
+    assert {s.node for s in ch.successors} == {ep, free, node(net, w)}  # still an outcome
