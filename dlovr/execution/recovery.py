@@ -55,7 +55,7 @@ from dlovr.execution.network_run import (
     rounded_vector,
     sensed_contact_vector,
 )
-from dlovr.model.planning import NetworkProgram, Successor, _expected, identify
+from dlovr.model.planning import NetworkProgram, Successor, expected_vector, identify
 from dlovr.model.program import Program, ProgramError
 
 #: How many times by default a run plans again through the network after its goal check failed.
@@ -105,7 +105,7 @@ def sensed_node(
     nodes = [n for n in net.nodes if n.id != net.goal and nprog.replan(n.id, position) is not None]
     nodes = near_nodes(nprog, nodes, position)
     total = sum(n.visits for n in nodes) or 1
-    cands = [Successor(n.id, n.situation, n.principal, _expected(n), n.visits / total) for n in nodes]
+    cands = [Successor(n.id, n.situation, n.principal, expected_vector(n), n.visits / total) for n in nodes]
     return identify(cands, vector, tolerance)
 
 

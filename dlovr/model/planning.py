@@ -137,7 +137,7 @@ def _counts(e: Edge) -> tuple[int, int]:
     return int(e.risk == "risky"), int(e.risk == "caution")
 
 
-def _expected(node: Any) -> Vec3 | None:
+def expected_vector(node: Any) -> Vec3 | None:
     """The contact vector a node is identified by: the one its demonstrations sensed, else the sum
     of its principal contacts' vectors (docs/networks.md)."""
     return node.sensed if node.sensed is not None else node.vector
@@ -373,7 +373,7 @@ class NetworkProgram:
         rows = sorted(out.items(), key=lambda kv: (-kv[1], int(kv[0][1:])))
         nodes = self._nodes
         return tuple(
-            Successor(k, nodes[k].situation, nodes[k].principal, _expected(nodes[k]), _r(p / total))
+            Successor(k, nodes[k].situation, nodes[k].principal, expected_vector(nodes[k]), _r(p / total))
             for k, p in rows
         )
 
