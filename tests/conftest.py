@@ -12,6 +12,12 @@ import shutil
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
+
+#: Property tests are judged on what they find, never on how long one example took: these machines are
+#: shared, and a 200 ms per-example deadline (hypothesis's default) fails a correct test under load.
+settings.register_profile("dlovr", deadline=None)
+settings.load_profile("dlovr")
 
 #: Fixtures that make a test slow: headless Chromium (``browser``), the browser UI's server simulating in
 #: real time (``server``, tests/ui/conftest.py) and a local Ray instance (``ray_instance``,
