@@ -24,7 +24,9 @@ The loop, from the network's start node and the scene's gripper position:
    outside the network**: the run stops with a report of the sensed vector and the expected ones.
    With the oracle the node is the one whose principal contacts the tracker sees. A macro that ended
    by its motion (its transition shows the force no step) is taken to reach its planned target, as
-   in a compiled program, unless its transition is spontaneous (``S``: where it landed is sensed);
+   in a compiled program, unless its transition is spontaneous (``S``: where it landed is sensed)
+   or an instable one the plan takes where the reference took another (its macro follows the
+   reference's motion through that one, :func:`borrows_motion`: where it landed is sensed);
 4. from the identified node the planner chooses again (``replan`` event when it is not the node
    the previous plan expected); the goal node ends the run, a node with no demonstrated path to the
    goal stops it.
@@ -73,7 +75,8 @@ class NetworkOptions:
     demonstrated tracks (:func:`plan_track`) where the network has them, else the mean motions;
     ``blind_motion``: a macro that ended by its motion (its transition shows no force signal) is taken
     to have reached its planned target, as in a compiled program, instead of being identified (a
-    spontaneous one, ``S``, is identified all the same);
+    spontaneous one, ``S``, and an instable one along the reference's motion through another
+    transition, :func:`borrows_motion`, are identified all the same);
     ``sigma``: identification weighs each successor's probability by how well its vector fits
     (:func:`dlovr.model.planning.identify`; None: the nearest vector alone)."""
 
@@ -181,6 +184,18 @@ def reference_span(nprog: NetworkProgram, plan: MacroPlan, node: str) -> tuple[f
         return None
     nxt = next((x for x in steps if x[0] >= start - 1e-9 and x[2].classes), None)
     return (start, nxt[1]) if nxt is not None and {"S", "I"} & set(nxt[2].classes) else None
+
+
+def borrows_motion(nprog: NetworkProgram, plan: MacroPlan, node: str) -> bool:
+    """Whether the macro from ``node`` moves along the reference's motion through another transition
+    than its own: an ``S`` or ``I`` macro whose last edge the reference never took there
+    (:func:`reference_span`). Such a macro's end by its motion tells nothing of where the DLO went
+    (most likely where the reference's own transition led), so the run senses it instead of taking
+    the planned target."""
+    if not {"S", "I"} & set(plan.classes) or not plan.edges:
+        return False
+    own = {e.id for _, _, e in _reference_steps(nprog.network)}
+    return plan.edges[-1] not in own and reference_span(nprog, plan, node) is not None
 
 
 def reference_goal_entry(nprog: NetworkProgram) -> float | None:
@@ -415,10 +430,12 @@ class _NetworkRun:
         plan, nopts = choice.macro, self.nopts
         if self.ses.opts.detect == "oracle":
             return next((s for s in choice.successors if s.node == true_node), None)
-        if run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes:
+        borrowed = nopts.tracks and borrows_motion(self.nprog, plan, choice.node)
+        if run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes and not borrowed:
             # a transition without force signal gives the wrench nothing to tell: as a compiled
             # program does, take the demonstrated motion to have made the planned transition
-            # (not a spontaneous one, whose outcome the motion does not choose: where the DLO
+            # (not a spontaneous one, whose outcome the motion does not choose, nor an instable one
+            # run along the reference's motion through another transition: where the DLO
             # landed is sensed)
             return next((s for s in choice.successors if s.node == plan.target), None)
         return identify(choice.successors, sensed, nopts.tolerance, nopts.sigma)

@@ -220,8 +220,10 @@ def goal_check_counts(trials: Sequence[dict[str, Any]]) -> dict[str, int]:
 def replan_counts(trials: Sequence[dict[str, Any]]) -> dict[str, int]:
     """How the recovery through a network went (:mod:`dlovr.execution.recovery`): the trials that
     planned again (``replanned``), those it brought to the goal (``recovered``) and the attempts in
-    all (``attempts``)."""
-    done = [t["program"] for t in trials if t["program"].get("replans")]
+    all (``attempts``). A network program's trials count their own replans (a number, not recovery
+    attempts) and are left out."""
+    progs = [t["program"] for t in trials]
+    done = [p for p in progs if isinstance(p.get("replans"), (list, tuple)) and p["replans"]]
     return {"replanned": len(done), "recovered": sum(bool(p.get("recovered")) for p in done),
             "attempts": sum(len(p["replans"]) for p in done)}
 

@@ -467,7 +467,7 @@ def test_network_macros_follow_the_reference_demonstration_where_it_went():
     """Along the reference's own edges a macro lies on its clock (from its entry into the node to its
     entry into the target); an instable transition the plan takes elsewhere than the reference (its
     motion does not choose where it leads) follows the reference's motion through its own one."""
-    from dlovr.execution.network_run import reference_goal_entry, reference_span
+    from dlovr.execution.network_run import borrows_motion, reference_goal_entry, reference_span
 
     inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
     goal = "V/G & E/N & V/F[box.F2]"
@@ -486,6 +486,13 @@ def test_network_macros_follow_the_reference_demonstration_where_it_went():
     assert at_tip.macro.target == net.locate(inst_y) and at_tip.macro.classes == ("I",)
     assert reference_span(prog, at_tip.macro, tip) == (1.0, 2.0)  # A's own I, from TIP to inst_x
     assert reference_goal_entry(prog) == 3.0
+    # that macro's end by its motion says nothing of where the DLO went (the reference's motion went
+    # to inst_x): a run senses it instead of taking inst_y (peg_in_hole's network from 20 program
+    # runs took the groove corner's I this way and went on from the hole as if outside it: 1 of 10)
+    assert borrows_motion(prog, at_tip.macro, tip)
+    assert not borrows_motion(prog, first.macro, net.start)
+    ref_i = replace(at_tip.macro, edges=(f"{tip}->{net.locate(inst_x)}",), target=net.locate(inst_x))
+    assert not borrows_motion(prog, ref_i, tip)  # the reference's own I: its motion made it
 
 
 def _shape(net: Network):
