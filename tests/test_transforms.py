@@ -59,7 +59,7 @@ def test_the_classifier_still_refuses_a_zero_vector():
     which gave a NaN contact vector, is refused too: no reader or simulator makes one); a pinch
     (normals that cancel below the tolerance) still gives the zero contact vector."""
     with pytest.raises(ValueError, match="zero-length vector"):
-        _point_or_line("S", np.array([1.0, 0.0, 0.0]), (0.0, 0.0, 0.0), ModelParams())
+        _point_or_line("S", [1.0, 0.0, 0.0], (0.0, 0.0, 0.0), ModelParams())
     with pytest.raises(ValueError, match="zero-length vector"):
         contact_vector(ContactFacts(faces=(), gripper_z=(0.0, 0.0, 0.0)), gripper=True)
     opposite = (FaceFact("a.F1", "a", (0.0, 0.0, 1.0)), FaceFact("b.F1", "b", (0.0, 0.0, -1.0)))
