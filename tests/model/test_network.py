@@ -463,20 +463,30 @@ def test_joined_tracks_repeat_each_motion_from_where_the_last_ended():
     np.testing.assert_allclose(out.pos[2], [0.1, 0.0, 0.0])
 
 
+#: Two instable states the tip may go to from TIP, and the goal after either.
+INST_X, INST_Y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
+BRANCH_GOAL = "V/G & E/N & V/F[box.F2]"
+
+
+def _branching_demos() -> list[Demonstration]:
+    """Three demonstrations FREE, TIP, an instable state, the goal: the reference (A, the first)
+    through INST_X, the two others through INST_Y; 1 s a situation."""
+
+    def d(name, seq):
+        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
+
+    seqs = (("A", INST_X), ("B", INST_Y), ("C", INST_Y))
+    return [d(n, [FREE, TIP, inst, BRANCH_GOAL]) for n, inst in seqs]
+
+
 def test_network_macros_follow_the_reference_demonstration_where_it_went():
     """Along the reference's own edges a macro lies on its clock (from its entry into the node to its
     entry into the target); an instable transition the plan takes elsewhere than the reference (its
     motion does not choose where it leads) follows the reference's motion through its own one."""
     from dlovr.execution.network_run import borrows_motion, reference_goal_entry, reference_span
 
-    inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
-    goal = "V/G & E/N & V/F[box.F2]"
-
-    def d(name, seq):
-        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
-
-    demos = [d(n, [FREE, TIP, inst, goal]) for n, inst in (("A", inst_x), ("B", inst_y), ("C", inst_y))]
-    prog = NetworkProgram(build_network(demos))
+    inst_x, inst_y = INST_X, INST_Y
+    prog = NetworkProgram(build_network(_branching_demos()))
     net = prog.network
     assert net.reference is not None and net.reference.demonstration == 0
     first = prog.replan(net.start, None)
@@ -528,13 +538,8 @@ def test_the_plan_is_never_less_likely_than_the_reference_demonstrations_own_pat
     """``reference_path`` is the edges the reference took, in its order; ``path_probability`` gives a
     path the planner's probability (departures applicable where it gets, 0 for one that is not);
     the plan from the start is at least as likely (here more: two of three went the other way)."""
-    inst_x, inst_y = "V/G & E/N & V/E^LI[box.F1,box.F2]", "V/G & E/N & V/E^LI[box.F1,box.F3]"
-    goal = "V/G & E/N & V/F[box.F2]"
-
-    def d(name, seq):
-        return replace(demo(name, seq, [1.0] * len(seq), line_track(0.01)), commands=line_track(0.01, 40))
-
-    demos = [d(n, [FREE, TIP, inst, goal]) for n, inst in (("A", inst_x), ("B", inst_y), ("C", inst_y))]
+    inst_x, inst_y, goal = INST_X, INST_Y, BRANCH_GOAL
+    demos = _branching_demos()
     prog = NetworkProgram(build_network(demos))
     net = prog.network
     ids = {s: node(net, s) for s in (FREE, TIP, inst_x, inst_y, goal)}
