@@ -113,11 +113,12 @@ class Timeline:
         """Coloured bands, one per kept situation, transitions marked with their classes, and a list
         of the last situations.
 
-        With ``pick_uuid`` (a text input of the page), hovering a band or a row sends ``h<i>`` to that
-        input, leaving it sends an empty value, and clicking sends ``c<i>:<ms>`` (``i``: the index of
-        the situation in :attr:`bands`); the server highlights its faces or scrubs to it. ``axis_end``
-        (s) ends the axis after the last band (the live timeline's room to grow); ``window`` (s, a
-        zoomed view) draws only the bands within it, cut at its ends, each in its own colour still.
+        With ``pick_uuid`` (a text input of the page), hovering a band or a row sends ``h<i>:<n>`` to
+        that input, leaving it sends ``:<n>`` (``<n>``: a count of reports, :data:`PICK_JS`), and
+        clicking sends ``c<i>:<ms>`` (``i``: the index of the situation in :attr:`bands`); the server
+        highlights its faces or scrubs to it. ``axis_end`` (s) ends the axis after the last band (the
+        live timeline's room to grow); ``window`` (s, a zoomed view) draws only the bands within it,
+        cut at its ends, each in its own colour still.
         """
         t0, t1 = self.start, self.end
         lo, hi = window if window is not None else (t0, t1 if axis_end is None else max(axis_end, t1))
@@ -221,22 +222,26 @@ def step_time(tl: Timeline, t: float, direction: int) -> float:
     return max(earlier, default=t)
 
 
-PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0;POST
+PICK_JS = """(window.__dlovrPick||(window.__dlovrPick=(function(){var xy=null,hover='',timer=0,n=0;POST
 function at(){var el=xy&&document.elementFromPoint(xy[0],xy[1]);
 var t=el&&el.closest&&el.closest('.dlovr-pick [data-situation]');return t?'h'+t.dataset.situation:'';}
-function decide(){var s=at();if(s!==hover){hover=s;post(s);}}
+function send(s){hover=s;n+=1;post(s+':'+n);}
+function decide(){timer=0;var s=at();if(s!==hover)send(s);}
 var pick=function(e){if(e&&e.clientX!==undefined)xy=[e.clientX,e.clientY];
-if(e&&e.type==='click'){var c=at();if(c)post('c'+c.slice(1)+':'+Date.now());return;}clearTimeout(timer);
-if(at())decide();else timer=setTimeout(decide,LEAVE_MS);};
+if(e&&e.type==='click'){var c=at();if(c)post('c'+c.slice(1)+':'+Date.now());return;}
+var away=timer!==0;clearTimeout(timer);timer=0;var s=at();
+if(s){if(s!==hover||away)send(s);}else timer=setTimeout(decide,LEAVE_MS);};
 document.addEventListener('mousemove',pick,true);
 document.documentElement.addEventListener('mouseleave',function(){xy=null;pick(null);});
 return pick;})()))"""
 """The page's hover follower for the timeline (installed once, by the first ``mouseover``): the
 situation under the mouse is looked up at the mouse's place (``document.elementFromPoint``), so a
 band replaced under a still mouse (the live timeline is drawn again every second) is still the band
-hovered. Entering a band is sent at once as ``h<i>`` to the text input ``UUID``; being over no band
-is sent as ``""`` only once it has lasted :data:`LEAVE_MS` (a redraw's moment without bands is not a
-leave); a click sends ``c<i>:<ms>``."""
+hovered. Entering a band is sent at once as ``h<i>:<n>`` to the text input ``UUID``; being over no
+band is sent as ``:<n>`` only once it has lasted :data:`LEAVE_MS` (a redraw's moment without bands
+is not a leave); a click sends ``c<i>:<ms>``. ``<n>`` counts the reports, so that each one is a new
+value of the input (the server hears only changes): a band entered again after a moment off it is
+reported again, and a report lost on the way (the page reconnecting) is mended by the next entry."""
 
 LEAVE_MS = 150
 """How long the mouse must be over no band before the timeline counts as left (ms)."""

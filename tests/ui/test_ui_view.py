@@ -322,6 +322,27 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     page.close()
 
 
+def test_a_band_entered_again_is_reported_again_so_a_hover_the_server_lost_comes_back(
+    server: DemoServer, browser
+):
+    """The page reports a hover when the band under the mouse changes; a band entered again after a
+    moment off it (shorter than the leave delay) is reported again, so a hover the server lost (a
+    report sent while the page was reconnecting, a pin cleared) comes back at the next entry."""
+    page = open_page(browser, server.url)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    first = page.locator('.dlovr-timeline > div[data-situation="0"]')
+    faces = server.viewport.faces
+    hover_until(page, first, lambda: faces.pinned == {}, "the hovered free situation pinned")
+    with server.draw_lock:
+        faces.pin(None)  # the server forgets the hover
+    box = first.bounding_box()
+    assert box is not None
+    page.mouse.move(5, 300)  # off the band and straight back, as a hand slips off and on
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    wait_for(lambda: faces.pinned == {}, timeout=10, what="the hover reported again")
+    page.close()
+
+
 def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files(server: DemoServer, browser):
     from dlovr.ui.program_view import macro_risk
 

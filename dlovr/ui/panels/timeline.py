@@ -211,8 +211,9 @@ class TimelinePanel:
             self.live_btn.visible = False
 
     def picked(self, value: str) -> None:
-        """A situation of the timeline hovered (``h<i>``: highlight its faces), left (``""``) or
-        clicked (``c<i>:<ms>``: show the middle of it, as the slider would)."""
+        """A situation of the timeline hovered (``h<i>:<n>``: highlight its faces), left (``:<n>``,
+        or ``""``) or clicked (``c<i>:<ms>``: show the middle of it, as the slider would); what follows
+        the colon only makes each report a new value (:data:`dlovr.ui.timeline.PICK_JS`)."""
         app = self.app
         tl = self.viewed()
         kind = value.partition(":")[0]
