@@ -29,9 +29,11 @@ from dlovr.outputs import write_output  # atomic: a full disk leaves the previou
     help="Read the recordings on this many worker processes (default: one after the other here).",
 )
 @click.option(
-    "--without-chatter",
-    is_flag=True,
-    help="Merge each recording's path to its goal: its chatter removed first, as `compile` removes it.",
+    "--without-chatter/--keep-chatter",
+    default=True,
+    show_default=True,
+    help="Merge each recording's path to its goal, its chatter removed first as `compile` removes it "
+    "(the default), or keep the situations as they happened.",
 )
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output files if they exist.")
 @cluster_option
@@ -46,6 +48,8 @@ def network_cmd(
 ) -> None:
     """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
     situations, transitions with class, count, probability, durations, gripper motions and risk.
+    Each recording's chatter (a situation left and re-entered within a moment, docs/model.md
+    section 6) is removed first unless --keep-chatter.
 
     Existing output files are refused unless --force."""
     from dlovr.model.planning import NetworkProgram
