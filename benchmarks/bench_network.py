@@ -2,12 +2,14 @@
 and the open-loop replay on the same perturbed peg_in_hole trials.
 
 Run: ``.venv/bin/python benchmarks/bench_network.py [--demos 20] [--from runs|script|people]
-[--demo-seed 1] [--person 1] [--keep-chatter] [--trials 50] [--seed 0] [--workers 2] [--keep DIR]``
+[--demo-seed 1] [--person 1] [--keep-chatter | --without-chatter] [--trials 50] [--seed 0] [--workers 2]
+[--keep DIR]``
 
 1. the sample demonstration (``recordings/peg_in_hole.mcap``, given first: the network's reference
-   demonstration) and ``--demos`` demonstrations, merged into a network (``dlovr network``, each
-   demonstration's chatter removed, or with ``--keep-chatter`` kept) and compiled into a network
-   program (``dlovr compile --network``).
+   demonstration) and ``--demos`` demonstrations, merged into a network (``dlovr network``: the
+   chatter of each demonstration a hand made removed; ``--keep-chatter``: kept in all;
+   ``--without-chatter``: removed from all) and compiled into a network program (``dlovr compile
+   --network``).
    ``--from runs`` (default): recorded runs of the sample program (``dlovr run --trials --record``) in
    scenes perturbed from ``--demo-seed``, a demonstrator who adapts to each scene as a person does;
    ``--from script``: the scripted demonstration replayed open loop in each perturbed scene (``dlovr
@@ -39,6 +41,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+CHATTER = {None: ", chatter removed from the hand-made ones", "keep": ", chatter kept",
+           "all": ", chatter removed from all"}
 VARY = ("dlo.length=10%", "dlo.young=0.5..2", "dlo.friction=30%", "objects.pos=0.005")
 
 
@@ -104,7 +108,11 @@ def main() -> None:
     ap.add_argument("--from", dest="source", choices=("runs", "script", "people"), default="runs")
     ap.add_argument("--demo-seed", type=int, default=1, help="the demonstrations' seed")
     ap.add_argument("--person", type=float, default=1.0, help="--from people: drift and tremor, x defaults")
-    ap.add_argument("--keep-chatter", action="store_true", help="dlovr network --keep-chatter")
+    chat = ap.add_mutually_exclusive_group()
+    chat.add_argument("--keep-chatter", dest="chatter", action="store_const", const="keep",
+                      help="dlovr network --keep-chatter")
+    chat.add_argument("--without-chatter", dest="chatter", action="store_const", const="all",
+                      help="dlovr network --without-chatter")
     ap.add_argument("--trials", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0, help="the trials' seed")
     ap.add_argument("--workers", type=int, default=2)
@@ -116,11 +124,12 @@ def main() -> None:
         d.mkdir(parents=True, exist_ok=True)
         hand = f"-p{a.person:g}" if a.source == "people" else ""
         demos, t_demos = record_demos(a, d / f"demos-{a.source}{hand}-seed{a.demo_seed}", vary)
-        tag = f"{a.source}{hand}-seed{a.demo_seed}-{a.demos}{'-chatter' if a.keep_chatter else ''}"
+        suffix = {"keep": "-chatter", "all": "-nochatter"}.get(a.chatter, "")
+        tag = f"{a.source}{hand}-seed{a.demo_seed}-{a.demos}{suffix}"
         net, prog_path = d / f"net-{tag}.json", d / f"net-{tag}.prog.json"
         # the sample demonstration first: the network's reference, whose tracks its macros follow
         dlovr("network", "recordings/peg_in_hole.mcap", *map(str, demos), "-o", str(net), "--force",
-              *(["--keep-chatter"] if a.keep_chatter else []))
+              *({"keep": ["--keep-chatter"], "all": ["--without-chatter"]}.get(a.chatter, [])))
         dlovr("compile", "--network", str(net), "-o", str(prog_path), "--force")
         prog = json.loads(prog_path.read_text())
         check = reference_check(prog_path)
@@ -132,7 +141,7 @@ def main() -> None:
     what = {"runs": "recorded program runs", "script": "scripted demonstrations",
             "people": f"person-like demonstrations (demo.person={a.person:g}, nominal scene)"}[a.source]
     print(f"peg_in_hole, {a.trials} trials (seed {a.seed}), the sample + {a.demos} {what} (seed "
-          f"{a.demo_seed}){', chatter kept' if a.keep_chatter else ', chatter removed'}, {a.workers} workers")
+          f"{a.demo_seed}){CHATTER[a.chatter]}, {a.workers} workers")
     print(f"network: {s['nodes']} situations, {s['edges']} transitions, P(goal) from the start "
           f"{s['plan_reach_probability']:.3f} over {s['plan_macros']} macros "
           f"({t_demos:.0f} s to record)")

@@ -64,37 +64,60 @@ def test_network_of_three_copies_counts_every_transition_three_times(built):
     assert sorted(e["label"] for e in net["edges"] if e["risk"] == "risky") == ["I", "S,E"]
 
 
-def test_network_drops_chatter_by_default_and_keeps_it_on_request(tmp_path):
-    """`dlovr network` merges each recording's path to its goal: the sample table recording's flips
-    between two situations of the cable lying on the table (``-`` back and forth, three times each,
-    within a moment) are chatter, removed by default and said so in the file;
-    ``--keep-chatter`` keeps the situations as they happened (docs/networks.md); ``--without-chatter``,
-    the default now, still says the same."""
-    table = SAMPLES / "table.mcap"
-    runs = {
-        flag: cli("network", table, *([flag] if flag else []), "-o", tmp_path / f"net{flag}.json")
-        for flag in ("", "--without-chatter", "--keep-chatter")
-    }
-    for r in runs.values():
+def _networks(tmp_path: Path, recordings: Path, *flags: str) -> dict[str, tuple[str, dict]]:
+    """``dlovr network RECORDINGS [FLAG]`` for each flag ("": none): its output and its file."""
+    out = {}
+    for flag in flags:
+        path = tmp_path / f"net{flag}.json"
+        r = cli("network", recordings, *([flag] if flag else []), "-o", path)
         assert r.exit_code == 0, r.output
-    assert "3 situations, 4 transitions (0 risky) from 1 recordings of table" in runs[""].output
-    assert "4 situations, 6 transitions (0 risky) from 1 recordings of table" in runs["--keep-chatter"].output
-    dropped, kept = (json.loads((tmp_path / f"net{f}.json").read_text()) for f in ("", "--keep-chatter"))
-    assert "removed" in dropped["chatter"] and "chatter" not in kept
-    assert (tmp_path / "net--without-chatter.json").read_text() == (tmp_path / "net.json").read_text()
-    back_and_forth = [e for e in kept["edges"] if e["label"] == "-"]
-    assert len(back_and_forth) == 2 and {e["count"] for e in back_and_forth} == {3}
-    assert all(e["label"] != "-" for e in dropped["edges"])
+        out[flag] = (r.output, json.loads(path.read_text()))
+    return out
+
+
+def test_a_scripts_flips_stay_unless_without_chatter(tmp_path):
+    """The sample table recording, played from its script, flips between two situations of the cable
+    lying on the table (``-`` back and forth, three times each, within a moment): the scene's flips,
+    not a hovering hand's, so `dlovr network` keeps them (as ``--keep-chatter`` does) and
+    ``--without-chatter`` removes them (docs/networks.md)."""
+    nets = _networks(tmp_path, SAMPLES / "table.mcap", "", "--keep-chatter", "--without-chatter")
+    for flag in ("", "--keep-chatter"):
+        assert "4 situations, 6 transitions (0 risky) from 1 recordings of table" in nets[flag][0]
+        assert "chatter" not in nets[flag][1]
+        back_and_forth = [e for e in nets[flag][1]["edges"] if e["label"] == "-"]
+        assert len(back_and_forth) == 2 and {e["count"] for e in back_and_forth} == {3}
+    output, removed = nets["--without-chatter"]
+    assert "3 situations, 4 transitions (0 risky) from 1 recordings of table" in output
+    assert removed["chatter"].startswith("removed from each demonstration (")
+    assert all(e["label"] != "-" for e in removed["edges"])
 
 
 @pytest.mark.slow
-def test_a_scripted_demonstrations_network_is_the_same_with_or_without_chatter(three, tmp_path):
-    """The scripted peg-in-hole sample has no chatter: its network keeps its shape either way."""
-    for flag in ("--without-chatter", "--keep-chatter"):
-        r = cli("network", three / "peg0.mcap", flag, "-o", tmp_path / f"net{flag}.json")
-        assert r.exit_code == 0, r.output
-        assert "15 situations, 14 transitions (2 risky) from 1 recordings" in r.output
-    net = json.loads((tmp_path / "net--without-chatter.json").read_text())
+def test_network_drops_a_hands_chatter_by_default_and_keeps_it_on_request(tmp_path):
+    """A person-like demonstration of the table script (`dlovr record --trials 1 --vary
+    demo.person=1`, docs/people.md) flips as the script's does; made by a hand, its flips are
+    chatter: `dlovr network` removes them and says so, ``--keep-chatter`` keeps them."""
+    r = dlovr("record", "--script", Path(__file__).parents[1] / "scenes/table.script.toml", "--trials", 1,
+              "--seed", 0, "--vary", "demo.person=1", "-o", tmp_path / "demos")
+    assert r.returncode == 0, r.stderr
+    nets = _networks(tmp_path, tmp_path / "demos", "", "--keep-chatter")
+    output, dropped = nets[""]
+    assert "3 situations, 4 transitions (0 risky) from 1 recordings of table" in output
+    assert "removed from each demonstration made by a hand (1 of 1)" in dropped["chatter"]
+    assert all(e["label"] != "-" for e in dropped["edges"])
+    output, kept = nets["--keep-chatter"]
+    assert "4 situations, 6 transitions (0 risky) from 1 recordings of table" in output
+    assert "chatter" not in kept and any(e["label"] == "-" for e in kept["edges"])
+
+
+@pytest.mark.slow
+def test_network_without_chatter_merges_each_recordings_path_to_its_goal(three, tmp_path):
+    """--without-chatter: each recording's chatter removed before merging, said so in the file; the
+    scripted sample has none, so its network keeps its shape (docs/networks.md)."""
+    r = cli("network", three / "peg0.mcap", "--without-chatter", "-o", tmp_path / "net.json")
+    assert r.exit_code == 0, r.output
+    assert "15 situations, 14 transitions (2 risky) from 1 recordings" in r.output
+    net = json.loads((tmp_path / "net.json").read_text())
     assert "removed" in net["chatter"] and net["start"] != net["goal"]
 
 

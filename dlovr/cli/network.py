@@ -29,11 +29,17 @@ from dlovr.outputs import write_output  # atomic: a full disk leaves the previou
     help="Read the recordings on this many worker processes (default: one after the other here).",
 )
 @click.option(
-    "--without-chatter/--keep-chatter",
-    default=True,
-    show_default=True,
-    help="Merge each recording's path to its goal, its chatter removed first as `compile` removes it "
-    "(the default), or keep the situations as they happened.",
+    "--keep-chatter",
+    "chatter",
+    flag_value="keep",
+    help="Keep every recording's situations as they happened (default: each recording a hand made "
+    "merged as its path to its goal, its chatter removed first as `compile` removes it).",
+)
+@click.option(
+    "--without-chatter",
+    "chatter",
+    flag_value="all",
+    help="Remove the chatter from every recording, a script's too.",
 )
 @click.option("-f", "--force", is_flag=True, help="Overwrite the output files if they exist.")
 @cluster_option
@@ -42,14 +48,15 @@ def network_cmd(
     out: str,
     html_out: str | None,
     workers: int | None,
-    without_chatter: bool,
+    chatter: str | None,
     force: bool,
     cluster: str | None,
 ) -> None:
     """Merge recordings of one scene (files or directories of *.mcap) into a transition network:
     situations, transitions with class, count, probability, durations, gripper motions and risk.
-    Each recording's chatter (a situation left and re-entered within a moment, docs/model.md
-    section 6) is removed first unless --keep-chatter.
+    The chatter of each recording a hand made (a situation left and re-entered within a moment,
+    docs/model.md section 6) is removed first, unless --keep-chatter; a script's recordings keep
+    theirs (their flips are the scene's), unless --without-chatter.
 
     Existing output files are refused unless --force."""
     from dlovr.model.planning import NetworkProgram
@@ -76,9 +83,10 @@ def network_cmd(
             bar.update(k - done[0])
             done[0] = k
 
-        chatter = ChatterRules() if without_chatter else None
+        rules = None if chatter == "keep" else ChatterRules()
         net = network_from_recordings(
-            paths, progress=progress, workers=workers, cluster=cluster, chatter=chatter
+            paths, progress=progress, workers=workers, cluster=cluster, chatter=rules,
+            hands_only=chatter is None,
         )
     write_output(out, net.dumps(), force=force)
     if html_out:

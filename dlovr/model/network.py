@@ -50,6 +50,7 @@ from dlovr.model.program import (
     motion_between,
     remove_chatter,
 )
+from dlovr.model.smoothing import made_by_hand
 from dlovr.model.tracks import EdgeTrack, representative, stretch
 from dlovr.model.transitions import CLASS_ORDER, classify_step, principal, successional_contacts
 from dlovr.transforms import norm
@@ -527,20 +528,26 @@ class _Visits:
     demo_keys: list[list[str]] = field(default_factory=list)
 
 
-def build_network(demos: Sequence[Demonstration], chatter: ChatterRules | None = None) -> Network:
+def build_network(
+    demos: Sequence[Demonstration], chatter: ChatterRules | None = None, *, hands_only: bool = False
+) -> Network:
     """Merge demonstrations of one scene into a transition network (module docstring).
 
     ``chatter``: merge each demonstration's path to its goal instead of its kept situations as they
     happened: its chatter removed first as a program's compiler removes it
-    (:func:`dlovr.model.program.remove_chatter` with these rules; the network says so in ``chatter``)."""
+    (:func:`dlovr.model.program.remove_chatter` with these rules; the network says so in ``chatter``);
+    with ``hands_only``, only from the demonstrations a hand made (:func:`by_hand`): a script's flips
+    are the scene's, not a hovering hand's, and stay."""
     if not demos:
         raise NetworkError("no demonstrations to build a network from")
     _check_scenes(demos)
     for d in demos:
         if not d.states:
             raise NetworkError(f"{d.name}: demonstration has no contact situations")
+    cleaned = [chatter is not None and (not hands_only or by_hand(d)) for d in demos]
     if chatter is not None:
-        demos = [replace(d, states=tuple(remove_chatter(d.states, d.poses, chatter))) for d in demos]
+        demos = [replace(d, states=tuple(remove_chatter(d.states, d.poses, chatter))) if c else d
+                 for d, c in zip(demos, cleaned, strict=True)]
     seen = _Visits()
     for di, d in enumerate(demos):
         _visit(seen, di, d)
@@ -554,18 +561,29 @@ def build_network(demos: Sequence[Demonstration], chatter: ChatterRules | None =
         demos[0].scene_name, demos[0].scene_sha256, tuple(d.name for d in demos), tuple(nodes), tuple(edges),
         _endpoints(firsts, order), _endpoints(lasts, order),
         _most_common(Counter(k for k, _ in firsts), order), _most_common(Counter(k for k, _ in lasts), order),
-        NETWORK_VERSION, _whole_track(demos[reference], reference), _chatter_note(chatter),
+        NETWORK_VERSION, _whole_track(demos[reference], reference),
+        _chatter_note(chatter, sum(cleaned) if hands_only else None, len(demos)),
     )
     _check(net)
     return net
 
 
-def _chatter_note(rules: ChatterRules | None) -> str:
-    """What a network records of how its demonstrations' chatter was treated ("": kept)."""
-    if rules is None:
+def _chatter_note(rules: ChatterRules | None, hands: int | None = None, n: int = 0) -> str:
+    """What a network records of how its demonstrations' chatter was treated ("": kept); ``hands``:
+    removed only from the demonstrations a hand made, this many of ``n``."""
+    if rules is None or hands == 0:
         return ""
-    return (f"removed from each demonstration (an excursion back to where it left within {rules.max_s:g} s, "
+    which = "each demonstration" if hands is None else f"each demonstration made by a hand ({hands} of {n})"
+    return (f"removed from {which} (an excursion back to where it left within {rules.max_s:g} s, "
             f"{rules.max_m:g} m and {rules.max_deg:g} deg of gripper motion)")
+
+
+def by_hand(demo: Demonstration) -> bool:
+    """Was ``demo`` made by a hand (:func:`dlovr.model.smoothing.made_by_hand` of its commanded
+    track; True without one, as nothing tells it from a hand's)?"""
+    if demo.commands is None:
+        return True
+    return made_by_hand(demo.commands.t, demo.commands.pos)
 
 
 def _visit(seen: _Visits, di: int, d: Demonstration) -> None:

@@ -82,6 +82,33 @@ def tremor_of(t: np.ndarray, pos: np.ndarray) -> float:
     return float(np.median(np.sqrt((a * a).sum(axis=1))))
 
 
+#: A commanded track whose position accelerates at more than this fraction of its samples was made
+#: by a hand (:func:`made_by_hand`): the built-in scripts' corners are 0.1-0.3 % of theirs, a
+#: person-like hand's drift and tremor 100 %, its pace and easing alone 74 %, its key jogging 4 %.
+HAND_FRACTION = 0.01
+#: The acceleration (m/s^2) above which a sample counts: a script's legs at constant speed show 1e-11
+#: (rounding), a hand's slowest drift (1.5 mm at 0.05 Hz) 1e-4 and more.
+HAND_ACCEL = 1e-5
+
+
+def made_by_hand(t: np.ndarray, pos: np.ndarray) -> bool:
+    """Was the commanded gripper track (times ``t`` s, evenly spaced; positions ``pos`` (k, 3) m,
+    world) made by a hand rather than played by a machine? A script moves along straight legs at
+    constant speed: its position accelerates only at the corners between legs, a few samples in
+    thousands. A hand's accelerates at nearly every sample (drift, tremor, eased moves), a
+    key-jogging one at every step. True when more than :data:`HAND_FRACTION` of the samples
+    accelerate by more than :data:`HAND_ACCEL`. (Positions only: a script's turn at constant rate
+    moves its quaternion's components along sinusoids.)"""
+    p = np.asarray(pos, dtype=float)
+    if len(p) < 3:
+        return False
+    dt = float(np.median(np.diff(np.asarray(t, dtype=float))))
+    if dt <= 0:
+        return False
+    a = np.abs(p[2:] - 2.0 * p[1:-1] + p[:-2]).max(axis=1) / (dt * dt)
+    return float(np.mean(a > HAND_ACCEL)) > HAND_FRACTION
+
+
 def _phasor(t: np.ndarray, hz: float) -> np.ndarray | None:
     """``exp(2 pi i hz t)`` at the evenly spaced times ``t`` (s), by repeated multiplication (no
     vectorised sine: the same bits on every processor); None where ``t`` is not evenly spaced."""

@@ -51,10 +51,12 @@ def network_from_recordings(
     workers: int | None = None,
     cluster: str | None = None,
     chatter: ChatterRules | None = None,
+    hands_only: bool = False,
 ) -> Network:
     """Build a transition network from recordings of one scene; ``progress(k)`` after each one read
     (with ``workers`` / ``cluster``: as the k-th completes, in order of completion); ``chatter``: each
-    recording's chatter removed first (:func:`dlovr.model.network.build_network`).
+    recording's chatter removed first (with ``hands_only``: of each recording a hand made;
+    :func:`dlovr.model.network.build_network`).
 
     The recordings are read here one after the other, or with ``workers`` / ``cluster`` through
     :func:`dlovr.batch.run_batch` (local processes or Ray; the network is the same, it is built from
@@ -75,7 +77,7 @@ def network_from_recordings(
         demos.append(d)
         if progress is not None and not batched:
             progress(k)
-    return build_network(demos, chatter)
+    return build_network(demos, chatter, hands_only=hands_only)
 
 
 def _demonstrations(

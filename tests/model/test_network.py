@@ -534,6 +534,32 @@ def test_a_network_without_chatter_has_the_shape_of_the_scripted_demonstrations(
     assert "chatter" not in json.loads(as_recorded.dumps())
 
 
+def test_by_default_only_a_hands_chatter_is_removed():
+    """``hands_only`` (the default of ``dlovr network``): the chatter of a demonstration whose
+    commanded track a hand made (it trembles) is removed; a script's flips (a straight leg at constant
+    speed) stay, they are the scene's; a demonstration without a commanded track counts as a
+    hand's. The file says how many."""
+    from dlovr.model.network import by_hand
+    from dlovr.model.program import ChatterRules
+
+    t = np.arange(0.0, 8.0, 0.002)
+    line = np.stack([0.01 * t, np.zeros_like(t), np.full_like(t, 0.3)], axis=1)
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
+    machine = PoseTrack(t, line, quat)
+    hand = PoseTrack(t, line + 0.0003 * np.sin(2 * np.pi * 9.0 * t)[:, None], quat)
+    flips = ([FREE, TIP, LIE, TIP, LIE, GROOVE], [1.0, 2.0, 0.3, 0.05, 1.5, 1.0])
+    script, person, unknown = (replace(demo(n, *flips), commands=c)
+                               for n, c in (("script", machine), ("person", hand), ("unknown", None)))
+    assert [by_hand(d) for d in (script, person, unknown)] == [False, True, True]
+    net = build_network([script, person, unknown], ChatterRules(), hands_only=True)
+    back = [e for e in net.edges if (e.source, e.target) == (node(net, LIE), node(net, TIP))]
+    assert [e.count for e in back] == [1]  # the script's flip back, not the others'
+    assert "made by a hand (2 of 3)" in net.chatter
+    assert not build_network([script], ChatterRules(), hands_only=True).chatter
+    everyone = build_network([script, person, unknown], ChatterRules())
+    assert all((e.source, e.target) != (node(everyone, LIE), node(everyone, TIP)) for e in everyone.edges)
+
+
 def test_the_plan_is_never_less_likely_than_the_reference_demonstrations_own_path():
     """``reference_path`` is the edges the reference took, in its order; ``path_probability`` gives a
     path the planner's probability (departures applicable where it gets, 0 for one that is not);

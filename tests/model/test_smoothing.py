@@ -24,6 +24,24 @@ def legs():
     return np.stack([x, np.zeros_like(x), np.full_like(x, 0.5)], axis=1)
 
 
+def test_a_script_is_played_by_a_machine_a_hand_drifts_eases_and_jogs():
+    """``made_by_hand``: a script's legs accelerate only at their corners; a hand's drift, its eased
+    moves without drift or tremor, its tremor and its key steps accelerate far more often (the
+    network removes chatter only from demonstrations a hand made, docs/networks.md)."""
+    assert not sm.made_by_hand(T, legs())
+    drift = legs() + 0.0015 * np.sin(2 * np.pi * 0.1 * T)[:, None]  # 0.1 Hz: 6e-4 m/s^2 at most
+    assert sm.made_by_hand(T, drift)
+    s = np.clip(T / 2.0, 0.0, 1.0)
+    x = 0.1 * (10 * s**3 - 15 * s**4 + 6 * s**5)  # minimum jerk
+    eased = np.stack([x, np.zeros_like(T), np.full_like(T, 0.5)], axis=1)
+    assert sm.made_by_hand(T, eased)
+    assert sm.made_by_hand(T, legs() + 0.0003 * np.sin(2 * np.pi * 9.0 * T)[:, None])
+    jog = legs().copy()
+    jog[:, 0] = np.floor(T * 30.0) * 0.005  # a held key: a 5 mm step 30 times a second
+    assert sm.made_by_hand(T, jog)
+    assert not sm.made_by_hand(T[:2], legs()[:2])
+
+
 def test_a_script_does_not_tremble_a_hand_does():
     assert sm.tremor_of(T, legs()) == 0.0
     hand = legs() + 0.0003 * np.sin(2 * np.pi * 9.0 * T)[:, None]
