@@ -102,6 +102,7 @@ class Demonstration:
     scene_sha256: str = ""
     wrench: WrenchSeries | None = None
     commands: PoseTrack | None = None  # the commanded gripper track, for the edges' own tracks
+    program_run: bool = False  # a recorded run of a program: the executor moved, not a hand (by_hand)
 
 
 @dataclass(frozen=True)
@@ -580,7 +581,10 @@ def _chatter_note(rules: ChatterRules | None, hands: int | None = None, n: int =
 
 def by_hand(demo: Demonstration) -> bool:
     """Was ``demo`` made by a hand (:func:`dlovr.model.smoothing.made_by_hand` of its commanded
-    track; True without one, as nothing tells it from a hand's)?"""
+    track; True without one, as nothing tells it from a hand's)? A recorded program run is not: the
+    executor's track accelerates where it registers, turns and holds, but no hand hovers there."""
+    if demo.program_run:
+        return False
     if demo.commands is None:
         return True
     return made_by_hand(demo.commands.t, demo.commands.pos)

@@ -19,7 +19,8 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
     metadata: for a demonstration in a perturbed scene (``dlovr record --trials``) the hash of the
     unperturbed scene, ``base_scene_sha256``, so that perturbed runs of one scene merge; gripper poses
     from its contact-state messages, world frame, m and wxyz; the sensed wrench when it has one; the
-    commanded gripper track, for the edges' own tracks)."""
+    commanded gripper track, for the edges' own tracks; whether it is a recorded program run, metadata
+    ``source`` ``dlovr run``)."""
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
@@ -40,6 +41,7 @@ def demonstration(path: str | Path, hold: float | None = None) -> Demonstration:
         rec.metadata.get("base_scene_sha256") or rec.metadata.get("scene_sha256", ""),
         rec.wrench(),
         commands,
+        rec.metadata.get("source") == "dlovr run",
     )
 
 

@@ -551,6 +551,7 @@ def test_by_default_only_a_hands_chatter_is_removed():
     script, person, unknown = (replace(demo(n, *flips), commands=c)
                                for n, c in (("script", machine), ("person", hand), ("unknown", None)))
     assert [by_hand(d) for d in (script, person, unknown)] == [False, True, True]
+    assert not by_hand(replace(person, program_run=True))  # the executor's track, not a hand's
     net = build_network([script, person, unknown], ChatterRules(), hands_only=True)
     back = [e for e in net.edges if (e.source, e.target) == (node(net, LIE), node(net, TIP))]
     assert [e.count for e in back] == [1]  # the script's flip back, not the others'
