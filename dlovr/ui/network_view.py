@@ -77,10 +77,11 @@ def scene_network(scene_name: str, folders: Sequence[Path]) -> tuple[Network | N
     recs = scene_recordings(scene_name, folders)
     if not recs:
         return None, f"no network and no recording of scene {scene_name}"
+    from dlovr.model.program import ChatterRules
     from dlovr.recording.demonstrations import network_from_recordings
 
-    try:
-        net = network_from_recordings(recs)
+    try:  # as `dlovr network` builds it: the chatter of each recording a hand made removed
+        net = network_from_recordings(recs, chatter=ChatterRules(), hands_only=True)
     except (NetworkError, RecordingError, ValueError) as e:
         return None, f"cannot build the network: {e}"
     n = len(recs)
