@@ -150,7 +150,11 @@ class ContactTracker:
         self._disc: Discretizer | None = None
         self._normals: dict[str, list[float]] = {}
         # a point's faces and primitives by its face rows
-        self._by_rows: dict[bytes, tuple[list[tuple[str, ...]], list[Any]]] = {}
+        self._by_rows: dict[bytes, tuple[list[tuple[str, ...]], list[Any], int]] = {}
+        # a number per distinct list of primitives (0: none), and the situations made from them
+        self._codes: dict[tuple[Any, ...], int] = {(): 0}
+        self._structures: dict[tuple[Any, ...], tuple[Situation, list[_PlanItem]]] = {}
+        self._plan: list[_PlanItem] = []  # the situation's plan (_refreshed)
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -197,7 +201,8 @@ class ContactTracker:
         contacts on an edge has turned by more than ``TURN_DEG`` (the point-or-line decision follows
         it). When no point's primitives
         changed, it is the last one with those annotations refreshed (:func:`_refreshed`): what
-        ``situation_from_points`` makes of the same primitives, without contracting them again."""
+        ``situation_from_points`` makes of the same primitives, without contracting them again; so is
+        one made from the same primitives and tip decision at an earlier step (:func:`_structure`)."""
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
@@ -223,17 +228,12 @@ class ContactTracker:
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            sit = _refreshed(self._situation, pts, z)
+            sit = _refreshed(self._situation, pts, z, self._plan)
             if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
-        else:
-            sit = situation_from_points(
-                self._env,
-                pts[1:] - pts[:-1],
-                self._normal,
-                tip_angle_deg=angle,
-                gripper_z=z,
-            )
+        else:  # made again, or made from the same primitives before (_structure)
+            key = (len(pts), tip, *self._env_codes)
+            sit, self._plan = _structure(self._structures, key, self._env, pts, self._normal, angle, z)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
         self._edge_vectors = [
             (cast(int, c.dlo.index), list(c.dlo.vector)) for c in sit.contacts
@@ -297,17 +297,21 @@ class ContactTracker:
                 self.partial_labellings += 1
         if changed:
             group, start, env, by_rows = self._views.group, self._views.start, self._env, self._by_rows
+            codes = self._env_codes
             for p in self._views.changed[: self._work_i[tk.W_CHANGED_N]].tolist():
                 rows = group[start[p] : start[p + 1]]
                 key = rows.tobytes()  # the point's face rows (their width is fixed)
                 got = by_rows.get(key)
                 if got is None:
                     faces = [self.geometry.face_tuple(row) for row in rows]
-                    got = by_rows[key] = (faces, point_primitives(faces, self._made))
+                    prims = point_primitives(faces, self._made)
+                    code = self._codes.setdefault(tuple(prims), len(self._codes))
+                    got = by_rows[key] = (faces, prims, code)
                 self._point_faces[p] = got[0]
                 if env[p] is not got[1] and env[p] != got[1]:
                     self._env_version += 1
                 env[p] = got[1]
+                codes[p] = got[2]
             self._version += 1
 
     def _grow(self) -> None:
@@ -334,6 +338,7 @@ class ContactTracker:
             self._lab_i, self._lab_f = tk.no_labels()
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
+            self._env_codes = [0] * n1  # the numbers (_codes) of the points' primitives
             self._version = 0
             self._env_version += 1
         self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
@@ -431,25 +436,68 @@ def _tuple(v: Any) -> Any:
     return tuple(float(x) for x in v)
 
 
-def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
+def _structure(
+    made: dict[tuple[Any, ...], tuple[Situation, list[_PlanItem]]], key: tuple[Any, ...],
+    env: list[list[EnvPrimitive]], pts: np.ndarray, normal: Any, angle: float, z: Vec3,
+) -> tuple[Situation, list[_PlanItem]]:
+    """``situation_from_points`` of the points' primitives ``env``, the tip at ``angle`` (degrees)
+    and the gripper's ``z``, and its :func:`_plan`. What it contracts depends on the primitives and
+    the tip's decision alone (``key``: the cable's points, the tip's decision and a number per
+    point's primitives), so a situation made ``made`` from the same ones before is refreshed instead
+    (:func:`_refreshed`: the same object ``situation_from_points`` makes, without contracting every
+    point again): a cable crossing edges back and forth meets the same few again and again."""
+    got = made.get(key)
+    if got is not None:
+        return _refreshed(got[0], pts, z, got[1]), got[1]
+    sit = situation_from_points(env, pts[1:] - pts[:-1], normal, tip_angle_deg=angle, gripper_z=z)
+    if len(made) >= _STRUCTURES_KEPT:
+        made.clear()
+    plan = _plan(sit, len(pts) - 1)
+    made[key] = (sit, plan)
+    return sit, plan
+
+
+def _refreshed(
+    sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem] | None = None
+) -> Situation:
     """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
     from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
     its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
-    cost (no contraction of every point's primitives)."""
-    n = len(pts) - 1
+    cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (made here
+    when not given; the tracker keeps it with the situation)."""
+    if plan is None:
+        plan = _plan(sit, len(pts) - 1)
     xyz = pts.tolist()  # once: a contact's two points as Python floats
+    new = object.__new__
     contacts = []
-    for c in sit.contacts:
-        d, env = c.dlo, c.env
-        i = cast(int, d.index)
-        a, b = (xyz[i - 1], xyz[i]) if i == n else (xyz[i], xyz[i + 1])
-        vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-        if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
+    for kind, i, span, env, ia, ib, g in plan:
+        a, b = xyz[ia], xyz[ib]
+        dlo = new(DloPrimitive)  # the fields of a checked one: no __init__ (see _made)
+        dlo.__dict__.update(kind=kind, index=i, span=span, vector=(b[0] - a[0], b[1] - a[1], b[2] - a[2]))
+        if g:  # G's z is not compared: the canonical order stays
             env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
-        dlo = _made(DloPrimitive, kind=d.kind, index=i, span=d.span, vector=vector)
-        contacts.append(_made(Contact, dlo=dlo, env=env))
+        c = new(Contact)
+        c.__dict__.update(dlo=dlo, env=env)
+        contacts.append(c)
     return _made(Situation, contacts=tuple(contacts))
+
+
+#: Per contact of a situation, what :func:`_refreshed` keeps of it: the DLO primitive's kind, index and
+#: span, the environment primitives, the two points whose difference is its vector, and whether the
+#: environment holds the gripper (whose ``z`` is refreshed).
+_PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], int, int, bool]
+
+
+def _plan(sit: Situation, n: int) -> list[_PlanItem]:
+    """:func:`_refreshed`'s plan of ``sit``, a situation of a cable of ``n`` segments."""
+    out: list[_PlanItem] = []
+    for c in sit.contacts:
+        d = c.dlo
+        i = cast(int, d.index)
+        ia, ib = (i - 1, i) if i == n else (i, i + 1)
+        out.append((d.kind, i, d.span, c.env, ia, ib, any(e.kind == "G" for e in c.env)))
+    return out
 
 
 def _made(cls: type[_T], **fields: Any) -> _T:
@@ -520,6 +568,8 @@ def _table_of(arrays: Any) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+_STRUCTURES_KEPT = 4096
+"""How many situations :func:`_structure` keeps by their primitives (then none again)."""
 #: An edge contact's DLO vector is looked at again (its point-or-line decision made again) once it has
 #: turned by more than this since the last time (degrees): well inside the decision's 3° band.
 TURN_DEG = 0.25
