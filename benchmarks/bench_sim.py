@@ -33,6 +33,10 @@ this script printed before (measuring nothing), so a long run can be done in par
 (``mj_step``, the record, the tracker's kernel call, situation, discrete situation, forces and
 debouncer, and the garbage collector's pauses), in µs per step.
 
+``--gc freeze`` freezes the objects made before each round (``gc.freeze``, as the commands do after
+their setup: ``dlovr.cli.common.freeze_setup``); ``--gc both`` plays each round's sim+extract once
+more frozen and prints its ratios beside the default's after the table.
+
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
 charges to whichever variant ran then.
@@ -140,17 +144,29 @@ class Row:
         return statistics.median(self.ratios)
 
 
-def measure(case: str, segments: int | None, repeat: int, max_stretch: float) -> Row:
-    """Interleaved rounds of bare, sim and sim+extract along the case's commands."""
+def measure(case: str, segments: int | None, repeat: int, max_stretch: float, gc_mode: str = "default",
+            frozen: list[float] | None = None) -> Row:
+    """Interleaved rounds of bare, sim and sim+extract along the case's commands. ``gc_mode``
+    ``freeze``: every round with the objects made before it frozen (``gc.freeze``, as the commands
+    do after their setup); ``both``: as by default, and each round's sim+extract once more frozen,
+    its ratio to the round's bare ``mj_step`` appended to ``frozen``."""
+    import gc
+
     scene, script = case_scene(case, segments)
     targets, contacts = _commands(scene, script, max_stretch)
     b, s, f = [], [], []
     sim = None
     for _ in range(repeat):
+        if gc_mode == "freeze":
+            gc.freeze()
         b.append(bare(scene, targets, max_stretch))
         s.append(stepped(scene, targets, max_stretch, False)[0])
         t, sim = stepped(scene, targets, max_stretch, True)
         f.append(t)
+        if gc_mode == "both" and frozen is not None:
+            gc.freeze()
+            frozen.append(stepped(scene, targets, max_stretch, True)[0] / b[-1])
+        gc.unfreeze()
     assert sim is not None
     n, tr = len(targets), sim.tracker
     lab = f"{tr.labellings / n:.1%} / {tr.partial_labellings / n:.1%}"
@@ -298,6 +314,9 @@ def main() -> None:
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall clock")
     ap.add_argument("--from", dest="logs", type=Path, nargs="+", default=None,
                     help="with --plot: draw the tables of earlier runs' output instead of measuring")
+    ap.add_argument("--gc", choices=("default", "freeze", "both"), default="default",
+                    help="freeze: gc.freeze() before each round, as the commands do after their setup; "
+                         "both: each round's pipeline also once frozen, printed after the table")
     ap.add_argument("--parts", action="store_true",
                     help="after the table, one pass per case timing the pipeline's parts")
     args = ap.parse_args()
@@ -315,22 +334,30 @@ def main() -> None:
             raise SystemExit(f"no script for case {case!r} ({script_path(case)})")
     print(f"mujoco {mujoco.__version__}; median of {repeat}; {args.clock} time")
     print(FMT.format(*HEAD))
-    rows = []
+    rows: list[Row] = []
+    lows: list[tuple[Row, list[float]]] = []
     for case in args.case:
         for n in segments:
+            frozen: list[float] = []
             try:
-                row = measure(case, n, repeat, args.max_stretch)
+                row = measure(case, n, repeat, args.max_stretch, args.gc, frozen)
             except SimulationDiverged as e:
                 print(f"{case:>12} {n:>8} diverged: {e}", flush=True)
                 continue
             rows.append(row)
             print_row(row)
+            if frozen:
+                lows.append((row, frozen))
     for row in rows:
         target = TARGETS.get(row.case)
         if target is not None and (row.segments == 40 or not args.scaling):
             met = "met" if row.ratio <= target else "NOT met"
             print(f"{row.case} at {row.segments} segments: median ratio {row.ratio:.2f} "
                   f"(rounds {', '.join(f'{r:.2f}' for r in row.ratios)}), target <= {target}: {met}")
+    for row, frozen in lows:
+        print(f"{row.case} at {row.segments} segments, sim+extract with gc.freeze() after setup: median "
+              f"ratio {statistics.median(frozen):.2f} (rounds {', '.join(f'{x:.2f}' for x in frozen)}) "
+              f"against {row.ratio:.2f} without (rounds {', '.join(f'{x:.2f}' for x in row.ratios)})")
     if args.plot is not None and rows:
         plot(rows, args.plot)
     if args.parts:
