@@ -19,7 +19,9 @@ Each case plays its script along one command stream, three ways, interleaved, ``
 - sim+extract: ``Simulator(track=True).step``: the above plus contact-state extraction (topology,
   discrete states, forces, debouncing) every step: the per-step pipeline.
 
-Prints µs per step (the median of the rounds), the ratio of sim+extract to bare (median, with the
+Prints µs per step (the median of the rounds; before each row, the chunks' floors: the sum over
+chunks of 50 steps of each chunk's least time in any round, which another process's bursts on a shared
+machine inflate less than a round's total), the ratio of sim+extract to bare (median, with the
 lowest and highest round's: targets at most 1.2 on peg-in-hole at 40 segments, 1.3 on the
 contact-rich cases), the real-time factor of sim+extract (2 ms step / time per step), the mean number
 of raw contacts per step and how often the tracker labelled all queried points or some of them.
@@ -35,7 +37,8 @@ debouncer, and the garbage collector's pauses), in µs per step.
 
 ``--gc freeze`` freezes the objects made before each round (``gc.freeze``, as the commands do after
 their setup: ``dlovr.cli.common.freeze_setup``); ``--gc both`` plays each round's sim+extract once
-more frozen and prints its ratios beside the default's after the table.
+more frozen and prints its ratios beside the default's after the table; with either, ``--parts``
+runs frozen.
 
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
@@ -86,18 +89,23 @@ def _commands(scene, script, max_stretch):
     return out, contacts / max(len(out), 1)
 
 
-def bare(scene, targets, max_stretch) -> float:
+def bare(scene, targets, max_stretch, chunks: list[float] | None = None) -> float:
+    """Seconds per ``mj_step`` along ``targets``; ``chunks`` gets the seconds of each :data:`CHUNK`
+    steps."""
     sim = Simulator(scene, max_stretch=max_stretch)
     m, d = sim.model, sim.data
-    clock = CLOCK
-    total = 0.0
-    for pos, quat in targets:
+    clock, cost = CLOCK, _clock_cost()
+    total = part = 0.0
+    for k, (pos, quat) in enumerate(targets, 1):
         sim.target_pos, sim.target_quat = pos, quat
         sim._move_mocap()
         t0 = clock()
         mujoco.mj_step(m, d)
-        total += clock() - t0
-    return total / len(targets) - _clock_cost()
+        part += clock() - t0 - cost
+        if chunks is not None and k % CHUNK == 0:
+            chunks.append(part)
+            total, part = total + part, 0.0
+    return (total + part) / len(targets)
 
 
 _CLOCK_COST: dict[object, float] = {}
@@ -116,13 +124,33 @@ def _clock_cost() -> float:
     return _CLOCK_COST[CLOCK]
 
 
-def stepped(scene, targets, max_stretch, track: bool) -> tuple[float, Simulator]:
+def stepped(
+    scene, targets, max_stretch, track: bool, chunks: list[float] | None = None
+) -> tuple[float, Simulator]:
+    """Seconds per ``Simulator.step`` along ``targets``; ``chunks`` gets the seconds of each
+    :data:`CHUNK` steps."""
     sim = Simulator(scene, max_stretch=max_stretch, track=track)
-    t0 = CLOCK()
-    for pos, quat in targets:
+    clock = CLOCK
+    t0 = t1 = clock()
+    for k, (pos, quat) in enumerate(targets, 1):
         sim.target_pos, sim.target_quat = pos, quat
         sim.step()
-    return (CLOCK() - t0) / len(targets), sim
+        if chunks is not None and k % CHUNK == 0:
+            t2 = clock()
+            chunks.append(t2 - t1)
+            t1 = t2
+    return (clock() - t0) / len(targets), sim
+
+
+#: Steps per chunk of the floor estimate (:func:`floors`).
+CHUNK = 50
+
+
+def floors(rounds: list[list[float]]) -> float:
+    """The sum over chunks of each chunk's least seconds in any round, per step: the same steps in
+    every round, so another process's burst on the shared cores inflates a chunk in one round and not
+    its minimum (an estimate of the quiet machine's cost, beside the medians)."""
+    return sum(min(c) for c in zip(*rounds, strict=True)) / (CHUNK * len(rounds[0]))
 
 
 @dataclass(frozen=True)
@@ -155,13 +183,15 @@ def measure(case: str, segments: int | None, repeat: int, max_stretch: float, gc
     scene, script = case_scene(case, segments)
     targets, contacts = _commands(scene, script, max_stretch)
     b, s, f = [], [], []
+    cb, cs, cf = [], [], []  # per round, the chunks' seconds
     sim = None
     for _ in range(repeat):
         if gc_mode == "freeze":
             gc.freeze()
-        b.append(bare(scene, targets, max_stretch))
-        s.append(stepped(scene, targets, max_stretch, False)[0])
-        t, sim = stepped(scene, targets, max_stretch, True)
+        cb.append([]), cs.append([]), cf.append([])
+        b.append(bare(scene, targets, max_stretch, cb[-1]))
+        s.append(stepped(scene, targets, max_stretch, False, cs[-1])[0])
+        t, sim = stepped(scene, targets, max_stretch, True, cf[-1])
         f.append(t)
         if gc_mode == "both" and frozen is not None:
             gc.freeze()
@@ -171,6 +201,10 @@ def measure(case: str, segments: int | None, repeat: int, max_stretch: float, gc
     n, tr = len(targets), sim.tracker
     lab = f"{tr.labellings / n:.1%} / {tr.partial_labellings / n:.1%}"
     med = statistics.median
+    fb, fs, ff = floors(cb), floors(cs), floors(cf)
+    print(f"  {case}: the chunks' floors ({CHUNK} steps, least of {repeat} rounds each): bare "
+          f"{fb * 1e6:.1f}, sim {fs * 1e6:.1f}, sim+extract {ff * 1e6:.1f} µs per step, ratio {ff / fb:.2f}",
+          flush=True)
     return Row(case, scene.dlo.segments, n, contacts, med(b), med(s), med(f),
                tuple(x / y for x, y in zip(f, b, strict=True)), lab)
 
@@ -361,6 +395,10 @@ def main() -> None:
     if args.plot is not None and rows:
         plot(rows, args.plot)
     if args.parts:
+        if args.gc != "default":  # as the commands run it
+            import gc
+
+            gc.freeze()
         for case in args.case:
             print_parts(case, segments[0], args.max_stretch)
 
