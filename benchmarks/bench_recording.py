@@ -96,7 +96,7 @@ def replay_cpu(path: Path):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "bench_recording").splitlines()[0])
     ap.add_argument("--scene", default="peg_in_hole")
     ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
     ap.add_argument("--copies", type=int, default=8, help="recordings compiled in the throughput test")

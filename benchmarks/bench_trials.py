@@ -35,7 +35,7 @@ VARY = ("dlo.length=10%", "dlo.young=0.5..2", "dlo.friction=30%", "objects.pos=0
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "bench_trials").splitlines()[0])
     ap.add_argument("--program", default=str(ROOT / "recordings/programs/peg_in_hole.program.json"))
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
