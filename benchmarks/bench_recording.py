@@ -1,7 +1,7 @@
 """Recording overhead, replay speed and compile throughput, measured side by side in one run.
 
 Run: ``.venv/bin/python benchmarks/bench_recording.py [--scene peg_in_hole] [--segments 40] [--copies 8]
-[--replays 5] [--no-compile]``
+[--replays 5] [--no-compile] [--gc default|freeze|both]``
 
 1. simulation (step + contact extraction) alone vs the same with recording to MCAP (target: at most
    10% more);
@@ -11,6 +11,9 @@ Run: ``.venv/bin/python benchmarks/bench_recording.py [--scene peg_in_hole] [--s
    target: at least 0.85);
 3. ``dlovr compile`` throughput in recordings per second with 1 and 2 workers (``--no-compile``: not).
 
+``--gc freeze`` freezes the objects made before each round of 2. (``gc.freeze``, as ``dlovr replay``
+does after its setup); ``--gc both`` replays once more frozen in each round and prints that ratio too.
+
 ``--segments N`` records the scene with an N-segment cable (a copy of the scene file with that count,
 embedded in the recording as usual).
 """
@@ -18,6 +21,7 @@ embedded in the recording as usual).
 from __future__ import annotations
 
 import argparse
+import gc
 import re
 import shutil
 import statistics
@@ -92,7 +96,7 @@ def replay_cpu(path: Path):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "bench_recording").splitlines()[0])
     ap.add_argument("--scene", default="peg_in_hole")
     ap.add_argument("--script", type=Path, default=None, help="default: scenes/SCENE.script.toml")
     ap.add_argument("--copies", type=int, default=8, help="recordings compiled in the throughput test")
@@ -100,6 +104,9 @@ def main() -> None:
     ap.add_argument("--segments", type=int, default=None, help="the cable's segments (default: the scene's)")
     ap.add_argument("--replays", type=int, default=3, help="interleaved rounds of replay and bare mj_step")
     ap.add_argument("--no-compile", action="store_true", help="leave out the compile throughput")
+    ap.add_argument("--gc", choices=("default", "freeze", "both"), default="default",
+                    help="freeze: gc.freeze() before each round (as `dlovr replay` does after its setup); "
+                         "both: each round's replay also once frozen, its ratio printed beside")
     args = ap.parse_args()
     script = args.script or scenes_dir() / f"{args.scene}.script.toml"
     sim_time = load_script(script).total_duration
@@ -118,14 +125,20 @@ def main() -> None:
               f"simulated, {size:.2f} MB")
         print(f"simulation alone        {plain:7.2f} s")
         print(f"simulation + recording  {recorded:7.2f} s   ratio {recorded / plain:.3f} (target <= 1.10)")
-        cpu_bare, cpu_replay, walls, bares = [], [], [], []
+        cpu_bare, cpu_replay, walls, bares, frozen = [], [], [], [], []
         res = None
         for _ in range(args.replays):  # interleaved; medians (the machine is shared and noisy)
+            if args.gc == "freeze":
+                gc.freeze()
             bares.append(bare_rtf(args.scene, script))
             cpu_bare.append(bare_rtf(args.scene, script, time.thread_time))
             res, per_step = replay_cpu(out)
             cpu_replay.append(per_step)
             walls.append(res.wall_time)
+            if args.gc == "both":  # the same replay once more, as `dlovr replay` runs it
+                gc.freeze()
+                frozen.append(replay_cpu(out)[1])
+            gc.unfreeze()
         assert res is not None
         med = statistics.median
         rtf = res.sim_time / med(walls)
@@ -138,6 +151,10 @@ def main() -> None:
         print(f"replay --verify / bare mj_step throughput, thread CPU: {med(ratios):.3f} (rounds "
               f"{', '.join(f'{x:.3f}' for x in ratios)}; {med(cpu_replay) * 1e6:.0f} vs "
               f"{dt / med(cpu_bare) * 1e6:.0f} µs per step (replay vs bare); target >= 0.85)")
+        if frozen:
+            fr = [dt / b / r for b, r in zip(cpu_bare, frozen, strict=True)]
+            print(f"  the same with gc.freeze() before the replay (as `dlovr replay` does): {med(fr):.3f} "
+                  f"(rounds {', '.join(f'{x:.3f}' for x in fr)}; {med(frozen) * 1e6:.0f} µs per step)")
         if args.no_compile:
             return
         src = Path(tmp) / "many"

@@ -19,7 +19,9 @@ Each case plays its script along one command stream, three ways, interleaved, ``
 - sim+extract: ``Simulator(track=True).step``: the above plus contact-state extraction (topology,
   discrete states, forces, debouncing) every step: the per-step pipeline.
 
-Prints µs per step (the median of the rounds), the ratio of sim+extract to bare (median, with the
+Prints µs per step (the median of the rounds; before each row, the chunks' floors: the sum over
+chunks of 50 steps of each chunk's least time in any round, which another process's bursts on a shared
+machine inflate less than a round's total), the ratio of sim+extract to bare (median, with the
 lowest and highest round's: targets at most 1.2 on peg-in-hole at 40 segments, 1.3 on the
 contact-rich cases), the real-time factor of sim+extract (2 ms step / time per step), the mean number
 of raw contacts per step and how often the tracker labelled all queried points or some of them.
@@ -32,6 +34,11 @@ this script printed before (measuring nothing), so a long run can be done in par
 ``--parts`` then plays each case once more with the pipeline's parts timed inside the running loop
 (``mj_step``, the record, the tracker's kernel call, situation, discrete situation, forces and
 debouncer, and the garbage collector's pauses), in µs per step.
+
+``--gc freeze`` freezes the objects made before each round (``gc.freeze``, as the commands do after
+their setup: ``dlovr.cli.common.freeze_setup``); ``--gc both`` plays each round's sim+extract once
+more frozen and prints its ratios beside the default's after the table; with either, ``--parts``
+runs frozen.
 
 ``--clock cpu`` (the default) times with this thread's CPU time, ``wall`` with the wall clock: on a
 shared machine the CPU time leaves out the time other processes hold the cores, which the wall clock
@@ -82,18 +89,23 @@ def _commands(scene, script, max_stretch):
     return out, contacts / max(len(out), 1)
 
 
-def bare(scene, targets, max_stretch) -> float:
+def bare(scene, targets, max_stretch, chunks: list[float] | None = None) -> float:
+    """Seconds per ``mj_step`` along ``targets``; ``chunks`` gets the seconds of each :data:`CHUNK`
+    steps."""
     sim = Simulator(scene, max_stretch=max_stretch)
     m, d = sim.model, sim.data
-    clock = CLOCK
-    total = 0.0
-    for pos, quat in targets:
+    clock, cost = CLOCK, _clock_cost()
+    total = part = 0.0
+    for k, (pos, quat) in enumerate(targets, 1):
         sim.target_pos, sim.target_quat = pos, quat
         sim._move_mocap()
         t0 = clock()
         mujoco.mj_step(m, d)
-        total += clock() - t0
-    return total / len(targets) - _clock_cost()
+        part += clock() - t0 - cost
+        if chunks is not None and k % CHUNK == 0:
+            chunks.append(part)
+            total, part = total + part, 0.0
+    return (total + part) / len(targets)
 
 
 _CLOCK_COST: dict[object, float] = {}
@@ -112,13 +124,33 @@ def _clock_cost() -> float:
     return _CLOCK_COST[CLOCK]
 
 
-def stepped(scene, targets, max_stretch, track: bool) -> tuple[float, Simulator]:
+def stepped(
+    scene, targets, max_stretch, track: bool, chunks: list[float] | None = None
+) -> tuple[float, Simulator]:
+    """Seconds per ``Simulator.step`` along ``targets``; ``chunks`` gets the seconds of each
+    :data:`CHUNK` steps."""
     sim = Simulator(scene, max_stretch=max_stretch, track=track)
-    t0 = CLOCK()
-    for pos, quat in targets:
+    clock = CLOCK
+    t0 = t1 = clock()
+    for k, (pos, quat) in enumerate(targets, 1):
         sim.target_pos, sim.target_quat = pos, quat
         sim.step()
-    return (CLOCK() - t0) / len(targets), sim
+        if chunks is not None and k % CHUNK == 0:
+            t2 = clock()
+            chunks.append(t2 - t1)
+            t1 = t2
+    return (clock() - t0) / len(targets), sim
+
+
+#: Steps per chunk of the floor estimate (:func:`floors`).
+CHUNK = 50
+
+
+def floors(rounds: list[list[float]]) -> float:
+    """The sum over chunks of each chunk's least seconds in any round, per step: the same steps in
+    every round, so another process's burst on the shared cores inflates a chunk in one round and not
+    its minimum (an estimate of the quiet machine's cost, beside the medians)."""
+    return sum(min(c) for c in zip(*rounds, strict=True)) / (CHUNK * len(rounds[0]))
 
 
 @dataclass(frozen=True)
@@ -140,21 +172,39 @@ class Row:
         return statistics.median(self.ratios)
 
 
-def measure(case: str, segments: int | None, repeat: int, max_stretch: float) -> Row:
-    """Interleaved rounds of bare, sim and sim+extract along the case's commands."""
+def measure(case: str, segments: int | None, repeat: int, max_stretch: float, gc_mode: str = "default",
+            frozen: list[float] | None = None) -> Row:
+    """Interleaved rounds of bare, sim and sim+extract along the case's commands. ``gc_mode``
+    ``freeze``: every round with the objects made before it frozen (``gc.freeze``, as the commands
+    do after their setup); ``both``: as by default, and each round's sim+extract once more frozen,
+    its ratio to the round's bare ``mj_step`` appended to ``frozen``."""
+    import gc
+
     scene, script = case_scene(case, segments)
     targets, contacts = _commands(scene, script, max_stretch)
     b, s, f = [], [], []
+    cb, cs, cf = [], [], []  # per round, the chunks' seconds
     sim = None
     for _ in range(repeat):
-        b.append(bare(scene, targets, max_stretch))
-        s.append(stepped(scene, targets, max_stretch, False)[0])
-        t, sim = stepped(scene, targets, max_stretch, True)
+        if gc_mode == "freeze":
+            gc.freeze()
+        cb.append([]), cs.append([]), cf.append([])
+        b.append(bare(scene, targets, max_stretch, cb[-1]))
+        s.append(stepped(scene, targets, max_stretch, False, cs[-1])[0])
+        t, sim = stepped(scene, targets, max_stretch, True, cf[-1])
         f.append(t)
+        if gc_mode == "both" and frozen is not None:
+            gc.freeze()
+            frozen.append(stepped(scene, targets, max_stretch, True)[0] / b[-1])
+        gc.unfreeze()
     assert sim is not None
     n, tr = len(targets), sim.tracker
     lab = f"{tr.labellings / n:.1%} / {tr.partial_labellings / n:.1%}"
     med = statistics.median
+    fb, fs, ff = floors(cb), floors(cs), floors(cf)
+    print(f"  {case}: the chunks' floors ({CHUNK} steps, least of {repeat} rounds each): bare "
+          f"{fb * 1e6:.1f}, sim {fs * 1e6:.1f}, sim+extract {ff * 1e6:.1f} µs per step, ratio {ff / fb:.2f}",
+          flush=True)
     return Row(case, scene.dlo.segments, n, contacts, med(b), med(s), med(f),
                tuple(x / y for x, y in zip(f, b, strict=True)), lab)
 
@@ -298,6 +348,9 @@ def main() -> None:
     ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu", help="thread CPU time or wall clock")
     ap.add_argument("--from", dest="logs", type=Path, nargs="+", default=None,
                     help="with --plot: draw the tables of earlier runs' output instead of measuring")
+    ap.add_argument("--gc", choices=("default", "freeze", "both"), default="default",
+                    help="freeze: gc.freeze() before each round, as the commands do after their setup; "
+                         "both: each round's pipeline also once frozen, printed after the table")
     ap.add_argument("--parts", action="store_true",
                     help="after the table, one pass per case timing the pipeline's parts")
     args = ap.parse_args()
@@ -315,25 +368,37 @@ def main() -> None:
             raise SystemExit(f"no script for case {case!r} ({script_path(case)})")
     print(f"mujoco {mujoco.__version__}; median of {repeat}; {args.clock} time")
     print(FMT.format(*HEAD))
-    rows = []
+    rows: list[Row] = []
+    lows: list[tuple[Row, list[float]]] = []
     for case in args.case:
         for n in segments:
+            frozen: list[float] = []
             try:
-                row = measure(case, n, repeat, args.max_stretch)
+                row = measure(case, n, repeat, args.max_stretch, args.gc, frozen)
             except SimulationDiverged as e:
                 print(f"{case:>12} {n:>8} diverged: {e}", flush=True)
                 continue
             rows.append(row)
             print_row(row)
+            if frozen:
+                lows.append((row, frozen))
     for row in rows:
         target = TARGETS.get(row.case)
         if target is not None and (row.segments == 40 or not args.scaling):
             met = "met" if row.ratio <= target else "NOT met"
             print(f"{row.case} at {row.segments} segments: median ratio {row.ratio:.2f} "
                   f"(rounds {', '.join(f'{r:.2f}' for r in row.ratios)}), target <= {target}: {met}")
+    for row, frozen in lows:
+        print(f"{row.case} at {row.segments} segments, sim+extract with gc.freeze() after setup: median "
+              f"ratio {statistics.median(frozen):.2f} (rounds {', '.join(f'{x:.2f}' for x in frozen)}) "
+              f"against {row.ratio:.2f} without (rounds {', '.join(f'{x:.2f}' for x in row.ratios)})")
     if args.plot is not None and rows:
         plot(rows, args.plot)
     if args.parts:
+        if args.gc != "default":  # as the commands run it
+            import gc
+
+            gc.freeze()
         for case in args.case:
             print_parts(case, segments[0], args.max_stretch)
 

@@ -1,19 +1,23 @@
 """Throughput of robustness trials: trials per minute per core, and the executor's own cost per step.
 
 Run: ``.venv/bin/python benchmarks/bench_trials.py [--program recordings/programs/peg_in_hole.program.json]
-[--trials 3] [--baseline]``
+[--trials 3] [--baseline] [--gc default|freeze]``
 
 Runs ``--trials`` perturbed trials (the variation of docs/programs.md: cable length +-10 %, stiffness x0.5-2,
 friction +-30 %, obstacles +-5 mm) one after the other in this process, with force detection and
 the demonstration's recorded path, and prints wall time per trial, simulated seconds per trial,
 trials per minute on one core (with ``--baseline`` a trial includes the open-loop replay) and the
 time per step the executor adds on top of the tracking simulator (path, sensing chain, detectors),
-from one more run of trial 0's program with ``Simulator.step`` timed apart.
+from one more run of trial 0's program with ``Simulator.step`` timed apart. The trials' thread CPU
+time (median) gives trials per minute per core without the other processes' share of a shared
+machine; ``--gc freeze`` freezes the setup's objects first (``gc.freeze``, as ``dlovr run`` does).
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
+import statistics
 import time
 from pathlib import Path
 
@@ -31,11 +35,13 @@ VARY = ("dlo.length=10%", "dlo.young=0.5..2", "dlo.friction=30%", "objects.pos=0
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=(__doc__ or "bench_trials").splitlines()[0])
     ap.add_argument("--program", default=str(ROOT / "recordings/programs/peg_in_hole.program.json"))
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--baseline", action="store_true", help="include the open-loop replay in each trial")
+    ap.add_argument("--gc", choices=("default", "freeze"), default="default",
+                    help="freeze: gc.freeze() after the setup, as `dlovr run --trials` does")
     args = ap.parse_args()
 
     program = Program.load(args.program)
@@ -47,13 +53,16 @@ def main() -> None:
     setup = TrialSetup(program=program, scene=scene, pieces=pieces, track=track, variations=variations,
                        seed=args.seed, opts=ExecOptions(), baseline=args.baseline)
 
-    walls, sims = [], []
+    if args.gc == "freeze":
+        gc.freeze()
+    walls, cpus, sims = [], [], []
     for k in range(args.trials):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         res = run_trial(setup, k)
         walls.append(time.perf_counter() - t0)
+        cpus.append(time.thread_time() - c0)
         sims.append(res["program"]["sim_time"] + (res.get("openloop") or {}).get("sim_time", 0.0))
-        print(f"trial {k}: {walls[-1]:.2f} s wall, {sims[-1]:.2f} s simulated, "
+        print(f"trial {k}: {walls[-1]:.2f} s wall, {cpus[-1]:.2f} s thread CPU, {sims[-1]:.2f} s simulated, "
               f"goal {'reached' if res['program']['success'] else 'missed'}")
 
     # the executor's own cost per step: a run of the program with the simulator's step timed apart
@@ -79,6 +88,9 @@ def main() -> None:
     simulated = sum(sims) / len(sims)
     print(f"\n{program.name}: {args.trials} trials, {mean_wall:.2f} s wall per trial ({simulated:.2f} s "
           f"simulated), {60.0 / mean_wall:.1f} trials per minute per core")
+    med_cpu = statistics.median(cpus)
+    print(f"thread CPU per trial: median {med_cpu:.2f} s (trials {', '.join(f'{c:.2f}' for c in cpus)}): "
+          f"{60.0 / med_cpu:.1f} trials per minute per core of CPU time (gc: {args.gc})")
     print(f"per step of a program run: {step_us:.0f} us in Simulator(track=True).step, {own_us:.0f} us in "
           f"the executor (path, sensing chain, detectors): {own_us / step_us:.1%} on top")
 

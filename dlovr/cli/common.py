@@ -207,3 +207,19 @@ def warm_up() -> None:
     from dlovr.sim.warmup import warm_up as compile_kernels
 
     compile_kernels(lambda notice: click.echo(notice, err=True))
+
+
+def freeze_setup() -> None:
+    """Leave every object made so far out of the garbage collector's collections (``gc.freeze``):
+    the modules, numba's and MuJoCo's objects, the scene, some 170,000 in all.
+
+    A long simulation makes per-step objects (situations, contact states, records) that outlive the
+    young generations, and each full collection then walks every object of the process: about
+    190 ms each, some 50 µs a step over the drape case (docs/benchmarks.md); frozen, it walks only
+    what the run made. The commands that simulate (``demo``, ``record``, ``replay``, ``run``,
+    ``serve``) call it once their setup is done. Process-wide, so not in the library; what was
+    frozen and later becomes cyclic garbage is never collected (setup leaves little)."""
+    import gc
+
+    gc.freeze()
+

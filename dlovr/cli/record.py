@@ -15,6 +15,7 @@ from dlovr.cli.common import (
     UserError,
     builtin_script,
     finishes_on_sigterm,
+    freeze_setup,
     load_scene_arg,
     plural,
     progress_bar,
@@ -43,6 +44,7 @@ def demonstrate(
 
     scene, script = _scene_and_script(scene_ref, script_path)
     sim = _simulator(scene)
+    freeze_setup()
     nsteps = round(script.total_duration / sim.model.opt.timestep)
     existed = out is not None and os.path.lexists(out)
     if out is not None:
@@ -334,6 +336,7 @@ def replay_cmd(recording: str, verify: bool) -> None:
     """
     from dlovr.recording import replay
 
+    freeze_setup()
     with progress_bar(1, "replay") as bar:
         done = [0]
 

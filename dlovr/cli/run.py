@@ -12,7 +12,7 @@ from typing import Any
 import click
 
 from dlovr.batch import cluster_option
-from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, refuse_existing, shown_dir
+from dlovr.cli.common import EXIT_FAILED, EXIT_OK, UserError, freeze_setup, refuse_existing, shown_dir
 from dlovr.outputs import rounded
 
 
@@ -154,6 +154,7 @@ def run_cmd(**given: Any) -> None:
         if a.baseline or a.recording or a.path_mode == "demo":
             why = "a network program has no single demonstration to replay or follow"
             raise UserError(f"{a.program_path}: {why}")
+        freeze_setup()
         _network(runnable, a, n)
         return
     program = runnable
@@ -161,6 +162,9 @@ def run_cmd(**given: Any) -> None:
     opts = _exec_options(a, n)
     recovery = _recovery(program, a)
     use_track = a.path_mode != "program" and track is not None
+    import dlovr.execution.run  # noqa: F401  (the simulator and executor, before freeze_setup)
+
+    freeze_setup()
     if n.trials is not None:
         _trials(TrialsArgs(program, scene, track, use_track, opts, bool(a.baseline), recovery), a, n)
         return

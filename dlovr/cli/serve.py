@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import click
 
 from dlovr import signals
-from dlovr.cli.common import UserError
+from dlovr.cli.common import UserError, freeze_setup
 
 if TYPE_CHECKING:
     from dlovr.ui.starting import StartingServer
@@ -77,6 +77,7 @@ def _serve(early: StartingServer, scene_ref: str, host: str, recordings_dir: str
     signals.check()  # SIGINT/SIGTERM while the kernels compiled is only noted (dlovr.signals): end now
     from dlovr.ui import serve
 
+    freeze_setup()
     try:
         serve(scene, host=host, port=port, recordings_dir=recordings_dir, early=early)
     except ValueError as e:

@@ -382,10 +382,18 @@ def _point_or_line(
     and a few µs where numpy's calls on 3-vectors took some 30): a simulation makes it for every
     E contact on an edge whenever its situation is made again."""
     v = list(dlo_vector) if type(dlo_vector) is tuple else np.asarray(dlo_vector, dtype=float).tolist()
-    n = norm(v)
-    if n == 0.0:
-        raise ValueError("zero-length vector")
-    cos = abs(dot([x / n for x in v], crease))
+    if len(v) == 3 and len(crease) == 3:  # dot and norm written out, summed in the same order
+        x0, x1, x2 = v
+        n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        if n == 0.0:
+            raise ValueError("zero-length vector")
+        c0, c1, c2 = crease
+        cos = abs(x0 / n * c0 + x1 / n * c1 + x2 / n * c2)  # abs: a zero's sign does not matter
+    else:
+        n = norm(v)
+        if n == 0.0:
+            raise ValueError("zero-length vector")
+        cos = abs(dot([x / n for x in v], crease))
     angle = math.acos(min(1.0, cos)) * _DEG_PER_RAD
     if angle <= params.parallel_tol_deg + band_deg:
         return _LINE_STATES[stab]
@@ -570,7 +578,7 @@ class Discretizer:
     what a contact takes from the scene facts alone is kept by its topology (DLO kind, environment
     primitives and the gripper's z axis, an annotation of ``G`` that its contact vector takes), so a
     contact seen before costs only its span and, on an edge, the point or line decision from its DLO
-    vector; a contact that comes out as the last one of its topology did is that one again. At most
+    vector; a contact that comes out as the last one of its topology and span did is that one again. At most
     ``size`` topologies are kept (then forgotten all at once). Same results as :func:`discretize`
     when ``line_band_deg`` is 0.
 
@@ -588,14 +596,19 @@ class Discretizer:
         if not 0.0 <= line_band_deg < 90.0:
             raise ValueError(f"line_band_deg must be in [0, 90), got {line_band_deg}")
         self.book, self.params, self.size, self.line_band_deg = book, params, size, line_band_deg
-        self._memo: dict[tuple[Any, ...], list[Any]] = {}  # key -> [parts, last discrete contact]
+        # key -> [parts, the last discrete contact made of them by span, key]
+        self._memo: dict[tuple[Any, ...], list[Any]] = {}
+        # the memo's entries of an E and of a V contact by the identity of an environment without the
+        # gripper (the tuple itself kept beside them): a simulation's situations share these tuples
+        self._by_env: dict[int, list[Any]] = {}
         self._lines: frozenset[tuple[Any, ...]] = frozenset()  # edge contacts that were line contacts
         self._now: set[tuple[Any, ...]] | None = None  # those of the situation being made
 
     def __call__(self, situation: Situation) -> DiscreteSituation:
         self._now = set()
         try:
-            out = DiscreteSituation(tuple(self.contact(c) for c in situation.contacts))
+            contact = self.contact
+            out = DiscreteSituation(tuple([contact(c) for c in situation.contacts]))
             self._lines = frozenset(self._now)
         finally:
             self._now = None
@@ -608,27 +621,55 @@ class Discretizer:
     def contact(self, contact: Contact) -> DiscreteContact:
         """:func:`discretize_contact` of ``contact`` with this scene's facts and parameters (and, for an
         E contact on an edge within a call of the discretizer, the band of its point-or-line decision)."""
+        env, dlo = contact.env, contact.dlo
+        ent = self._by_env.get(id(env))
+        got = ent[1 if dlo.kind == "E" else 2] if ent is not None and ent[0] is env else None
+        if got is None:
+            got = self._entry(contact)
+        parts, span = got[0], dlo.span
+        last = got[1].get(span)
+        if parts[1] is None:  # the state comes from the facts alone
+            if last is not None:
+                return last
+            st = parts[0]
+        else:  # an E contact on an edge: point or line, from its DLO vector
+            key = got[2]
+            st = _state_of(parts, contact, self.params, self.line_band_deg if key in self._lines else 0.0)
+            if self._now is not None and st.env == "E^L":
+                self._now.add(key)
+            if last is not None and last.state == st:
+                return last  # what _from_parts would make, without making it
+        made = got[1]
+        if len(made) >= _SPANS_KEPT:
+            made.clear()
+        dc = made[span] = _discrete_contact(st, parts[2], parts[3], span, parts[4])
+        return dc
+
+    def _entry(self, contact: Contact) -> list[Any]:
+        """The memo's entry of ``contact``'s topology (DLO kind, environment, the gripper's z):
+        ``[parts, the last discrete contact made of it, key]``, made when new."""
         env = contact.env
         z = env[0].z if len(env) == 1 else tuple(e.z for e in env)
-        key = (contact.dlo.kind == "E", env, z)
+        e_kind = contact.dlo.kind == "E"
+        key = (e_kind, env, z)
         got = self._memo.get(key)
         if got is None:
             if len(self._memo) >= self.size:
                 self._memo.clear()
-            got = self._memo[key] = [_contact_parts(contact, self.book, self.params), None]
-        last = got[1]
-        if last is not None and last.span == contact.dlo.span and got[0][1] is None:
-            return last
-        band = self.line_band_deg if key in self._lines else 0.0
-        parts = got[0]
-        st = _state_of(parts, contact, self.params, band)
-        if self._now is not None and parts[1] is not None and st.env == "E^L":
-            self._now.add(key)
-        span = contact.dlo.span
-        if last is not None and last.span == span and last.state == st:
-            return last  # what _from_parts would make, without making it
-        dc = got[1] = _discrete_contact(st, parts[2], parts[3], span, parts[4])
-        return dc
+                self._by_env.clear()
+            got = self._memo[key] = [_contact_parts(contact, self.book, self.params), {}, key]
+        if not any(e.kind == "G" for e in env):  # its z takes part in the key
+            ent = self._by_env.get(id(env))
+            if ent is None or ent[0] is not env:
+                if len(self._by_env) >= self.size:
+                    self._by_env.clear()
+                ent = self._by_env[id(env)] = [env, None, None]
+            ent[1 if e_kind else 2] = got
+        return got
+
+
+_SPANS_KEPT = 256
+"""How many spans' discrete contacts :class:`Discretizer` keeps per topology (then none again)."""
 
 
 def _discrete_contact(

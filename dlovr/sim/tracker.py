@@ -42,7 +42,6 @@ from dlovr.model.transitions import (
 )
 from dlovr.sim import track_kernels as tk
 from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT, T_WIDTH
-from dlovr.transforms import dot
 
 
 @dataclass(frozen=True)
@@ -150,7 +149,11 @@ class ContactTracker:
         self._disc: Discretizer | None = None
         self._normals: dict[str, list[float]] = {}
         # a point's faces and primitives by its face rows
-        self._by_rows: dict[bytes, tuple[list[tuple[str, ...]], list[Any]]] = {}
+        self._by_rows: dict[bytes, tuple[list[tuple[str, ...]], list[Any], int]] = {}
+        # a number per distinct list of primitives (0: none), and the situations made from them
+        self._codes: dict[tuple[Any, ...], int] = {(): 0}
+        self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
+        self._plan: _Plan = ([], _edges_of([]))  # the situation's plan (_refreshed) and edge contacts
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -168,9 +171,10 @@ class ContactTracker:
         if self._disc is not None:
             self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
-        # (DLO index, vector) of the situation's E contacts on edges: their point-or-line decisions
-        # depend on these vectors, so the situation is made again once one turns (none: it never is)
-        self._edge_vectors: list[tuple[int, list[float]]] = []
+        # the points and vectors (with their squared length) of the situation's E contacts on edges:
+        # their point-or-line decisions depend on these vectors, so the situation is made again once
+        # one turns (none: it never is)
+        self._edge_vectors: _EdgeVectors = _NO_EDGES
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -197,7 +201,8 @@ class ContactTracker:
         contacts on an edge has turned by more than ``TURN_DEG`` (the point-or-line decision follows
         it). When no point's primitives
         changed, it is the last one with those annotations refreshed (:func:`_refreshed`): what
-        ``situation_from_points`` makes of the same primitives, without contracting them again."""
+        ``situation_from_points`` makes of the same primitives, without contracting them again; so is
+        one made from the same primitives and tip decision at an earlier step (:func:`_structure`)."""
         n = len(pts) - 1
         # the labels decide the situation, and the end-vertex rule when the tip has a contact:
         # cache the situation by both
@@ -223,22 +228,19 @@ class ContactTracker:
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            sit = _refreshed(self._situation, pts, z)
+            sit = _refreshed(self._situation, pts, z, self._plan[0])
             if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
-        else:
-            sit = situation_from_points(
-                self._env,
-                pts[1:] - pts[:-1],
-                self._normal,
-                tip_angle_deg=angle,
-                gripper_z=z,
-            )
+        else:  # made again, or made from the same primitives before (_structure)
+            key = (len(pts), tip, *self._env_codes)
+            sit, self._plan = _structure(self._structures, key, self._env, pts, self._normal, angle, z)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
-        self._edge_vectors = [
-            (cast(int, c.dlo.index), list(c.dlo.vector)) for c in sit.contacts
-            if _on_edge(c) and c.dlo.vector is not None
-        ]
+        ks, ia, ib = self._plan[1]
+        vectors = []
+        for k in ks:
+            v0, v1, v2 = cast(Vec3, sit.contacts[k].dlo.vector)
+            vectors.append((v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2))
+        self._edge_vectors = (ia, ib, vectors) if ks else _NO_EDGES
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -297,17 +299,21 @@ class ContactTracker:
                 self.partial_labellings += 1
         if changed:
             group, start, env, by_rows = self._views.group, self._views.start, self._env, self._by_rows
+            codes = self._env_codes
             for p in self._views.changed[: self._work_i[tk.W_CHANGED_N]].tolist():
                 rows = group[start[p] : start[p + 1]]
                 key = rows.tobytes()  # the point's face rows (their width is fixed)
                 got = by_rows.get(key)
                 if got is None:
                     faces = [self.geometry.face_tuple(row) for row in rows]
-                    got = by_rows[key] = (faces, point_primitives(faces, self._made))
+                    prims = point_primitives(faces, self._made)
+                    code = self._codes.setdefault(tuple(prims), len(self._codes))
+                    got = by_rows[key] = (faces, prims, code)
                 self._point_faces[p] = got[0]
                 if env[p] is not got[1] and env[p] != got[1]:
                     self._env_version += 1
                 env[p] = got[1]
+                codes[p] = got[2]
             self._version += 1
 
     def _grow(self) -> None:
@@ -334,6 +340,7 @@ class ContactTracker:
             self._lab_i, self._lab_f = tk.no_labels()
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
+            self._env_codes = [0] * n1  # the numbers (_codes) of the points' primitives
             self._version = 0
             self._env_version += 1
         self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
@@ -431,25 +438,79 @@ def _tuple(v: Any) -> Any:
     return tuple(float(x) for x in v)
 
 
-def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3) -> Situation:
+def _structure(
+    made: dict[tuple[Any, ...], tuple[Situation, _Plan]], key: tuple[Any, ...],
+    env: list[list[EnvPrimitive]], pts: np.ndarray, normal: Any, angle: float, z: Vec3,
+) -> tuple[Situation, _Plan]:
+    """``situation_from_points`` of the points' primitives ``env``, the tip at ``angle`` (degrees)
+    and the gripper's ``z``, and its :func:`_plan` with its :func:`_edges_of`. What it contracts
+    depends on the primitives and the tip's decision alone (``key``: the cable's points, the tip's
+    decision and a number per point's primitives), so a situation made (``made``) from the same ones
+    before is refreshed instead (:func:`_refreshed`: the same object ``situation_from_points``
+    makes, without contracting every point again): a cable crossing edges back and forth meets the
+    same few again and again."""
+    got = made.get(key)
+    if got is not None:
+        return _refreshed(got[0], pts, z, got[1][0]), got[1]
+    sit = situation_from_points(env, pts[1:] - pts[:-1], normal, tip_angle_deg=angle, gripper_z=z)
+    if len(made) >= _STRUCTURES_KEPT:
+        made.clear()
+    items = _plan(sit, len(pts) - 1)
+    plan = (items, _edges_of(items))
+    made[key] = (sit, plan)
+    return sit, plan
+
+
+def _refreshed(
+    sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem] | None = None
+) -> Situation:
     """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
     from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
     its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
-    cost (no contraction of every point's primitives)."""
-    n = len(pts) - 1
+    cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (made here
+    when not given; the tracker keeps it with the situation)."""
+    if plan is None:
+        plan = _plan(sit, len(pts) - 1)
     xyz = pts.tolist()  # once: a contact's two points as Python floats
+    new = object.__new__
     contacts = []
-    for c in sit.contacts:
-        d, env = c.dlo, c.env
-        i = cast(int, d.index)
-        a, b = (xyz[i - 1], xyz[i]) if i == n else (xyz[i], xyz[i + 1])
-        vector = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-        if any(e.kind == "G" for e in env):  # G's z is not compared: the canonical order stays
+    for kind, i, span, env, ia, ib, g in plan:
+        a, b = xyz[ia], xyz[ib]
+        dlo = new(DloPrimitive)  # the fields of a checked one: no __init__ (see _made)
+        dlo.__dict__.update(kind=kind, index=i, span=span, vector=(b[0] - a[0], b[1] - a[1], b[2] - a[2]))
+        if g:  # G's z is not compared: the canonical order stays
             env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
-        dlo = _made(DloPrimitive, kind=d.kind, index=i, span=d.span, vector=vector)
-        contacts.append(_made(Contact, dlo=dlo, env=env))
+        c = new(Contact)
+        c.__dict__.update(dlo=dlo, env=env)
+        contacts.append(c)
     return _made(Situation, contacts=tuple(contacts))
+
+
+#: The points (first and second rows) and vectors ``(x, y, z, x² + y² + z²)`` of a situation's E contacts
+#: on edges, as :func:`_turned` reads them.
+_EdgeVectors = tuple[np.ndarray, np.ndarray, list[tuple[float, float, float, float]]]
+_NO_EDGES: _EdgeVectors = (np.zeros(0, np.int64), np.zeros(0, np.int64), [])
+
+#: Per contact of a situation, what :func:`_refreshed` keeps of it: the DLO primitive's kind, index and
+#: span, the environment primitives, the two points whose difference is its vector, and whether the
+#: environment holds the gripper (whose ``z`` is refreshed).
+_PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], int, int, bool]
+
+
+#: A situation's :func:`_plan` and its :func:`_edges_of`.
+_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray, np.ndarray]]
+
+
+def _plan(sit: Situation, n: int) -> list[_PlanItem]:
+    """:func:`_refreshed`'s plan of ``sit``, a situation of a cable of ``n`` segments."""
+    out: list[_PlanItem] = []
+    for c in sit.contacts:
+        d = c.dlo
+        i = cast(int, d.index)
+        ia, ib = (i - 1, i) if i == n else (i, i + 1)
+        out.append((d.kind, i, d.span, c.env, ia, ib, any(e.kind == "G" for e in c.env)))
+    return out
 
 
 def _made(cls: type[_T], **fields: Any) -> _T:
@@ -460,15 +521,24 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     return obj
 
 
-def _turned(edge_vectors: list[tuple[int, list[float]]], pts: np.ndarray) -> bool:
-    """Has the DLO vector of an edge contact (DLO index, vector when the situation was made) turned
-    by more than ``TURN_DEG`` since (its point-or-line decision may then change)?"""
-    n = len(pts) - 1
-    for i, v in edge_vectors:
-        a, b = pts[i - 1 : i + 1].tolist() if i == n else pts[i : i + 2].tolist()
-        d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]]
-        dv, nn = dot(d, v), dot(d, d) * dot(v, v)
-        if nn <= 0.0 or dv < 0.0 or dv * dv < _COS2_TURN * nn:
+def _edges_of(plan: list[_PlanItem]) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The E contacts on edges (:func:`_on_edge`) of a :func:`_plan`: their places in the situation
+    and the two points whose difference is each one's DLO vector."""
+    ks = [k for k, (kind, _, _, env, _, _, _) in enumerate(plan)
+          if kind == "E" and any(e.kind == "faces" and len(e.faces) == 2 for e in env)]
+    return ks, np.array([plan[k][4] for k in ks], np.int64), np.array([plan[k][5] for k in ks], np.int64)
+
+
+def _turned(edge_vectors: _EdgeVectors, pts: np.ndarray) -> bool:
+    """Has the DLO vector of an edge contact (its two points, its vector ``v`` when the situation was
+    made and ``v . v``) turned by more than ``TURN_DEG`` since (its point-or-line decision may then
+    change)? The dot products are :func:`dlovr.transforms.dot`'s sums written out."""
+    ia, ib, vectors = edge_vectors
+    if not vectors:
+        return False
+    for (d0, d1, d2), (v0, v1, v2, vv) in zip((pts[ib] - pts[ia]).tolist(), vectors, strict=True):
+        dv, nn = d0 * v0 + d1 * v1 + d2 * v2, (d0 * d0 + d1 * d1 + d2 * d2) * vv
+        if nn <= 0.0 or dv < 0.0 or dv * dv < _COS2_TURN * nn:  # a zero's sign changes none of these
             return True
     return False
 
@@ -520,6 +590,8 @@ def _table_of(arrays: Any) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+_STRUCTURES_KEPT = 4096
+"""How many situations :func:`_structure` keeps by their primitives (then none again)."""
 #: An edge contact's DLO vector is looked at again (its point-or-line decision made again) once it has
 #: turned by more than this since the last time (degrees): well inside the decision's 3° band.
 TURN_DEG = 0.25
