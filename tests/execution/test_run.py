@@ -240,3 +240,34 @@ def test_pinned_trial_draws_stay_the_same():
     """The trial the comparison test relies on: seed 1, trial 2 lowers the table by 7.5 mm."""
     d = parse_vary("objects.pos=0.02").draw(1, 2)
     np.testing.assert_allclose(d, [0.017652, -0.004054, -0.007525], atol=1e-6)
+
+
+def test_the_first_touch_takes_back_the_detectors_own_latency(peg):
+    """The demonstration's own scene: the tip touches the block where it was demonstrated, and the
+    detector fires some 40 ms later (the step's rise to its threshold), 1.2 mm further down. That delay
+    is how late the same detector fires on the demonstration's wrench, not a longer cable: the
+    executor takes it back, so the tip offset it learns is nil and the gripper goes back to the
+    demonstrated contact (it was left 1.2 mm low for the whole run, which turned objects' groove then
+    held the tip in: 4 of 50 trials of ``objects.yaw=10`` missed the goal that the replay reached)."""
+    from dlovr.execution.engine import Engine
+    from dlovr.execution.executor import _period, demo_detection_lag
+    from dlovr.execution.run import fresh_simulator
+
+    program, scene, track = peg
+    first = program.classed[0]
+    opts = ExecOptions()
+    period = _period(first, opts, track)
+    lag = demo_detection_lag(first, opts, track, period, 500.0, first.t - period)
+    assert lag is not None and 0.02 < lag < 0.06
+    sim, why = fresh_simulator(scene)
+    assert sim is not None, why
+    eng = Engine(program, sim, opts, track=track, scene=scene)
+    while eng.macro < 2 and eng.step():
+        pass
+    ses = eng.session
+    assert ses is not None and ses.tool_known
+    detected = next(e.t for e in ses.events if e.kind == "detected")
+    assert abs(detected - first.t - lag) < 0.006  # the run's own delay, as measured on the demonstration
+    assert abs(ses.tool[2]) < 2e-4, ses.tool  # no tip offset (before: +1.2 mm)
+    k = int(np.searchsorted(track.t, first.t))
+    assert abs(float(sim.target_pos[2]) - float(track.pos[k, 2])) < 2e-4  # back at the demonstrated touch
