@@ -153,12 +153,14 @@ def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
 
 
 @pytest.mark.slow
-def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose(peg):
-    """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more friction.
-    Its tip lands in the hole 2 cm short of the corner, and when the last slide stops it is still
-    creeping toward it at a few mm/s. It arrives more than 0.3 s into the final hold (the hold was
-    0.3 s, and this trial failed): the program holds its last pose FINAL_SETTLE_S before it is judged,
-    as the open-loop replay does."""
+def test_a_long_soft_cable_rests_in_the_corner_through_the_final_hold(peg):
+    """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more
+    friction. Until detections were taken back by their demonstrated latency (2026-11-27) its tip
+    landed in the hole 2 cm short of the corner and crept into it more than 0.3 s into the final hold
+    (a 0.3 s hold failed it); now, with the gripper no longer left 1.2 mm low, it lands in the corner
+    before the hold (as trials 22, 30, 37, 41 and 48, the other long, soft, high-friction draws, do).
+    The program still holds its last pose FINAL_SETTLE_S before it is judged, as the open-loop replay
+    does, and the tip rests in the goal through that hold."""
     from dlovr.execution.executor import FINAL_SETTLE_S, principal_states
     from dlovr.execution.variation import parse_varies, perturb
 
@@ -175,8 +177,7 @@ def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose
     res = run_program(program, scene, ExecOptions(detect="force"), track=track, on_step=on_step)
     assert res.success, format_result(res)
     hold_from = res.sim_time - FINAL_SETTLE_S
-    last_off = max(t for t, ok in at_goal if not ok)
-    assert last_off > hold_from + 0.3, (last_off, hold_from)
+    assert all(ok for t, ok in at_goal if t >= hold_from)
     assert run_openloop.__kwdefaults__["settle"] == FINAL_SETTLE_S
 
 
