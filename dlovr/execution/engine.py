@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from dlovr.execution.executor import DemoTrack, Event, ExecOptions, Execution, Session, Steps, program_steps
@@ -199,4 +200,4 @@ def smoothed(program: Runnable, track: DemoTrack | None) -> DemoTrack | None:
     from dlovr.model.smoothing import smooth_poses
 
     pos, quat = smooth_poses(track.t, track.pos, track.quat, window)
-    return DemoTrack(track.t, pos, quat)
+    return replace(track, pos=pos, quat=quat)  # its sensed wrench and forces are the demonstration's

@@ -374,6 +374,10 @@ class DemoTrack:
     #: the force (N, world) the demonstration sensed while its cable hung free at its start (mean over
     #: :data:`FREE_WINDOW_S`): the demonstrated cable's weight, as its sensor read it
     free_force: tuple[float, float, float] | None = None
+    #: the wrench the demonstration sensed (a :class:`dlovr.model.derivation.WrenchSeries`: times s,
+    #: force N, torque N m, world), where its recording has one: how late the program's own detectors
+    #: fire on the demonstration (:func:`demo_detection_lag`)
+    wrench: Any = None
 
 
 #: The time (s) over which the sensed force at the end of a run (and of the demonstration) is
@@ -864,9 +868,11 @@ def _detected(
     """The macro's transition was seen at ``s`` of its ``path`` (record ``r``): stop there (screw
     paths), learn the tip's offset at its first touch, report; where on the demonstration's clock
     (s) the next macro's motion resumes (None: at its own stretch)."""
-    # a noisy sensor's detectors smooth the force, which delays them: the transition came ``lag``
-    # earlier, and the gripper goes back to where it was then (the next macro resumes from there)
-    lag = ses.guard.lag() if ses.guard is not None else 0.0
+    # a detector fires some time after the transition (the step's rise to its threshold, the filters;
+    # a noisy sensor's smoothing): the transition came ``lag`` earlier, and the gripper goes back to
+    # where it was then (the next macro resumes from there). The lag is how late the same detectors
+    # fire on the demonstration's own wrench; without one, the detectors' smoothing alone
+    lag = detection_lag(m, ses, track, period, at_demo - s * period)
     s_at = max(s - lag / period, 0.0) if lag > 0.0 else s
     if lag > 0.0:
         ses.sim.set_target(*path.at(s_at))
@@ -879,6 +885,61 @@ def _detected(
         ses.tool, ses.tool_known, at = tip_offset(path, s_at), True, None
     ses.emit("detected", m.index, f"macro {m.index} {m.label}: transition detected")
     return at
+
+
+#: The longest detection lag (s) measured on the demonstration that is taken back
+#: (:func:`detection_lag`): the detectors compare the force over windows of about 0.15 s
+#: (``ref_lag_s``), and a detector that fires later than that on the demonstration does not time its
+#: transition.
+MAX_DEMO_LAG_S = 0.15
+
+
+def detection_lag(m: Macro, ses: Session, track: DemoTrack | None, period: float, t0: float) -> float:
+    """How long (s) after the transition the macro's force detectors fired, as the executor takes it
+    back (:func:`_detected`): as late as they fire on the demonstration's own wrench
+    (:func:`demo_detection_lag`, at most :data:`MAX_DEMO_LAG_S`), else their own smoothing
+    (:meth:`_Guard.lag`); 0 for the oracle. ``period`` (s): the macro's stretch, from ``t0``
+    (demonstration time, s)."""
+    guard = ses.guard
+    if guard is None or guard.oracle:
+        return 0.0
+    demo = demo_detection_lag(m, ses.opts, track, period, 1.0 / ses.dt, t0)
+    return demo if demo is not None and demo <= MAX_DEMO_LAG_S else guard.lag()
+
+
+def demo_detection_lag(
+    m: Macro, opts: ExecOptions, track: DemoTrack | None, period: float, rate_hz: float, t0: float
+) -> float | None:
+    """How long (s) after its transition (``m.t``) the macro's own force detectors fire on the
+    wrench the demonstration sensed, run as :func:`run_macro` runs them: the recorded force resampled
+    at the run's rate (``rate_hz``, linear between samples) and low-passed as the run's sensor chain
+    does (``opts.filter_tau``, no noise), the detectors started ``blank`` s into the stretch that
+    begins at ``t0`` (demonstration time, s) and lasts ``period`` s, armed from :func:`_arm_at` on.
+    None without a recorded wrench or where they do not fire within ``period`` after ``m.t``.
+
+    A detection comes this late in a run that repeats the demonstration exactly: the step's rise to
+    the threshold and the filters' delay, not motion beyond the demonstrated transition."""
+    w = None if track is None else track.wrench
+    if w is None or len(w.t) < 2 or period <= 0.0 or rate_hz <= 0.0:
+        return None
+    guard = _Guard(m, opts, rate_hz)
+    if not guard.detectors:
+        return None
+    dt, arm = 1.0 / rate_hz, _arm_at(m, opts, track, period)
+    start = max(t0 - HISTORY_S, float(w.t[0]))
+    ts = np.arange(start, min(m.t + period, float(w.t[-1])) + 0.5 * dt, dt)
+    fs = np.stack([np.interp(ts, w.t, w.force[:, i]) for i in range(3)], axis=1)
+    cond = WrenchConditioner(NoiseModel(0.0), opts.filter_tau)
+    zero, history, started = np.zeros(3), deque(maxlen=max(1, round(HISTORY_S / dt))), False
+    for t, raw in zip(ts.tolist(), fs, strict=True):
+        f = cond(raw, zero, dt)[0]
+        if not started and t >= t0 + opts.blank - 1e-9:
+            guard.start(t, f, zero, list(history))
+            started = True
+        elif started and guard.update(t, f, zero, None, armed=(t - t0) / period >= arm):
+            return max(t - m.t, 0.0)
+        history.append((t, f))
+    return None
 
 
 def run_final(m: Macro, ses: Session, track: DemoTrack | None) -> Steps[None]:

@@ -128,7 +128,7 @@ def load_track(path: str | Path) -> DemoTrack:
         t1 = float(wrench.t[-1])
         end_force = _mean3(wrench.window(t1 - GOAL_SENSE_S, t1))
         free_force = _mean3(wrench.window(*FREE_WINDOW_S))
-    return DemoTrack(steps * rec.dt, pos, quat, end_force, free_force)
+    return DemoTrack(steps * rec.dt, pos, quat, end_force, free_force, wrench)
 
 
 def _mean3(rows: np.ndarray) -> tuple[float, float, float] | None:

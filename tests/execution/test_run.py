@@ -153,12 +153,14 @@ def test_a_longer_cable_is_turned_about_its_tip_where_it_was_felt(peg):
 
 
 @pytest.mark.slow
-def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose(peg):
-    """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more friction.
-    Its tip lands in the hole 2 cm short of the corner, and when the last slide stops it is still
-    creeping toward it at a few mm/s. It arrives more than 0.3 s into the final hold (the hold was
-    0.3 s, and this trial failed): the program holds its last pose FINAL_SETTLE_S before it is judged,
-    as the open-loop replay does."""
+def test_a_long_soft_cable_rests_in_the_corner_through_the_final_hold(peg):
+    """Trial 12 of seed 0 (docs/programs.md): a 5.5 % longer cable, 0.67x as stiff, with 23 % more
+    friction. Until detections were taken back by their demonstrated latency (2026-11-27) its tip
+    landed in the hole 2 cm short of the corner and crept into it more than 0.3 s into the final hold
+    (a 0.3 s hold failed it); now, with the gripper no longer left 1.2 mm low, it lands in the corner
+    before the hold (as trials 22, 30, 37, 41 and 48, the other long, soft, high-friction draws, do).
+    The program still holds its last pose FINAL_SETTLE_S before it is judged, as the open-loop replay
+    does, and the tip rests in the goal through that hold."""
     from dlovr.execution.executor import FINAL_SETTLE_S, principal_states
     from dlovr.execution.variation import parse_varies, perturb
 
@@ -175,8 +177,7 @@ def test_a_creeping_tip_reaches_the_corner_while_the_gripper_holds_its_last_pose
     res = run_program(program, scene, ExecOptions(detect="force"), track=track, on_step=on_step)
     assert res.success, format_result(res)
     hold_from = res.sim_time - FINAL_SETTLE_S
-    last_off = max(t for t, ok in at_goal if not ok)
-    assert last_off > hold_from + 0.3, (last_off, hold_from)
+    assert all(ok for t, ok in at_goal if t >= hold_from)
     assert run_openloop.__kwdefaults__["settle"] == FINAL_SETTLE_S
 
 
@@ -240,3 +241,34 @@ def test_pinned_trial_draws_stay_the_same():
     """The trial the comparison test relies on: seed 1, trial 2 lowers the table by 7.5 mm."""
     d = parse_vary("objects.pos=0.02").draw(1, 2)
     np.testing.assert_allclose(d, [0.017652, -0.004054, -0.007525], atol=1e-6)
+
+
+def test_the_first_touch_takes_back_the_detectors_own_latency(peg):
+    """The demonstration's own scene: the tip touches the block where it was demonstrated, and the
+    detector fires some 40 ms later (the step's rise to its threshold), 1.2 mm further down. That delay
+    is how late the same detector fires on the demonstration's wrench, not a longer cable: the
+    executor takes it back, so the tip offset it learns is nil and the gripper goes back to the
+    demonstrated contact (it was left 1.2 mm low for the whole run, which turned objects' groove then
+    held the tip in: 4 of 50 trials of ``objects.yaw=10`` missed the goal that the replay reached)."""
+    from dlovr.execution.engine import Engine
+    from dlovr.execution.executor import _period, demo_detection_lag
+    from dlovr.execution.run import fresh_simulator
+
+    program, scene, track = peg
+    first = program.classed[0]
+    opts = ExecOptions()
+    period = _period(first, opts, track)
+    lag = demo_detection_lag(first, opts, track, period, 500.0, first.t - period)
+    assert lag is not None and 0.02 < lag < 0.06
+    sim, why = fresh_simulator(scene)
+    assert sim is not None, why
+    eng = Engine(program, sim, opts, track=track, scene=scene)
+    while eng.macro < 2 and eng.step():
+        pass
+    ses = eng.session
+    assert ses is not None and ses.tool_known
+    detected = next(e.t for e in ses.events if e.kind == "detected")
+    assert abs(detected - first.t - lag) < 0.006  # the run's own delay, as measured on the demonstration
+    assert abs(ses.tool[2]) < 2e-4, ses.tool  # no tip offset (before: +1.2 mm)
+    k = int(np.searchsorted(track.t, first.t))
+    assert abs(float(sim.target_pos[2]) - float(track.pos[k, 2])) < 2e-4  # back at the demonstrated touch
