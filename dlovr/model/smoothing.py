@@ -72,14 +72,21 @@ def tremor_of(t: np.ndarray, pos: np.ndarray) -> float:
     """The median acceleration (m/s^2) of the positions ``pos`` (k, 3) sampled at times ``t`` (s,
     evenly spaced): tenths of m/s^2 and more for a trembling hand, 0 for straight legs at constant
     speed (their corners are single samples)."""
+    a = _accelerations(t, pos)
+    return 0.0 if a is None else float(np.median(np.sqrt((a * a).sum(axis=1))))
+
+
+def _accelerations(t: np.ndarray, pos: np.ndarray) -> np.ndarray | None:
+    """The second differences of the positions ``pos`` (k, 3) m at the evenly spaced times ``t`` (s)
+    over the step squared: the acceleration (k - 2, 3) m/s^2 at each inner sample. None for fewer
+    than 3 samples or times that do not increase."""
     p = np.asarray(pos, dtype=float)
     if len(p) < 3:
-        return 0.0
+        return None
     dt = float(np.median(np.diff(np.asarray(t, dtype=float))))
     if dt <= 0:
-        return 0.0
-    a = (p[2:] - 2.0 * p[1:-1] + p[:-2]) / (dt * dt)
-    return float(np.median(np.sqrt((a * a).sum(axis=1))))
+        return None
+    return (p[2:] - 2.0 * p[1:-1] + p[:-2]) / (dt * dt)
 
 
 #: A commanded track whose position accelerates at more than this fraction of its samples was made
@@ -99,14 +106,8 @@ def made_by_hand(t: np.ndarray, pos: np.ndarray) -> bool:
     key-jogging one at every step. True when more than :data:`HAND_FRACTION` of the samples
     accelerate by more than :data:`HAND_ACCEL`. (Positions only: a script's turn at constant rate
     moves its quaternion's components along sinusoids.)"""
-    p = np.asarray(pos, dtype=float)
-    if len(p) < 3:
-        return False
-    dt = float(np.median(np.diff(np.asarray(t, dtype=float))))
-    if dt <= 0:
-        return False
-    a = np.abs(p[2:] - 2.0 * p[1:-1] + p[:-2]).max(axis=1) / (dt * dt)
-    return float(np.mean(a > HAND_ACCEL)) > HAND_FRACTION
+    a = _accelerations(t, pos)
+    return a is not None and float(np.mean(np.abs(a).max(axis=1) > HAND_ACCEL)) > HAND_FRACTION
 
 
 def _phasor(t: np.ndarray, hz: float) -> np.ndarray | None:
