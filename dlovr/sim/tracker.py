@@ -153,7 +153,8 @@ class ContactTracker:
         # a number per distinct list of primitives (0: none), and the situations made from them
         self._codes: dict[tuple[Any, ...], int] = {(): 0}
         self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
-        self._plan: _Plan = ([], _edges_of([]))  # the situation's plan (_refreshed) and edge contacts
+        # the situation's plan (_refreshed) and its edge contacts (_edges_of)
+        self._plan: _Plan = ([], ([], _NO_EDGES[0], _NO_EDGES[1]))
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -456,22 +457,18 @@ def _structure(
     if len(made) >= _STRUCTURES_KEPT:
         made.clear()
     items = _plan(sit, len(pts) - 1)
-    plan = (items, _edges_of(items))
+    plan = (items, _edges_of(sit, items))
     made[key] = (sit, plan)
     return sit, plan
 
 
-def _refreshed(
-    sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem] | None = None
-) -> Situation:
+def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem]) -> Situation:
     """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
     from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
     its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
-    cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (made here
-    when not given; the tracker keeps it with the situation)."""
-    if plan is None:
-        plan = _plan(sit, len(pts) - 1)
+    cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (the
+    tracker keeps it with the situation)."""
     xyz = pts.tolist()  # once: a contact's two points as Python floats
     new = object.__new__
     contacts = []
@@ -521,11 +518,10 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     return obj
 
 
-def _edges_of(plan: list[_PlanItem]) -> tuple[list[int], np.ndarray, np.ndarray]:
-    """The E contacts on edges (:func:`_on_edge`) of a :func:`_plan`: their places in the situation
-    and the two points whose difference is each one's DLO vector."""
-    ks = [k for k, (kind, _, _, env, _, _, _) in enumerate(plan)
-          if kind == "E" and any(e.kind == "faces" and len(e.faces) == 2 for e in env)]
+def _edges_of(sit: Situation, plan: list[_PlanItem]) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The E contacts on edges (:func:`_on_edge`) of ``sit``: their places in it and, from its
+    :func:`_plan`, the two points whose difference is each one's DLO vector."""
+    ks = [k for k, c in enumerate(sit.contacts) if _on_edge(c)]
     return ks, np.array([plan[k][4] for k in ks], np.int64), np.array([plan[k][5] for k in ks], np.int64)
 
 

@@ -367,7 +367,7 @@ def test_a_refreshed_situation_is_the_one_made_from_the_points_again():
     situation's DLO vectors and gripper z instead of contracting every point again: the very objects
     ``situation_from_points`` makes, annotations included (vectors, spans, indices, G's z)."""
     from dlovr.model.topology import EnvPrimitive, situation_from_points
-    from dlovr.sim.tracker import _refreshed
+    from dlovr.sim.tracker import _plan, _refreshed
 
     floor, wall = EnvPrimitive("faces", ("table.F1",)), EnvPrimitive("faces", ("wall.F2",))
     edge = EnvPrimitive("faces", ("wall.F1", "wall.F2"))
@@ -386,7 +386,7 @@ def test_a_refreshed_situation_is_the_one_made_from_the_points_again():
         zx, zy, zz = (float(x) for x in rng.normal(0.0, 1.0, 3))
         z = (zx, zy, zz)
         want = situation_from_points(env, moved[1:] - moved[:-1], normals.__getitem__, gripper_z=z)
-        got = _refreshed(first, moved, z)
+        got = _refreshed(first, moved, z, _plan(first, len(moved) - 1))
         assert got == want and ann(got) == ann(want)
         assert got.format() == want.format()
 
