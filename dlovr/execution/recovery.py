@@ -55,7 +55,7 @@ from dlovr.execution.network_run import (
     rounded_vector,
     sensed_contact_vector,
 )
-from dlovr.model.planning import NetworkProgram, Successor, expected_vector, identify
+from dlovr.model.planning import NetworkProgram, Successor, departure_distance, expected_vector, identify
 from dlovr.model.program import Program, ProgramError
 
 #: How many times by default a run plans again through the network after its goal check failed.
@@ -112,17 +112,15 @@ def sensed_node(
 def near_nodes(nprog: NetworkProgram, nodes: list[Any], position: Any) -> list[Any]:
     """Those of ``nodes`` the demonstrations entered near ``position`` (m, world), by the rule the
     planner picks departures by (:meth:`dlovr.model.planning.NetworkProgram.applicable`): a node's
-    distance is the least ``max(0, |x - s(e)| - 2 spread(e))`` over its out-edges ``e`` (``s(e)`` the
-    mean gripper position where the demonstrations entered it); kept are those within the planner's
-    ``reach`` of the nearest. Many situations push the gripper alike (a tip resting on any top face
-    senses ``-z``); where the gripper is tells them apart. All of them where ``position`` is None."""
+    distance is the least :func:`dlovr.model.planning.departure_distance` over its out-edges; kept
+    are those within the planner's ``reach`` of the nearest. Many situations push the gripper alike
+    (a tip resting on any top face senses ``-z``); where the gripper is tells them apart. All of them
+    where ``position`` is None."""
     if position is None or not nodes:
         return nodes
 
     def dist(n: Any) -> float:
-        out = nprog.network.out_edges(n.id)
-        return min((max(0.0, math.dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread)
-                    for e in out), default=math.inf)
+        return min((departure_distance(e, position) for e in nprog.network.out_edges(n.id)), default=math.inf)
 
     d = {n.id: dist(n) for n in nodes}
     limit = min(d.values()) + nprog.reach

@@ -133,6 +133,14 @@ def _dist(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> f
     return math.sqrt(sum((float(x) - float(y)) ** 2 for x, y in zip(a, b, strict=True)))
 
 
+def departure_distance(e: Edge, position: Sequence[float] | np.ndarray) -> float:
+    """How far (m) the gripper at ``position`` (world) is from where the demonstrations set off along
+    ``e``: ``max(0, |x - s(e)| - 2 spread(e))``, ``s(e)`` the mean gripper position where they
+    entered its source (:meth:`NetworkProgram.applicable` keeps the departures within ``reach`` of
+    the nearest)."""
+    return max(0.0, _dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread)
+
+
 def _counts(e: Edge) -> tuple[int, int]:
     return int(e.risk == "risky"), int(e.risk == "caution")
 
@@ -215,7 +223,7 @@ class NetworkProgram:
             return found
         es = self._out[node]
         if position is not None and es:
-            d = [max(0.0, _dist(position, e.motion.start_mean) - 2.0 * e.motion.start_spread) for e in es]
+            d = [departure_distance(e, position) for e in es]
             limit = min(d) + self.reach
             es = tuple(e for e, di in zip(es, d, strict=True) if di <= limit)
         self._applicable[key] = es
