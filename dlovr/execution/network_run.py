@@ -59,7 +59,7 @@ from dlovr.execution.executor import (
     run_final,
     run_macro,
 )
-from dlovr.model.derivation import THRESHOLD_PARAM
+from dlovr.model.detection import THRESHOLD_PARAM
 from dlovr.model.planning import Choice, MacroPlan, NetworkProgram, Successor, identify
 from dlovr.model.program import ContactSpec, Detection, Macro, Motion, PoseTrack, ProgramError, risk
 from dlovr.model.tracks import join

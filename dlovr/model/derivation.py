@@ -33,20 +33,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dlovr.model.detection import DEFAULTS, THRESHOLD_PARAM
 from dlovr.transforms import angle_deg, dot, norm, unit
 
 #: The classes' default parameters (forces N, angles degrees, times s, rates Hz): used where the
 #: demonstration gives no signal (the same values as :data:`dlovr.model.detection.DEFAULTS`).
+#: The parameters a derivation starts from: the detectors' defaults, less the ``S`` window, which a
+#: derived program leaves to the detector (so that program files say only what was derived).
 DEFAULT_PARAMS: dict[str, dict[str, float]] = {
-    "E": {"force_threshold_n": 0.5, "max_angle_deg": 30.0},
-    "C": {"min_turn_fraction": 0.5, "max_angle_deg": 20.0},
-    "T": {"rise_n": 0.5, "max_angle_deg": 20.0},
-    "I": {"max_angle_deg": 15.0, "min_force_n": 0.05},
-    "S": {"jump_n": 0.5, "min_rate_hz": 500.0},
+    cls: {k: v for k, v in params.items() if k != "window_s"} for cls, params in DEFAULTS.items()
 }
-#: The threshold parameter of each class (what :func:`derive` derives from the step).
-THRESHOLD_PARAM = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
-                   "I": "min_force_n", "S": "jump_n"}
 #: Classes whose cone (``max_angle_deg``) is widened to the demonstrated step's direction.
 CONE_CLASSES = ("E", "C", "I")
 #: A contact vector, axis or turn (unit vectors, or differences of them) shorter than this has no

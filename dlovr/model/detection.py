@@ -437,8 +437,16 @@ class SDetector(Detector):
 # --------------------------------------------------------------------------------------------------
 # Detection parameters for a noisy sensor
 
-#: The thresholds parameter of each class (as :data:`dlovr.model.derivation.THRESHOLD_PARAM`).
-_THRESHOLD = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n", "I": "min_force_n"}
+#: The threshold parameter of each class (the one a derivation derives from the demonstrated step).
+THRESHOLD_PARAM = {"E": "force_threshold_n", "C": "force_threshold_n", "T": "rise_n",
+                   "I": "min_force_n", "S": "jump_n"}
+
+
+def _sensor_threshold(cls: str) -> str | None:
+    """The threshold a noisy sensor raises: none for ``S`` (a jump within milliseconds, which no
+    smoothing may blur) or an unknown class."""
+    return None if cls == "S" else THRESHOLD_PARAM.get(cls)
+
 #: A threshold is at least this many standard deviations of the change a detector measures.
 SENSOR_K = 4.0
 #: The longest smoothing (s): longer would blur a step within the detectors' 0.15 s reference.
@@ -474,7 +482,7 @@ def for_sensor(
     are returned unchanged.
     """
     p = {k: float(v) for k, v in params.items()}
-    key = _THRESHOLD.get(cls)
+    key = _sensor_threshold(cls)
     if sigma <= 0.0 or key is None:
         return p, {}
     thr = p.get(key, DEFAULTS[cls].get(key, 0.0))
@@ -506,7 +514,7 @@ def for_sensor(
 def sensor_weak(cls: str, params: Mapping[str, float]) -> bool:
     """Whether parameters adapted by :func:`for_sensor` leave no force signal to trust: the threshold
     is above :data:`SENSOR_WEAK_FRACTION` of the demonstrated step."""
-    key = _THRESHOLD.get(cls)
+    key = _sensor_threshold(cls)
     if key is None or "sensor_noise_n" not in params or "step_n" not in params or key not in params:
         return False
     return float(params[key]) > SENSOR_WEAK_FRACTION * float(params["step_n"])
@@ -522,7 +530,7 @@ def no_force_signal(cls: str, params: Mapping[str, float], min_snr: float = 0.0)
     threshold is not below the step its demonstration showed (``step_n``, N), or that step is less
     than ``min_snr`` times the noise seen before it (``noise_n``), or the sensor's noise leaves it
     none (:func:`sensor_weak`). False without a demonstrated step (the class's defaults)."""
-    step, key = params.get("step_n"), _THRESHOLD.get(cls, "jump_n" if cls == "S" else "")
+    step, key = params.get("step_n"), THRESHOLD_PARAM.get(cls, "")
     if step is None:
         return False
     step = float(step)

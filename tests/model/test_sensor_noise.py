@@ -44,6 +44,7 @@ def test_a_step_too_small_for_the_noise_ends_its_macro_by_motion():
     assert not sensor_weak("E", for_sensor("E", TOUCH, 0.02)[0])
     assert sensor_weak("E", for_sensor("E", small, 0.05)[0])
     assert for_sensor("S", {"jump_n": 0.5}, 0.05)[0] == {"jump_n": 0.5}  # a jump: left as it is
+    assert not sensor_weak("S", {"jump_n": 0.6, "step_n": 0.5, "sensor_noise_n": 0.05})
 
 
 def _stream(step: float, seed: int, n: int = 1500, at: int = 1000) -> tuple[np.ndarray, np.ndarray]:
