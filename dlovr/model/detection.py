@@ -96,10 +96,14 @@ class LowPass:
 
     def __call__(self, x: np.ndarray, dt: float) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        if self._y is None or self.tau == 0.0:
+        y = self._y
+        if y is None or self.tau == 0.0:
             self._y = x.copy()
+        elif x.ndim == 1 and y.shape == x.shape:  # every step: in Python floats, numpy's roundings
+            k = dt / (self.tau + dt)
+            self._y = np.array([a + (b - a) * k for a, b in zip(y.tolist(), x.tolist(), strict=True)])
         else:
-            self._y = self._y + (x - self._y) * (dt / (self.tau + dt))
+            self._y = y + (x - y) * (dt / (self.tau + dt))
         return self._y.copy()
 
 
