@@ -218,8 +218,8 @@ class TrackPath:
     tool: Vec = (0.0, 0.0, 0.0)  # the tip's offset from the demonstrated one (m, gripper frame)
     # set once by __post_init__ (per path, not per step), and _end on the first step beyond s = 1
     _p0: list[float] = field(init=False, repr=False, compare=False)
-    _inv0: np.ndarray = field(init=False, repr=False, compare=False)
-    _cur_q: np.ndarray = field(init=False, repr=False, compare=False)
+    _inv0: list[float] = field(init=False, repr=False, compare=False)  # Python floats, as the steps use them
+    _cur_q: list[float] = field(init=False, repr=False, compare=False)
     _end: ScrewPath | None = field(init=False, repr=False, compare=False)
     # the samples around the stretch t0-t1 as Python floats: times, positions, quaternions
     _window: tuple[list[float], list[list[float]], list[list[float]]] = field(
@@ -238,8 +238,8 @@ class TrackPath:
         object.__setattr__(self, "_window", window)
         p0, q0 = self._sample(self.t0)  # per path, not per step: this runs every simulation step
         object.__setattr__(self, "_p0", p0)
-        object.__setattr__(self, "_inv0", np.array([q0[0], -q0[1], -q0[2], -q0[3]]))
-        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)))
+        object.__setattr__(self, "_inv0", [float(x) for x in (q0[0], -q0[1], -q0[2], -q0[3])])
+        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)).tolist())
         object.__setattr__(self, "_end", None)
         tool = self.tool
         turned = None
