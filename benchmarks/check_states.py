@@ -4,7 +4,10 @@ one checkout and compared against another.
 
 Run: ``python benchmarks/check_states.py save REF.pkl`` on the reference checkout, then
 ``python benchmarks/check_states.py compare REF.pkl`` on the changed one (``--only NAME`` for one
-script, ``--segments 40 80`` for extra runs of the peg-in-hole demonstration at those segment counts).
+script, ``--segments 40 80`` for extra runs of the peg-in-hole demonstration at those segment counts;
+``--programs peg_in_hole --trials 0 1`` for runs of the sample programs through the executor on
+``bench_trials.py``'s perturbed scenes, trial 1 with 0.05 N of sensor noise, each followed by its
+open-loop replay: every step's record and state, the events and both results).
 
 Per step it keeps: the topological and discrete situation (their notation and the objects
 themselves, with the annotations their equality leaves out: DLO vectors, spans, the gripper's z), the
@@ -54,6 +57,41 @@ def _step_digest(rec) -> tuple:
     )
 
 
+def run_program(name: str, trial: int) -> dict:
+    """Sample program ``name`` through the executor on trial ``trial``'s perturbed scene, then its
+    open-loop replay: every step's digest, the events and both results (wall times left out)."""
+    from dlovr.execution.executor import ExecOptions
+    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.execution.run import run_openloop as openloop
+    from dlovr.execution.run import run_program as program_run
+    from dlovr.execution.variation import parse_vary, perturb
+    from dlovr.geometry import scene_pieces
+    from dlovr.model.program import Program
+
+    root = Path(__file__).resolve().parents[1]
+    program = Program.load(root / "recordings" / "programs" / f"{name}.program.json")
+    rec = find_recording(program)
+    base = resolve_scene(program, None, rec)
+    track = load_track(rec) if rec is not None else None
+    pieces = scene_pieces(base)
+    vary = ("dlo.length=10%", "dlo.young=0.5..2", "dlo.friction=30%", "objects.pos=0.005")
+    scene, _ = perturb(base, tuple(parse_vary(v, base) for v in vary), 0, trial)
+    opts = ExecOptions(seed=trial, noise=0.05 if trial % 2 else 0.0)
+    steps: list[tuple] = []
+    events: list = []
+    t0 = time.perf_counter()
+    res = program_run(program, scene, opts, track=track, pieces=pieces,
+                      on_step=lambda r: steps.append(_step_digest(r)), on_event=events.append)
+    wall = time.perf_counter() - t0
+    result = {k: v for k, v in res.to_json().items() if "wall" not in k}
+    loop = None
+    if track is not None:
+        replay = openloop(program, scene, track, pieces=pieces).to_json()
+        loop = {k: v for k, v in replay.items() if "wall" not in k}
+    end = ([e.payload() for e in events], repr(result), repr(loop), 0, 0)
+    return {"steps": steps, "end": end, "wall": wall}
+
+
 def _same(a: tuple, b: tuple) -> bool:
     """Two steps' digests agree (situations compared by value; a saved one may be pickled)."""
     sa, sb = (pickle.loads(x[3]) if isinstance(x[3], bytes) else x[3] for x in (a, b))
@@ -93,6 +131,7 @@ def _runs(args) -> list[tuple[str, int | None]]:
     names += sorted(p.name.removesuffix(".script.toml") for p in BENCH_SCENES.glob("*.script.toml"))
     runs: list[tuple[str, int | None]] = [(n, None) for n in names]
     runs += [("peg_in_hole", s) for s in args.segments]
+    runs += [(f"program:{p}", k) for p in args.programs for k in args.trials]
     if args.only:
         runs = [r for r in runs if r[0] in args.only]
     return runs
@@ -104,12 +143,18 @@ def main() -> None:
     ap.add_argument("ref", type=Path)
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--segments", type=int, nargs="*", default=[40, 80])
+    ap.add_argument("--programs", nargs="*", default=[], help="sample programs run through the executor")
+    ap.add_argument("--trials", type=int, nargs="*", default=[0, 1], help="their trials (perturbed scenes)")
     args = ap.parse_args()
     out = {} if args.mode == "save" else pickle.loads(args.ref.read_bytes())
     bad = 0
     for name, seg in _runs(args):
-        key = f"{name}@{seg or 'scene'}"
-        got = run(name, seg)
+        if name.startswith("program:"):
+            key = f"{name}#{seg}"
+            got = run_program(name.removeprefix("program:"), int(seg or 0))
+        else:
+            key = f"{name}@{seg or 'scene'}"
+            got = run(name, seg)
         n = len(got["steps"])
         if args.mode == "save":
             out[key] = got

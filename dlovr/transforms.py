@@ -69,14 +69,37 @@ def angle_deg(a: np.ndarray, b: np.ndarray, tol: float = 1e-12) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
+def _f64(v: object) -> list[float] | None:
+    """A 1-d float64 array's entries as Python floats (the same IEEE doubles, which round as numpy's
+    scalars do, without their overhead); None for anything else."""
+    return v.tolist() if type(v) is np.ndarray and v.dtype == np.float64 and v.ndim == 1 else None
+
+
+def _floats(v: Sequence[float] | np.ndarray) -> Sequence[float] | np.ndarray:
+    """``v``'s entries for arithmetic: a float64 array's as Python floats (:func:`_f64`), anything
+    else as it is."""
+    got = _f64(v)
+    return v if got is None else got
+
+
 def quat_normalize(q: Sequence[float] | np.ndarray) -> np.ndarray:
-    q = np.asarray(q, dtype=float)
-    return q / norm(q)
+    """``q / |q|`` (float64; :func:`norm`'s length): element by element in Python floats, the same
+    roundings as numpy's ``q / norm(q)``."""
+    v = _f64(q)
+    if v is None:
+        a = np.asarray(q, dtype=float)
+        return a / norm(a)
+    n = norm(v)
+    if n == 0.0 or not math.isfinite(n):  # numpy's nan/inf and warning
+        a = np.asarray(q, dtype=float)
+        return a / n
+    return np.array([x / n for x in v])
 
 
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
+def quat_mul(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> np.ndarray:
+    """The Hamilton product ``a b`` (wxyz), in Python floats for float64 input (the same roundings)."""
+    aw, ax, ay, az = _floats(a)
+    bw, bx, by, bz = _floats(b)
     return np.array(
         [
             aw * bw - ax * bx - ay * by - az * bz,
@@ -87,10 +110,10 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+def quat_rotate(q: Sequence[float] | np.ndarray, v: Sequence[float] | np.ndarray) -> np.ndarray:
     """Rotate vector ``v`` by unit quaternion ``q`` (wxyz)."""
-    w, x, y, z = (float(c) for c in q)
-    vx, vy, vz = (float(c) for c in v)
+    w, x, y, z = _f64(q) or (float(c) for c in q)
+    vx, vy, vz = _f64(v) or (float(c) for c in v)
     tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
     return np.array(
         [
@@ -101,7 +124,7 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     )
 
 
-def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+def slerp(q0: Sequence[float] | np.ndarray, q1: Sequence[float] | np.ndarray, s: float) -> np.ndarray:
     """Shortest-path spherical interpolation from ``q0`` (s=0) to ``q1`` (s=1), unit wxyz.
 
     In Python floats, element by element: the same roundings as the numpy expressions

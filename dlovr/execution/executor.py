@@ -427,6 +427,11 @@ def goal_check(
     return angle <= tolerance + slack, angle
 
 
+#: A record without a torque reads none (the sensor chain copies it, never writes it).
+_NO_TORQUE = np.zeros(3)
+_NO_TORQUE.flags.writeable = False
+
+
 class Session:
     """One execution in progress: the simulator, the sensor chain, the event log and the guard of the
     macro running (whose detector signal the browser shows)."""
@@ -454,10 +459,11 @@ class Session:
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
             sim.tracker.restart(rec)
-        self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", np.zeros(3)), self.dt)
+        self.f, self.tq = self.cond(rec.gripper_force, getattr(rec, "gripper_torque", _NO_TORQUE), self.dt)
         #: the sensed force of the last :data:`HISTORY_S` (time s, force N): settles a detector's own
         #: smoothing when it starts (kept only for a noisy sensor)
         self.recent: deque[tuple[float, np.ndarray]] = deque(maxlen=max(1, round(HISTORY_S / self.dt)))
+        self._noisy = opts.assumed_noise > 0.0  # (kept only for a noisy sensor)
 
     @property
     def signal(self) -> float:
@@ -485,8 +491,8 @@ class Session:
         then in ``self.f`` (N) and ``self.tq`` (N m), world frame."""
         self.sim.set_target(pos, quat)
         r = self.sim.step()
-        self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", np.zeros(3)), self.dt)
-        if self.opts.assumed_noise > 0.0:
+        self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", _NO_TORQUE), self.dt)
+        if self._noisy:
             self.recent.append((float(r.time), self.f))
         if self.on_step is not None:
             self.on_step(r)

@@ -31,6 +31,7 @@ Everything here feeds the simulator, so it is computed in Python floats without 
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Any, cast
@@ -128,8 +129,9 @@ def tool_shift(pos: np.ndarray, q_ref: np.ndarray, q: np.ndarray, tool: Vec) -> 
     the point ``tool`` (gripper frame) further along than the demonstrated turn's pivot."""
     if tool[0] == 0.0 and tool[1] == 0.0 and tool[2] == 0.0:
         return pos
-    a, b = quat_rotate(q_ref, np.array(tool)), quat_rotate(q, np.array(tool))
-    return np.array([float(pos[i]) + float(a[i]) - float(b[i]) for i in range(3)])
+    a, b = quat_rotate(q_ref, tool).tolist(), quat_rotate(q, tool).tolist()
+    p = pos.tolist() if type(pos) is np.ndarray else [float(x) for x in pos]
+    return np.array([float(p[i]) + a[i] - b[i] for i in range(3)])
 
 
 def local_twist(
@@ -215,33 +217,67 @@ class TrackPath:
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
     tool: Vec = (0.0, 0.0, 0.0)  # the tip's offset from the demonstrated one (m, gripper frame)
     # set once by __post_init__ (per path, not per step), and _end on the first step beyond s = 1
-    _p0: np.ndarray = field(init=False, repr=False, compare=False)
-    _inv0: np.ndarray = field(init=False, repr=False, compare=False)
-    _cur_q: np.ndarray = field(init=False, repr=False, compare=False)
+    _p0: list[float] = field(init=False, repr=False, compare=False)
+    _inv0: list[float] = field(init=False, repr=False, compare=False)  # Python floats, as the steps use them
+    _cur_q: list[float] = field(init=False, repr=False, compare=False)
     _end: ScrewPath | None = field(init=False, repr=False, compare=False)
+    # the samples around the stretch t0-t1 as Python floats: times, positions, quaternions
+    _window: tuple[list[float], list[list[float]], list[list[float]]] = field(
+        init=False, repr=False, compare=False)
+    # the tool (None when zero) as an array and turned by the start orientation (tool_shift's R(q_ref) tool)
+    _tool: tuple[np.ndarray, list[float]] | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.frame not in ("world", "relative"):
             raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
-        p0, q0 = self._at_time(self.t0)  # per path, not per step: this runs every simulation step
+        times = np.asarray(self.times, dtype=float)
+        lo = max(int(np.searchsorted(times, self.t0, side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(times, self.t1, side="right")), len(times) - 1) + 1
+        window = (times[lo:hi].tolist(), np.asarray(self.pos[lo:hi], dtype=float).tolist(),
+                  np.asarray(self.quat[lo:hi], dtype=float).tolist())
+        object.__setattr__(self, "_window", window)
+        p0, q0 = self._sample(self.t0)  # per path, not per step: this runs every simulation step
         object.__setattr__(self, "_p0", p0)
-        object.__setattr__(self, "_inv0", np.array([q0[0], -q0[1], -q0[2], -q0[3]]))
-        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)))
+        object.__setattr__(self, "_inv0", [float(x) for x in (q0[0], -q0[1], -q0[2], -q0[3])])
+        object.__setattr__(self, "_cur_q", quat_normalize(np.asarray(self.start_quat, dtype=float)).tolist())
         object.__setattr__(self, "_end", None)
+        tool = self.tool
+        turned = None
+        if not (tool[0] == 0.0 and tool[1] == 0.0 and tool[2] == 0.0):
+            arr = np.array(tool, dtype=float)
+            turned = (arr, quat_rotate(self._cur_q, arr).tolist())
+        object.__setattr__(self, "_tool", turned)
 
     def _at_time(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The recorded pose at time ``t`` (s), interpolated between the samples around it (linear,
         slerp), held at the first and the last."""
+        pos, quat = self._sample(t)
+        return np.array(pos), np.array(quat, dtype=float)
+
+    def _sample(self, t: float) -> tuple[list[float], Any]:
+        """:meth:`_at_time` in Python floats (the same values; the quaternion a list or a row of
+        ``quat``), from the stretch's samples (``_window``) where ``t`` lies between two of them."""
+        times_w, pos_w, quat_w = self._window
+        if times_w and times_w[0] <= t < times_w[-1]:  # searchsorted's index less the window's start
+            j = bisect.bisect_right(times_w, t)
+            a, b = times_w[j - 1], times_w[j]
+            w = 0.0 if b <= a else (t - a) / (b - a)
+            p0, p1 = pos_w[j - 1], pos_w[j]
+            pos = [p0[k] + w * (p1[k] - p0[k]) for k in range(3)]
+            qa, qb = quat_w[j - 1], quat_w[j]
+            if w == 0.0 or qa == qb:
+                return pos, qa
+            return pos, slerp(qa, qb, w)
         times = self.times
         i = int(np.searchsorted(times, t, side="right"))
         if i <= 0:
-            return self.pos[0], self.quat[0]
+            return np.asarray(self.pos[0], dtype=float).tolist(), self.quat[0]
         if i >= len(times):
-            return self.pos[-1], self.quat[-1]
+            return np.asarray(self.pos[-1], dtype=float).tolist(), self.quat[-1]
         a, b = float(times[i - 1]), float(times[i])
         w = 0.0 if b <= a else (t - a) / (b - a)
-        p0, p1 = self.pos[i - 1], self.pos[i]
-        pos = np.array([float(p0[k]) + w * (float(p1[k]) - float(p0[k])) for k in range(3)])
+        p0, p1 = (np.asarray(self.pos[k], dtype=float).tolist() for k in (i - 1, i))
+        pos = [p0[k] + w * (p1[k] - p0[k]) for k in range(3)]
         qa, qb = self.quat[i - 1], self.quat[i]
         if w == 0.0 or qa.tolist() == qb.tolist():
             return pos, qa
@@ -259,18 +295,22 @@ class TrackPath:
                 object.__setattr__(self, "_end", on)
             return on.at(s - 1.0)
         p0, inv0, cur_q = self._p0, self._inv0, self._cur_q
-        p, q = self._at_time(self.t0 + s * (self.t1 - self.t0))
-        d = np.array([float(p[i]) - float(p0[i]) for i in range(3)])
+        p, q = self._sample(self.t0 + s * (self.t1 - self.t0))
+        d = [p[i] - p0[i] for i in range(3)]  # Python floats throughout: numpy's roundings
         if self.frame == "relative":
-            local = quat_rotate(inv0, d)
-            offset = quat_rotate(cur_q, local)
+            offset = quat_rotate(cur_q, quat_rotate(inv0, d)).tolist()
             quat = quat_mul(cur_q, quat_mul(inv0, q))
         else:
             offset = d
             quat = quat_mul(quat_mul(q, inv0), cur_q)
-        pos = np.array([self.start_pos[i] + float(offset[i]) for i in range(3)])
+        start = self.start_pos
         quat = quat_normalize(quat)
-        return tool_shift(pos, cur_q, quat, self.tool), quat
+        if self._tool is None:
+            return np.array([start[i] + offset[i] for i in range(3)]), quat
+        tool, a = self._tool  # tool_shift's sums, with R(q_start) tool made once
+        b = quat_rotate(quat, tool).tolist()
+        pos = [start[i] + offset[i] for i in range(3)]
+        return np.array([pos[i] + a[i] - b[i] for i in range(3)]), quat
 
 
 @dataclass(frozen=True)

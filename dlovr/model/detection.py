@@ -96,11 +96,19 @@ class LowPass:
 
     def __call__(self, x: np.ndarray, dt: float) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        if self._y is None or self.tau == 0.0:
+        y = self._y
+        if y is None or self.tau == 0.0:
             self._y = x.copy()
+        elif x.ndim == 1 and y.shape == x.shape:  # every step: in Python floats, numpy's roundings
+            self._y = np.array(self._next(y.tolist(), x.tolist(), dt))
         else:
-            self._y = self._y + (x - self._y) * (dt / (self.tau + dt))
+            self._y = y + (x - y) * (dt / (self.tau + dt))
         return self._y.copy()
+
+    def _next(self, y: list[float], x: list[float], dt: float) -> list[float]:
+        """One step of the filter on Python floats (the same roundings as the array expression)."""
+        k = dt / (self.tau + dt)
+        return [a + (b - a) * k for a, b in zip(y, x, strict=True)]
 
 
 @dataclass
@@ -158,8 +166,14 @@ class WrenchConditioner:
 
     def __call__(self, force: np.ndarray, torque: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         f, t = self.noise(force, torque)
-        y = self._filter(np.concatenate([f, t]), dt)
-        return y[:3], y[3:]
+        lp = self._filter
+        y = lp._y
+        if y is None or lp.tau == 0.0 or f.shape != (3,) or t.shape != (3,) or y.shape != (6,):
+            y = lp(np.concatenate([f, t]), dt)
+            return y[:3], y[3:]
+        out = lp._next(y.tolist(), f.tolist() + t.tolist(), dt)  # every step: what lp(...) does
+        lp._y = np.array(out)
+        return np.array(out[:3]), np.array(out[3:])
 
 
 # --------------------------------------------------------------------------------------------------

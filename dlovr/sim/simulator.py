@@ -260,9 +260,9 @@ class Simulator:
             q = np.asarray(quat, dtype=float)
             w = q.tolist() if q.shape == (4,) else None
             n = math.sqrt(dot(w, w)) if w is not None and all(map(math.isfinite, w)) else 0.0
-            if n < 1e-9:
+            if w is None or n < 1e-9:
                 raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
-            self.target_quat = q / n
+            self.target_quat = np.array([x / n for x in w])  # q / n, element by element
 
     def _move_mocap(self) -> None:
         dt = self._dt
