@@ -14,10 +14,13 @@ NET-PROGRAM``), the run then:
    vector sensed over the hold's last 0.2 s (the sensed force minus the cable's weight, as the
    network runs sense it, :func:`dlovr.execution.network_run.sensed_contact_vector`) against the
    expected vector of every node of the network but the goal (the goal check has just said the goal
-   does not fit) that has a demonstrated path to the goal from the gripper's position and that the
-   demonstrations entered near that position (:func:`near_nodes`) (:func:`sensed_node`: the nearest
-   within the network options' ``tolerance``; a tie goes to the node visited more often, then the
-   smaller id);
+   does not fit) that has a demonstrated path to the goal from the gripper's position and, on the
+   first attempt, that the program confirmed by its last detection or aimed at after it
+   (:func:`unconfirmed_nodes`: the macros after its last detection ended by their motion, bets
+   that nothing sensed, so the gripper went where the demonstration went and its position tells
+   nothing); without such a detection (and on later attempts), those the demonstrations entered
+   near the gripper's position (:func:`near_nodes`) (:func:`sensed_node`: the nearest within the
+   network options' ``tolerance``; a tie goes to the node visited more often, then the smaller id);
 3. runs the network loop from that node (:func:`dlovr.execution.network_run.network_steps_from`:
    plan, guarded macro, sense, identify, plan again ... until it arrives at the goal node, or a
    situation outside the network, a node without a path or a failed macro stops it);
@@ -94,19 +97,38 @@ def check_recovery(program: Program, nprog: NetworkProgram) -> None:
 
 
 def sensed_node(
-    nprog: NetworkProgram, vector: Any, position: Any, tolerance: float | None
+    nprog: NetworkProgram, vector: Any, position: Any, tolerance: float | None,
+    among: set[str] | None = None,
 ) -> Successor | None:
     """The node of ``nprog`` the sensed contact ``vector`` (world; None or zero: no contact) shows,
     with the gripper at ``position`` (m, world): among the nodes other than the goal that have a
-    demonstrated path to the goal from there, those the demonstrations were in near ``position``
-    (:func:`near_nodes`), the nearest expected vector (ties: more visits, then the smaller id); None
-    when none is within ``tolerance`` (a situation outside the network)."""
+    demonstrated path to the goal from there: those in ``among`` (:func:`unconfirmed_nodes`), else
+    those the demonstrations were in near ``position`` (:func:`near_nodes`), the nearest expected
+    vector (ties: more visits, then the smaller id); None when none is within ``tolerance`` (a
+    situation outside the network)."""
     net = nprog.network
-    nodes = [n for n in net.nodes if n.id != net.goal and nprog.replan(n.id, position) is not None]
-    nodes = near_nodes(nprog, nodes, position)
+    nodes = [n for n in net.nodes if n.id != net.goal and (among is None or n.id in among)
+             and nprog.replan(n.id, position) is not None]
+    if among is None:  # past bets nothing sensed, the gripper is where the demonstration was, not the run
+        nodes = near_nodes(nprog, nodes, position)
     total = sum(n.visits for n in nodes) or 1
     cands = [Successor(n.id, n.situation, n.principal, expected_vector(n), n.visits / total) for n in nodes]
     return identify(cands, vector, tolerance)
+
+
+def unconfirmed_nodes(nprog: NetworkProgram, out: Execution) -> set[str] | None:
+    """Where the run may be, by what it sensed: the network nodes of the situation its last macro
+    that ended by a detection led to and of those the macros it ran after it aimed at (they ended
+    by their motion, bets that nothing sensed, or failed); None when no macro ended by a
+    detection, or the network has none of those situations."""
+    done = [r for r in out.runs if r.ended == "detected"]
+    if not done:
+        return None
+    ran = {r.macro.index for r in out.runs}
+    macros = [m for m in out.program.macros if m.index >= done[-1].macro.index and m.index in ran]
+    found = {nprog.network.locate(m.to_situation) for m in macros}
+    found.discard(None)
+    return {str(n) for n in found} or None
 
 
 def near_nodes(nprog: NetworkProgram, nodes: list[Any], position: Any) -> list[Any]:
@@ -164,7 +186,8 @@ def _replan(
     v = sensed_contact_vector(force, tare, nopts.free_force)
     sv = rounded_vector(v)
     pos = tuple(float(x) for x in sim.data.mocap_pos[sim.built.mocap_id])
-    found = sensed_node(recovery.network, v, pos, nopts.tolerance)
+    among = unconfirmed_nodes(recovery.network, out) if not out.replans else None
+    found = sensed_node(recovery.network, v, pos, nopts.tolerance, among)
     if found is None:
         why = (f"the sensed contact vector {list(sv) if sv else 'none (free space)'} fits no situation of "
                "the network with a path to the goal: not planning again")

@@ -116,3 +116,29 @@ def test_where_the_gripper_is_tells_apart_situations_that_push_alike():
     prog = NetworkProgram(net)
     assert sensed_node(prog, (0, 0, -1), (0.1, 0.0, 0.3), 0.8).node == net.locate(S(TOP))
     assert sensed_node(prog, (0, 0, -1), (-0.1, 0.0, 0.3), 0.8).node == net.locate(S(top2))
+
+
+def test_past_bets_nothing_sensed_the_situation_is_one_the_program_aimed_at_since_its_last_detection():
+    """A run whose last macros ended by their motion went where the demonstration went, so where the
+    gripper is tells nothing: the sensed situation is sought among the one the last detection
+    confirmed and those the later macros aimed at, whatever the gripper's position (issue 28: a
+    blind run's tip left in the groove beside the hole was taken, by the gripper's position, for
+    the tip in the hole)."""
+    from types import SimpleNamespace as NS
+
+    from dlovr.execution.recovery import unconfirmed_nodes
+
+    net = build_network([demo("a", [FREE, TOP, GOAL], [0.0, 0.1, 0.1]),
+                         demo("b", [FREE, WALL, GOAL], [0.0, -0.1, -0.1]), demo("c", [FREE, STUCK])])
+    prog = NetworkProgram(net)
+    macros = [NS(index=k + 1, to_situation=s) for k, s in enumerate([STUCK, FREE, TOP, WALL, GOAL])]
+    ended = ["detected", "detected", "motion", "motion", "motion"]
+    runs = [NS(macro=m, ended=e) for m, e in zip(macros, ended, strict=True)]
+    out = NS(program=NS(macros=macros), runs=runs)
+    among = unconfirmed_nodes(prog, out)  # type: ignore[arg-type]
+    assert among == {net.locate(S(s)) for s in (FREE, TOP, WALL, GOAL)}
+    # the gripper over TOP, pushed along -y: by position only TOP is near, and it does not fit
+    assert sensed_node(prog, (0, -1, 0), (0.1, 0.0, 0.3), 0.8) is None
+    assert sensed_node(prog, (0, -1, 0), (0.1, 0.0, 0.3), 0.8, among).node == net.locate(S(WALL))
+    out.runs = [NS(macro=m, ended="motion") for m in macros]
+    assert unconfirmed_nodes(prog, out) is None  # type: ignore[arg-type]  # nothing sensed: any node

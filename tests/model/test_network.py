@@ -603,3 +603,29 @@ def test_a_plan_bets_on_a_transition_it_cannot_sense_only_where_the_motion_made_
     ch = NetworkProgram(replace(net, edges=edges)).replan(b)
     assert ch is not None and ch.path == (b, ep, net.goal) and ch.reach_probability == round(1 / 6, 9)
     assert {s.node for s in ch.successors} == {ep, free, node(net, w)}  # still an outcome
+
+
+def test_the_reference_demonstrations_own_departure_applies_wherever_the_gripper_is():
+    """At TIP the reference (and one more) went on into the goal from x = 0; another demonstration
+    went from x = 0.1 m to LIE, from where none reached the goal. With the gripper at x = 0.1 m the
+    reference's departure is 0.1 m from there, beyond the nearest's 0 + reach, but a run can follow
+    the reference's track from wherever it got to (as a compiled program does): it stays
+    applicable, and the plan goes on along it instead of finding no path (issue 33, trial 19)."""
+    here = line_track(0.0, 3)
+    there = PoseTrack(np.array([0.0, 1.0, 2.0]), np.array([[0, 0, 0.3], [0.1, 0, 0.3], [0.1, 0, 0.3]]),
+                      np.tile([1.0, 0.0, 0.0, 0.0], (3, 1)))
+
+    def d(name, seq, track):
+        return replace(demo(name, seq, [1.0] * 3, track), commands=track)
+
+    net = build_network([d("ref", [FREE, TIP, GROOVE], here), d("y", [FREE, TIP, GROOVE], here),
+                         d("z", [FREE, TIP, LIE], there)])
+    prog = NetworkProgram(net)
+    tip, goal, lie = node(net, TIP), node(net, GROOVE), node(net, LIE)
+    assert net.goal == goal and f"{tip}->{goal}" in reference_path(net)
+    assert {e.target for e in prog.applicable(tip, (0.1, 0.0, 0.3))} == {goal, lie}
+    ch = prog.replan(tip, (0.1, 0.0, 0.3))
+    assert ch is not None and ch.path == (tip, goal) and ch.reach_probability == round(2 / 3, 9)
+    two = (d("ref", [FREE, TIP, GROOVE], here), d("z", [FREE, TIP, LIE], there))
+    ref_less = NetworkProgram(build_network([replace(x, commands=None) for x in two]))
+    assert ref_less.replan(tip, (0.1, 0.0, 0.3)) is None  # without a reference: only the near departures
