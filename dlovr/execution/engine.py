@@ -200,4 +200,5 @@ def smoothed(program: Runnable, track: DemoTrack | None) -> DemoTrack | None:
     from dlovr.model.smoothing import smooth_poses
 
     pos, quat = smooth_poses(track.t, track.pos, track.quat, window)
-    return replace(track, pos=pos, quat=quat)  # its sensed wrench and forces are the demonstration's
+    # its sensed wrench and forces are the demonstration's
+    return replace(track, pos=pos, quat=quat, by_hand=True)

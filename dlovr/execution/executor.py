@@ -378,6 +378,9 @@ class DemoTrack:
     #: force N, torque N m, world), where its recording has one: how late the program's own detectors
     #: fire on the demonstration (:func:`demo_detection_lag`)
     wrench: Any = None
+    #: the track is a trembling hand's, smoothed (``dlovr.execution.engine.smoothed``): beyond a
+    #: stretch the gripper goes on with the stretch's net motion, not with the hand's last 0.1 s
+    by_hand: bool = False
 
 
 #: The time (s) over which the sensed force at the end of a run (and of the demonstration) is
@@ -729,7 +732,11 @@ def _path(
         # beyond its stretch the gripper keeps moving as it was when the transition should have come
         # (a turn keeps turning, an approach approaching); the macro's net motion if it held still
         span = max(m.t - t0, opts.min_duration)
-        beyond = local_twist(track.t, track.pos, track.quat, t0, m.t, span) or (mo.rotation, mo.relative)
+        # (a hand's last 0.1 s is its drift and easing: 7 deg/s of turning at the defaults, carried
+        # over a 3 s stretch, swings a 25 cm cable's tip centimetres aside: a hand's goes on as its
+        # stretch moved on the whole)
+        beyond = None if track.by_hand else local_twist(track.t, track.pos, track.quat, t0, m.t, span)
+        beyond = beyond or (mo.rotation, mo.relative)
         return TrackPath(
             track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool,
         )

@@ -44,6 +44,7 @@ from dlovr.model.transitions import (
     changes,
     classify_change,
     classify_step,
+    contact_objects,
     is_instable,
     principal,
     successional_contacts,
@@ -193,6 +194,26 @@ def _settles(b: TimedSituation, c: TimedSituation, rules: ChatterRules) -> bool:
     return c.through_free or "E" not in classify_step(b.situation, c.situation, False)
 
 
+def _free(s: TimedSituation) -> bool:
+    """Does the cable touch nothing but the gripper in ``s``?"""
+    return not successional_contacts(s.situation)
+
+
+def _swings(a: TimedSituation, b: TimedSituation, c: TimedSituation, poses: PoseTrack,
+            rules: ChatterRules) -> bool:
+    """Is ``a -> b -> c`` a swing through free space (docs/model.md, section 6): the cable left every
+    contact (``b`` free), none of them instable, and landed again within the chatter limits
+    (:func:`_is_chatter`, from leaving ``a`` to landing in ``c``) on nothing ``a`` did not touch
+    (``c``'s objects among ``a``'s)?"""
+    if not _free(b) or _free(a) or _free(c) or is_instable(a.situation.contacts):
+        return False  # from an instable contact it is a flight (section 5), a transition of its own
+    if not _is_chatter(b.t, c.t, poses, rules):
+        return False
+    before, after = (contact_objects([x for run in successional_contacts(s.situation) for x in run])
+                     for s in (a, c))
+    return before is not None and after is not None and after <= before
+
+
 def remove_chatter(
     states: Sequence[TimedSituation], poses: PoseTrack, rules: ChatterRules | None = None
 ) -> list[TimedSituation]:
@@ -200,7 +221,12 @@ def remove_chatter(
     situations, ``A -> B1 -> ... -> Bk -> A``, the whole excursion within the rules' time and motion)
     made one ``A`` (it begins when the first began and holds through all), repeated until none is left: a flip
     back and forth is a hand at a threshold, not two transitions. Anything else is kept: ``A -> B ->
-    C`` always, and ``E, C, C, E`` (laid down, dragged, lifted) whenever the drag is real motion.
+    C`` always (but for a swing, below), and ``E, C, C, E`` (laid down, dragged, lifted) whenever
+    the drag is real motion.
+    A swing through free space, ``A -> N -> C`` within the same limits onto nothing ``A`` did not
+    touch (:func:`_swings`), is the step ``A -> C``: the cable swung off what it lay on and landed
+    back on it while the hand barely moved, a detour the task did not take (a release and a landing
+    elsewhere, or after seconds or centimetres, stay ``E``, ``E``).
     A landing after a flight that settles within ``rules.settle_s`` into another contact situation
     (a bounce, or a change of the landed contact without a new one, :func:`_settles`) lands there
     (``S,E`` into the settled situation, not ``S,E`` then ``C``); the other way round, a brief
@@ -222,6 +248,10 @@ def remove_chatter(
                 and is_instable(b.situation.contacts):
             # slipping off: a brief instable contact on the way from an instable one into a flight
             out[i - 1 : i + 1] = [replace(a, duration=round(a.duration + b.duration, 9))]
+        elif _swings(a, b, c, poses, r):
+            # swung off and landed again on what it had left: a hand's wobble, not a release and a landing
+            out[i - 1 : i + 1] = [replace(a, duration=round(c.t - a.t, 9))]
+            i = max(i - 1, 1)
         elif _settles(b, c, r):
             # the impact of a landing: the flight lands where the cable settles
             out[i : i + 2] = [TimedSituation(b.t, round(b.duration + c.duration, 9), c.situation,

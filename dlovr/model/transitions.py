@@ -52,7 +52,7 @@ def successional_contacts(situation: DiscreteSituation) -> list[tuple[DiscreteCo
     return [tuple(situation.contacts[i] for i in run) for run in situation.successional()]
 
 
-def _objects(contacts: Sequence[DiscreteContact]) -> frozenset[str] | None:
+def contact_objects(contacts: Sequence[DiscreteContact]) -> frozenset[str] | None:
     """Objects touched, or ``None`` when some contact carries no face names (discrete-only input)."""
     if any(not c.faces for c in contacts):
         return None
@@ -152,9 +152,9 @@ def match(
     pb = list(pos_after) if pos_after is not None else _in_order(m)
     scored = []
     for i, x in enumerate(before):
-        ox, fx, px = _objects(x), _faces(x), set(principal(x))
+        ox, fx, px = contact_objects(x), _faces(x), set(principal(x))
         for j, y in enumerate(after):
-            oy = _objects(y)
+            oy = contact_objects(y)
             shared = ox & oy if ox is not None and oy is not None else None  # None: not known
             if shared is not None and not shared:
                 continue  # never pairs two successional contacts that share no object
@@ -200,7 +200,7 @@ def pair_principals(
         a = x[i]
         for j in ys:
             b = y[j]
-            oa, ob = _objects((a,)), _objects((b,))
+            oa, ob = contact_objects((a,)), contact_objects((b,))
             score = (
                 float(a not in after) + float(b not in before),
                 float(bool(set(a.faces) & set(b.faces))),
@@ -271,7 +271,7 @@ def new_obstacle(ch: Change) -> bool:
     obstacle was hit when the new situation (any of its successional contacts, ``ch.after``; the new
     successional contact when the situation is not known) holds lower-card ``E/E^LI`` contacts.
     """
-    ox, oy = _objects(ch.x), _objects(ch.y)
+    ox, oy = contact_objects(ch.x), contact_objects(ch.y)
     if ox is not None and oy is not None:
         return ox != oy
     xs = {c.state.name for c in ch.x}
@@ -287,7 +287,7 @@ def snaps(ch: Change) -> bool:
 
 
 def _lands_elsewhere(ch: Change) -> bool:
-    ox, oy = _objects(ch.x), _objects(ch.y)
+    ox, oy = contact_objects(ch.x), contact_objects(ch.y)
     new = ox is not None and oy is not None and bool(oy - ox)
     return bool(ch.y) and (new or ch.through_free)
 

@@ -206,6 +206,36 @@ def test_local_twist_is_the_motion_at_the_end_of_the_stretch():
     assert local_twist(t, np.zeros_like(pos), np.tile([1.0, 0, 0, 0], (len(t), 1)), 0.0, 2.0, 1.0) is None
 
 
+def test_a_hands_macro_goes_on_beyond_its_stretch_with_its_net_motion():
+    """docs/programs.md (the allowance): a hand's approach, 6 cm straight down in 3 s, ends turning
+    (its drift: 0.1 rad in its last 0.1 s). Beyond the stretch a hand's program goes on with the
+    stretch's net motion (down), not with its last 0.1 s carried over 3 s (3 rad of turning); a
+    script's (not by hand) keeps the recorded motion at the end of the stretch."""
+    from types import SimpleNamespace
+
+    from dlovr.execution.executor import DemoTrack, ExecOptions, _path
+    from dlovr.model.discrete import parse_discrete_situation
+    from dlovr.model.program import PoseTrack, TimedSituation, compile_program
+
+    t = np.arange(0.0, 3.0001, 0.01)
+    pos = np.stack([np.zeros_like(t), np.zeros_like(t), 0.44 - 0.02 * t], axis=1)
+    a = np.clip(t - 2.9, 0.0, None)  # rad, about x: the drift of the last 0.1 s
+    quat = np.stack([np.cos(a / 2), np.sin(a / 2), np.zeros_like(t), np.zeros_like(t)], axis=1)
+    states = [TimedSituation(0.0, 3.0, parse_discrete_situation("V/G & E/N & V/N")),
+              TimedSituation(3.0, 1.0, parse_discrete_situation("V/G & E/N & V/F[table.F1]"))]
+    m = compile_program(states, PoseTrack(t, pos, quat)).classed[0]
+    start = (tuple(pos[0]), tuple(quat[0]))
+    sim = SimpleNamespace(built=SimpleNamespace(mocap_id=0), target_pos=start[0], target_quat=start[1],
+                          data=SimpleNamespace(mocap_pos=[start[0]], mocap_quat=[start[1]]))
+    hand = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat, by_hand=True))
+    (p1, q1), (p2, q2) = hand.at(1.0), hand.at(1.5)
+    # 3 cm more down (in the gripper frame at the end, turned 0.1 rad)
+    np.testing.assert_allclose(p2 - p1, 0.5 * (pos[-1] - pos[0]), atol=3e-3)
+    assert abs(float(np.dot(q1, q2))) > math.cos(0.05 / 2 + 1e-3)  # and turned by 0.05 rad at most
+    script = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat))
+    assert abs(float(np.dot(script.at(1.0)[1], script.at(1.5)[1]))) < math.cos(1.0 / 2)  # 1.5 rad
+
+
 def test_last_start_is_where_the_last_motion_phase_began():
     t = np.arange(0.0, 3.0001, 0.002)
     x = np.interp(t, [0.0, 1.0, 1.5, 2.5, 3.0], [0.0, 0.1, 0.1, 0.2, 0.2])  # move, hold, move, hold

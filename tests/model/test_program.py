@@ -314,3 +314,32 @@ def test_an_excursion_through_several_situations_that_comes_back_at_once_is_chat
     kept = remove_chatter(states, straight_track(8))
     assert [k.situation.format() for k in kept] == [_N, _EF, _VF]
     assert kept[1].duration == pytest.approx(4.076)
+
+
+def test_a_swing_off_and_back_onto_the_same_object_is_one_transition():
+    """docs/model.md section 6: the cable on the block's edge swings off every contact for 0.8 s while
+    the hand barely moves and lands on the block's side face: the step edge -> face (``C``), not a
+    release and a landing (``E, E``). Onto another object, or with much motion, it stays ``E, E``."""
+    from dlovr.model.program import remove_chatter
+
+    edge = "V/G & E/N & E/E^P[b.F1,b.F3] & E/N & V/N"
+    face = "V/G & E/N & E/F[b.F3] & V/N"
+    groove = "V/G & E/N & V/E^LS[b.F3,h.F2]"
+    t = np.arange(0.0, 8.0, 0.1)
+
+    def moving(speed):  # the gripper along x at ``speed`` m/s, sampled every 0.1 s
+        pos = np.stack([speed * t, np.zeros(len(t)), np.full(len(t), 0.5)], axis=1)
+        return PoseTrack(t, pos, np.tile([1.0, 0, 0, 0], (len(t), 1)))
+
+    slow = moving(0.0125)  # 1 cm in the 0.8 s off the block
+    states = _seq((0, 1, _N), (1, 2, edge), (3, 0.8, _N), (3.8, 2, face), (5.8, 1, groove))
+    kept = remove_chatter(states, slow)
+    assert [k.situation.format() for k in kept] == [_N, edge, face, groove]
+    assert kept[1].duration == pytest.approx(2.8) and kept[2].t == 3.8
+    assert [m.label for m in compile_program(states, slow).macros] == ["E", "C", "E", "end"]
+    as_recorded = compile_program(states, slow, chatter=None)
+    assert [m.label for m in as_recorded.macros] == ["E", "E", "E", "E", "end"]
+    # landing on another object, or after 8 cm of motion: a release and a landing
+    other = _seq((0, 1, _N), (1, 2, edge), (3, 0.8, _N), (3.8, 2, "V/G & E/N & E/F[h.F2] & V/N"))
+    assert len(remove_chatter(other, slow)) == 4
+    assert len(remove_chatter(states, moving(0.1))) == 5
