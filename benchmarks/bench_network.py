@@ -26,13 +26,15 @@ Run: ``.venv/bin/python benchmarks/bench_network.py [--demos 20] [--from runs|sc
 Everything goes through the ``dlovr`` command as a user would run it, in a temporary directory (or
 ``--keep DIR``: the recordings go to ``DIR/demos-FROM-seedK`` and are reused when it holds at least
 ``--demos`` of them, the first ``--demos`` taken, so the 10- and the 20-demonstration networks share
-one set; trials whose ``summary.json`` is there are reused too, the single program's across
-networks). About 3 min for 20 demonstrations and 5 min for 50 trials of each on 2 workers.
+one set; trials are reused too, the single program's across networks, but only by the same program
+file run by the same code: their folder's name ends in a fingerprint of both, :func:`fingerprint`).
+About 3 min for 20 demonstrations and 5 min for 50 trials of each on 2 workers.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import subprocess
 import sys
@@ -74,8 +76,19 @@ def record_demos(a: argparse.Namespace, d: Path, vary: list[str]) -> tuple[list[
     return sorted(d.glob("*.mcap"))[: a.demos], time.perf_counter() - t0
 
 
+def fingerprint(program: str) -> str:
+    """12 hex digits of a hash of the program file and of every ``dlovr`` source file: trials kept under
+    ``--keep`` are reused only when neither changed (a fix in the executor changes their results)."""
+    h = hashlib.sha256((ROOT / program).read_bytes())
+    for f in sorted((ROOT / "dlovr").rglob("*.py")):
+        h.update(f.relative_to(ROOT).as_posix().encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:12]
+
+
 def trials(d: Path, program: str, a: argparse.Namespace, vary: list[str], *extra: str) -> tuple[dict, float]:
-    """``dlovr run PROGRAM --trials`` into ``d`` (its ``summary.json`` reused when there) and the wall s."""
+    """``dlovr run PROGRAM --trials`` into ``d`` + the program's and the code's :func:`fingerprint`
+    (its ``summary.json`` reused when there) and the wall s."""
+    d = d.with_name(f"{d.name}-{fingerprint(program)}")
     if (d / "summary.json").exists():
         return json.loads((d / "summary.json").read_text()), 0.0
     t0 = time.perf_counter()
