@@ -458,6 +458,11 @@ class Session:
         self.shift: Vec = (0.0, 0.0, 0.0)
         #: the turn (wxyz, world) of the objects the motion is in the frame of (registered runs)
         self.turn: Quat = IDENTITY
+        #: a detection taken back by its latency (:func:`_detected`) leaves the gripper where it fired
+        #: and keeps where it goes back to in ``back`` (position m, quaternion wxyz, world; the lag s):
+        #: a network run senses the contact first, then goes back (``dlovr.execution.network_run``)
+        self.sense_before_back = False
+        self.back: tuple[Any, Any, float] | None = None
         self.cond = WrenchConditioner(NoiseModel(opts.noise, seed=opts.seed), opts.filter_tau)
         rec = sim.record()
         if sim.tracker is not None and sim.tracker.current is None:
@@ -888,7 +893,11 @@ def _detected(
     lag = detection_lag(m, ses, track, period, at_demo - s * period)
     s_at = max(s - lag / period, 0.0) if lag > 0.0 else s
     if lag > 0.0:
-        ses.sim.set_target(*path.at(s_at))
+        pos, quat = path.at(s_at)
+        if ses.sense_before_back:
+            ses.back = (pos, quat, lag)
+        else:
+            ses.sim.set_target(pos, quat)
         at_demo -= (s - s_at) * period
     elif track is None:
         ses.sim.set_target(r.gripper_pos, r.gripper_quat)  # stop where the gripper is

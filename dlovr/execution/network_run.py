@@ -12,7 +12,8 @@ The loop, from the network's start node and the scene's gripper position:
    :mod:`dlovr.model.network`), ended by the detectors of its classes (or, with
    ``detect="oracle"``, by the contact tracker), failed at its allowance; the tip's first touch
    tells where the tip is, as for a compiled program;
-3. after the detection the gripper holds still ``sense_settle`` s, and the **sensed contact vector**
+3. after the detection the gripper holds still ``sense_settle`` s where the detector fired, and the
+   **sensed contact vector**
    is taken from the wrench: the sensed force minus the force sensed in free space (the cable's
    weight ``-m g`` along z, known from the scene as a robot knows its payload; the first samples of
    a run are not settled enough to tare on), negated and normalised -- a contact that begins adds
@@ -22,6 +23,11 @@ The loop, from the network's start node and the scene's gripper position:
    the successor whose expected vector (the one its demonstrations sensed, else the sum of its
    principal contacts') is closest; farther than ``tolerance`` from every one is **a situation
    outside the network**: the run stops with a report of the sensed vector and the expected ones.
+   Then, along the reference's track, the detection is **taken back by its latency** as a compiled
+   program's is: the gripper goes back to where it was as long before the detection as the same
+   detectors fire late on the reference demonstration's own recorded wrench
+   (:func:`reference_wrench`; ``dlovr.execution.executor.detection_lag``), and the next macro
+   resumes the track from there (without it the first touch's ~40 ms is read as a longer cable).
    With the oracle the node is the one whose principal contacts the tracker sees. A macro that ended
    by its motion (its transition shows the force no step) is taken to reach its planned target, as
    in a compiled program, unless its transition is spontaneous (``S``: where it landed is sensed)
@@ -78,7 +84,11 @@ class NetworkOptions:
     spontaneous one, ``S``, and an instable one along the reference's motion through another
     transition, :func:`borrows_motion`, are identified all the same);
     ``sigma``: identification weighs each successor's probability by how well its vector fits
-    (:func:`dlovr.model.planning.identify`; None: the nearest vector alone)."""
+    (:func:`dlovr.model.planning.identify`; None: the nearest vector alone); ``take_back``: along the
+    reference's track, a detection is taken back by how late the same detectors fire on the reference
+    demonstration's own recorded wrench (:func:`reference_wrench`), as a compiled program's is
+    (``dlovr.execution.executor.detection_lag``), once the contact has been sensed at the pose where it
+    was detected (:meth:`_NetworkRun._sense`)."""
 
     tolerance: float = 0.8
     sense_settle: float = 0.05
@@ -87,6 +97,7 @@ class NetworkOptions:
     tracks: bool = True
     blind_motion: bool = True
     sigma: float | None = 0.25
+    take_back: bool = True
 
 
 @dataclass(frozen=True)
@@ -110,6 +121,9 @@ class NetMacro:
     true_node: str
     true_principals: tuple[str, ...]
     reason: str = ""
+    #: how long (s) before its detection the transition was taken to have come: the gripper went back
+    #: to where it was then after sensing (0: not taken back)
+    taken_back: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -205,10 +219,60 @@ def reference_goal_entry(nprog: NetworkProgram) -> float | None:
     return max(at) if at else None
 
 
-def reference_track(nprog: NetworkProgram) -> DemoTrack | None:
-    """The reference demonstration's whole commanded track on its own clock (s), or None."""
+def reference_track(nprog: NetworkProgram, wrench: Any = None) -> DemoTrack | None:
+    """The reference demonstration's whole commanded track on its own clock (s), or None; with the
+    ``wrench`` it sensed (:func:`reference_wrench`), if given."""
     ref = nprog.network.reference
-    return None if ref is None else DemoTrack(ref.t0 + ref.t, ref.pos, ref.quat)
+    return None if ref is None else DemoTrack(ref.t0 + ref.t, ref.pos, ref.quat, wrench=wrench)
+
+
+#: How far (m) the commanded track of the recording a network names as its reference demonstration
+#: may lie from the reference track the network keeps (resampled at 10 ms, :mod:`dlovr.model.tracks`:
+#: 0.7 mm on peg_in_hole) for its wrench to be taken as the reference's (:func:`reference_wrench`).
+REFERENCE_MATCH_M = 0.002
+
+_WRENCHES: dict[tuple[str, int, int], Any] = {}
+
+
+def reference_wrench(nprog: NetworkProgram) -> Any:
+    """The wrench the reference demonstration sensed (``dlovr.model.derivation.WrenchSeries``), read
+    from the recording the network names for it (its path as the network lists it: absolute, or
+    relative to the working directory), or None: not found, no wrench channel, unreadable, or its
+    commanded track farther than :data:`REFERENCE_MATCH_M` from the network's reference track (another
+    recording under that name). Read once per file and process."""
+    from pathlib import Path
+
+    net, ref = nprog.network, nprog.network.reference
+    if ref is None or not 0 <= ref.demonstration < len(net.demonstrations):
+        return None
+    path = Path(net.demonstrations[ref.demonstration])
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _WRENCHES:
+        _WRENCHES[key] = _matching_wrench(ref, path)
+    return _WRENCHES[key]
+
+
+def _matching_wrench(ref: Any, path: Any) -> Any:
+    """The wrench recorded in ``path`` where its commanded track is the reference track ``ref``
+    (within :data:`REFERENCE_MATCH_M` at the reference's times, over the same span), else None."""
+    from dlovr.recording import Recording, RecordingError
+
+    try:
+        rec = Recording(path)
+        steps, pos, _ = rec.commands()
+        wrench = rec.wrench()
+        t = steps * rec.dt
+    except (RecordingError, OSError, ValueError):
+        return None
+    rt = ref.t0 + np.asarray(ref.t, float)
+    if wrench is None or len(t) < 2 or max(abs(t[0] - rt[0]), abs(t[-1] - rt[-1])) > 0.05:
+        return None
+    at = np.stack([np.interp(rt, t, pos[:, i]) for i in range(3)], axis=1)
+    return wrench if float(np.abs(at - np.asarray(ref.pos, float)).max()) <= REFERENCE_MATCH_M else None
 
 
 @dataclass(frozen=True)
@@ -334,7 +398,10 @@ class _NetworkRun:
         self.settle = settle
         self.macros: list[NetMacro] = []
         self.tare = np.array([0.0, 0.0, -float(scene.dlo.mass) * GRAVITY])  # the cable's weight
-        self.ref_track = reference_track(nprog)
+        wrench = reference_wrench(nprog) if nopts.take_back else None
+        self.ref_track = reference_track(nprog, wrench)
+        # a detection taken back: sensed where it fired, then back (:meth:`_sense`)
+        ses.sense_before_back, ses.back = True, None
         self.resume: float | None = None
         self.last_end: float | None = None  # where the last macro ended on the reference's clock (s)
         self.reason, self.arrived = "", False
@@ -404,15 +471,20 @@ class _NetworkRun:
 
     def _sense(self, k: int, choice: Choice, m: Macro, run: MacroRun, t0: float) -> Steps[bool]:
         """Hold still, sense the contact vector and identify the node reached; whether it is one."""
-        yield from _hold_target(self.ses, self.nopts.sense_settle)
-        tn, _ = _true_node(self.nprog, self.ses.sim)
-        sensed = sensed_contact_vector(self.ses.f, self.tare, _free_force(m, self.nopts.free_force))
+        ses = self.ses
+        yield from _hold_target(ses, self.nopts.sense_settle)
+        tn, _ = _true_node(self.nprog, ses.sim)
+        sensed = sensed_contact_vector(ses.f, self.tare, _free_force(m, self.nopts.free_force))
+        back, ses.back = ses.back, None
+        if back is not None:  # the detection taken back by its latency, now that it has been sensed
+            ses.sim.set_target(back[0], back[1])
         found = self._identify(choice, run, sensed, tn)
         sv = rounded_vector(sensed)
         if found is None:
             self._outside(k, choice, run, sv, t0)
             return False
-        self._log(k, choice, t0, run.ended_at, run.ended, sv, found.node)
+        lag = 0.0 if back is None else back[2]
+        self._log(k, choice, t0, run.ended_at, run.ended, sv, found.node, back=lag)
         plan = choice.macro
         if found.node != plan.target:
             self.replans += 1
@@ -467,6 +539,7 @@ class _NetworkRun:
         *,
         classes: tuple[str, ...] | None = None,
         reason: str = "",
+        back: float = 0.0,
     ) -> None:
         """Append the :class:`NetMacro` of macro ``k`` (with the tracker's node now)."""
         plan: MacroPlan = choice.macro
@@ -486,6 +559,7 @@ class _NetworkRun:
                 true_node=tn,
                 true_principals=tp,
                 reason=reason,
+                taken_back=back,
             )
         )
 
