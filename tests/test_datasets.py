@@ -237,8 +237,11 @@ def test_labels_are_the_recordings_situations(exported):
     t = steps * rec.dt
     for m in program.macros:
         j = int(np.searchsorted(t, m.t - 1e-9))
-        if m.kind == "transition":
-            assert ",".join(m.classes) in transitions[j].split(";"), (m.index, m.t, transitions[j])
+        if m.kind == "transition" and ",".join(m.classes) not in transitions[j].split(";"):
+            # the program took a swing through free space as one step (docs/model.md section 6): the
+            # labels keep the landing, its transition out of the brief free situation before it
+            touching = ["[" in s.situation.format() for s in kept if s.t < m.t - 1e-9]  # any object
+            assert transitions[j] and touching[-2] and not touching[-1], (m.index, m.t, transitions[j])
         last = int(np.searchsorted(t, m.t + 1e-9, side="right")) - 1  # the macro's last frame
         assert macro[last] == m.index and (last + 1 == len(t) or macro[last + 1] != m.index)
     assert sum(1 for x in transitions if x) >= sum(m.kind == "transition" for m in program.macros) >= 1
