@@ -191,6 +191,21 @@ def last_start(
     return float(t0)
 
 
+def _between(t: float, times: list[float], pos: list[list[float]], quat: list[list[float]], j: int
+             ) -> tuple[list[float], list[float] | np.ndarray]:
+    """The pose at ``t`` (s) between samples ``j - 1`` and ``j`` (``times[j - 1] <= t < times[j]``,
+    all in Python floats): the position linear, the quaternion slerped (sample ``j - 1``'s itself
+    where ``t`` is its time or both are equal)."""
+    a, b = times[j - 1], times[j]
+    w = 0.0 if b <= a else (t - a) / (b - a)
+    p0, p1 = pos[j - 1], pos[j]
+    out = [p0[k] + w * (p1[k] - p0[k]) for k in range(3)]
+    qa, qb = quat[j - 1], quat[j]
+    if w == 0.0 or qa == qb:
+        return out, qa
+    return out, slerp(qa, qb, w)
+
+
 @dataclass(frozen=True)
 class TrackPath:
     """Gripper poses along the demonstration's own recorded trajectory between two of its times, from
@@ -259,29 +274,16 @@ class TrackPath:
         ``quat``), from the stretch's samples (``_window``) where ``t`` lies between two of them."""
         times_w, pos_w, quat_w = self._window
         if times_w and times_w[0] <= t < times_w[-1]:  # searchsorted's index less the window's start
-            j = bisect.bisect_right(times_w, t)
-            a, b = times_w[j - 1], times_w[j]
-            w = 0.0 if b <= a else (t - a) / (b - a)
-            p0, p1 = pos_w[j - 1], pos_w[j]
-            pos = [p0[k] + w * (p1[k] - p0[k]) for k in range(3)]
-            qa, qb = quat_w[j - 1], quat_w[j]
-            if w == 0.0 or qa == qb:
-                return pos, qa
-            return pos, slerp(qa, qb, w)
+            return _between(t, times_w, pos_w, quat_w, bisect.bisect_right(times_w, t))
         times = self.times
         i = int(np.searchsorted(times, t, side="right"))
         if i <= 0:
             return np.asarray(self.pos[0], dtype=float).tolist(), self.quat[0]
         if i >= len(times):
             return np.asarray(self.pos[-1], dtype=float).tolist(), self.quat[-1]
-        a, b = float(times[i - 1]), float(times[i])
-        w = 0.0 if b <= a else (t - a) / (b - a)
-        p0, p1 = (np.asarray(self.pos[k], dtype=float).tolist() for k in (i - 1, i))
-        pos = [p0[k] + w * (p1[k] - p0[k]) for k in range(3)]
-        qa, qb = self.quat[i - 1], self.quat[i]
-        if w == 0.0 or qa.tolist() == qb.tolist():
-            return pos, qa
-        return pos, slerp(qa, qb, w)
+        two = slice(i - 1, i + 1)
+        ts, ps, qs = (np.asarray(x[two], dtype=float).tolist() for x in (times, self.pos, self.quat))
+        return _between(t, ts, ps, qs, 1)
 
     def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""
