@@ -99,16 +99,26 @@ class LowPass:
         y = self._y
         if y is None or self.tau == 0.0:
             self._y = x.copy()
-        elif x.ndim == 1 and y.shape == x.shape:  # every step: in Python floats, numpy's roundings
-            self._y = np.array(self._next(y.tolist(), x.tolist(), dt))
+        elif x.ndim == 1 and self.running(len(x)):  # every step: in Python floats, numpy's roundings
+            return np.array(self.step(x.tolist(), dt))
         else:
             self._y = y + (x - y) * (dt / (self.tau + dt))
         return self._y.copy()
 
-    def _next(self, y: list[float], x: list[float], dt: float) -> list[float]:
-        """One step of the filter on Python floats (the same roundings as the array expression)."""
-        k = dt / (self.tau + dt)
-        return [a + (b - a) * k for a, b in zip(y, x, strict=True)]
+    def running(self, n: int) -> bool:
+        """Whether the next sample of ``n`` values takes :meth:`step`: the filter has started on
+        samples of that many and smooths."""
+        y = self._y
+        return y is not None and self.tau != 0.0 and y.shape == (n,)
+
+    def step(self, x: list[float], dt: float) -> list[float]:
+        """:meth:`__call__` on Python floats where the filter is :meth:`running` (the same values),
+        without the arrays: for the sensor chain's every step."""
+        assert self._y is not None
+        k = dt / (self.tau + dt)  # the array expression's roundings, element by element
+        out = [a + (b - a) * k for a, b in zip(self._y.tolist(), x, strict=True)]
+        self._y = np.array(out)
+        return out
 
 
 @dataclass
@@ -167,12 +177,10 @@ class WrenchConditioner:
     def __call__(self, force: np.ndarray, torque: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         f, t = self.noise(force, torque)
         lp = self._filter
-        y = lp._y
-        if y is None or lp.tau == 0.0 or f.shape != (3,) or t.shape != (3,) or y.shape != (6,):
+        if f.shape != (3,) or t.shape != (3,) or not lp.running(6):
             y = lp(np.concatenate([f, t]), dt)
             return y[:3], y[3:]
-        out = lp._next(y.tolist(), f.tolist() + t.tolist(), dt)  # every step: what lp(...) does
-        lp._y = np.array(out)
+        out = lp.step(f.tolist() + t.tolist(), dt)  # every step: what lp(...) does
         return np.array(out[:3]), np.array(out[3:])
 
 
