@@ -355,14 +355,14 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
         "new KeyboardEvent(t, {key: 'l', bubbles: true})); }"
     )
     wait_for(lambda: float(demo.target()[0][0]) > x0 + 1e-4, timeout=5, what="the tap's step")
-    wait_for(lambda: demo.keys.held.idle, timeout=5, what="the key's release")
+    wait_for(lambda: demo.keys.idle, timeout=5, what="the key's release")
     step = demo.simulation_panel.jog.step
     assert float(demo.target()[0][0]) == pytest.approx(x0 + step, abs=1e-6)
     z0 = held_z(demo)
     page.keyboard.down("u")  # held: smooth motion at the set speed
     time.sleep(1.0)
     page.keyboard.up("u")
-    wait_for(lambda: demo.keys.held.idle, timeout=5, what="the key's release")
+    wait_for(lambda: demo.keys.idle, timeout=5, what="the key's release")
     moved = held_z(demo) - z0
     speed = demo.simulation_panel.jog.speed
     # held 1 s (the page may see the release later when busy: as long as it saw the key held)

@@ -31,6 +31,7 @@ class KeysPanel:
         self.status = status
         self.held = HeldKeys()
         self._moving = threading.Lock()  # one move at a time: no step lost between two threads
+        self._reporting = 0  # reports being handled: their steps and corrections not all made yet
 
     def build(self, gui: viser.GuiApi) -> None:
         keys = gui.add_text("Jog keys held", initial_value="", visible=False)
@@ -72,11 +73,21 @@ class KeysPanel:
     def report(self, held: str) -> None:
         """The page reports the jog keys held down: a key just pressed moves one step at once; a key
         released corrects its smooth motion to the time the page held it (:class:`HeldKeys`)."""
-        pressed, fix = self.held.report(held, time.perf_counter())
-        jog = self.simulation.jog
-        self.move(pressed, jog.step, jog.angle)
-        for key, seconds in fix.items():  # a release: exactly as long as the page held the key
-            self.move([key], jog.speed * seconds, jog.turn * seconds)
+        self._reporting += 1
+        try:
+            pressed, fix = self.held.report(held, time.perf_counter())
+            jog = self.simulation.jog
+            self.move(pressed, jog.step, jog.angle)
+            for key, seconds in fix.items():  # a release: exactly as long as the page held the key
+                self.move([key], jog.speed * seconds, jog.turn * seconds)
+        finally:
+            self._reporting -= 1
+
+    @property
+    def idle(self) -> bool:
+        """No key held or still to be released, and every report's steps and corrections made: the
+        target stays where it is."""
+        return not self._reporting and self.held.idle
 
     def tick(self) -> None:
         """Keys held longer than a press move on at the set speed (called every published frame)."""
