@@ -37,9 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from dlovr.execution.demo_track import load_track
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.recovery import Recovery
-from dlovr.execution.run import find_recording, load_track, resolve_scene
+from dlovr.execution.run import find_recording, resolve_scene
 from dlovr.execution.trials import TrialSetup, goal_check_counts, replan_counts, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces

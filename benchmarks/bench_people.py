@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
+from dlovr.execution.demo_track import load_track
 from dlovr.execution.executor import ExecOptions
-from dlovr.execution.run import load_track, resolve_scene
+from dlovr.execution.run import resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces

@@ -25,9 +25,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from dlovr.execution.demo_track import load_track
 from dlovr.execution.engine import execute
 from dlovr.execution.executor import ExecOptions
-from dlovr.execution.run import find_recording, load_track, resolve_scene
+from dlovr.execution.run import find_recording, resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trial
 from dlovr.execution.variation import parse_vary, perturb
 from dlovr.geometry import scene_pieces

@@ -60,8 +60,9 @@ def _step_digest(rec) -> tuple:
 def run_program(name: str, trial: int) -> dict:
     """Sample program ``name`` through the executor on trial ``trial``'s perturbed scene, then its
     open-loop replay: every step's digest, the events and both results (wall times left out)."""
+    from dlovr.execution.demo_track import load_track
     from dlovr.execution.executor import ExecOptions
-    from dlovr.execution.run import find_recording, load_track, resolve_scene
+    from dlovr.execution.run import find_recording, resolve_scene
     from dlovr.execution.run import run_openloop as openloop
     from dlovr.execution.run import run_program as program_run
     from dlovr.execution.variation import parse_vary, perturb

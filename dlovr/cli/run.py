@@ -321,7 +321,8 @@ def _exec_options(a: RunArgs, n: Numbers) -> Any:
 def _scene_track(program: Any, a: RunArgs) -> tuple[Any, Any]:
     """The scene ``program`` runs in and its demonstration's track (None when not needed, or not
     found and not required)."""
-    from dlovr.execution.run import POSES_INSTEAD, find_recording, load_track, not_found, resolve_scene
+    from dlovr.execution.demo_track import load_track
+    from dlovr.execution.run import POSES_INSTEAD, find_recording, not_found, resolve_scene
 
     try:
         rec_path = find_recording(program, a.recording)

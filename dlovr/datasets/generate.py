@@ -40,9 +40,10 @@ def trial_setup(
     the same options (a compiled or a network program; ``path_mode``: auto, demo or program).
     ``note`` is told when the macros cannot follow the demonstration (its recording not found), as
     ``dlovr run`` says it: another way of moving, another result."""
+    from dlovr.execution.demo_track import load_track
     from dlovr.execution.executor import ExecOptions
     from dlovr.execution.network_run import network_scene
-    from dlovr.execution.run import POSES_INSTEAD, find_recording, load_track, not_found, resolve_scene
+    from dlovr.execution.run import POSES_INSTEAD, find_recording, not_found, resolve_scene
     from dlovr.execution.trials import TrialSetup
     from dlovr.execution.variation import parse_varies
     from dlovr.geometry import scene_pieces

@@ -18,7 +18,8 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from dlovr.execution.executor import DemoTrack, Event, ExecOptions, Execution, Session, Steps, program_steps
+from dlovr.execution.demo_track import DemoTrack
+from dlovr.execution.executor import Event, ExecOptions, Execution, Session, Steps, program_steps
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult, format_network_result, network_steps
 from dlovr.execution.recovery import Recovery, recovering_steps
 from dlovr.execution.scoring import RunResult, score

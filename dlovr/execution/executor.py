@@ -30,6 +30,7 @@ from typing import Any, TypeVar, cast
 
 import numpy as np
 
+from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.motion import (
     Quat,
     ScrewPath,
@@ -358,29 +359,6 @@ class _Guard:
             fired = hit or fired
             self.peak = max(self.peak, d.signal)
         return fired
-
-
-@dataclass(frozen=True)
-class DemoTrack:
-    """The demonstration's commanded gripper trajectory: times (k,) s, positions (k, 3) m and
-    quaternions (k, 4) wxyz, world frame (``dlovr.recording.Recording.commands`` scaled to time)."""
-
-    t: np.ndarray
-    pos: np.ndarray
-    quat: np.ndarray
-    #: the force (N, world) the demonstration sensed at its end (mean over its last
-    #: :data:`GOAL_SENSE_S`), where the recording has a wrench channel: what the goal feels like
-    end_force: tuple[float, float, float] | None = None
-    #: the force (N, world) the demonstration sensed while its cable hung free at its start (mean over
-    #: :data:`FREE_WINDOW_S`): the demonstrated cable's weight, as its sensor read it
-    free_force: tuple[float, float, float] | None = None
-    #: the wrench the demonstration sensed (a :class:`dlovr.model.derivation.WrenchSeries`: times s,
-    #: force N, torque N m, world), where its recording has one: how late the program's own detectors
-    #: fire on the demonstration (:func:`demo_detection_lag`)
-    wrench: Any = None
-    #: the track is a trembling hand's, smoothed (``dlovr.execution.engine.smoothed``): beyond a
-    #: stretch the gripper goes on with the stretch's net motion, not with the hand's last 0.1 s
-    by_hand: bool = False
 
 
 #: The time (s) over which the sensed force at the end of a run (and of the demonstration) is

@@ -53,11 +53,11 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.execution.demo_track import DemoTrack, load_track
 from dlovr.execution.executor import (
     ENDED_OK,
     GRAVITY,
     START_TOL_M,
-    DemoTrack,
     MacroRun,
     Session,
     Steps,
@@ -259,15 +259,13 @@ def reference_wrench(nprog: NetworkProgram) -> Any:
 def _matching_wrench(ref: Any, path: Any) -> Any:
     """The wrench recorded in ``path`` where its commanded track is the reference track ``ref``
     (within :data:`REFERENCE_MATCH_M` at the reference's times, over the same span), else None."""
-    from dlovr.recording import Recording, RecordingError
+    from dlovr.recording import RecordingError
 
     try:
-        rec = Recording(path)
-        steps, pos, _ = rec.commands()
-        wrench = rec.wrench()
-        t = steps * rec.dt
+        track = load_track(path)
     except (RecordingError, OSError, ValueError):
         return None
+    t, pos, wrench = track.t, track.pos, track.wrench
     rt = ref.t0 + np.asarray(ref.t, float)
     if wrench is None or len(t) < 2 or max(abs(t[0] - rt[0]), abs(t[-1] - rt[-1])) > 0.05:
         return None

@@ -19,8 +19,9 @@ import json
 from pathlib import Path
 from typing import Any, overload
 
+from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.engine import Engine
-from dlovr.execution.executor import DemoTrack, Event, ExecOptions
+from dlovr.execution.executor import Event, ExecOptions
 from dlovr.execution.network_run import NetworkOptions, NetworkRunResult
 from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import fresh_simulator, not_started

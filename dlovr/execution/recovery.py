@@ -42,9 +42,9 @@ from typing import Any
 
 import numpy as np
 
+from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.executor import (
     ENDED_OK,
-    DemoTrack,
     Execution,
     Replan,
     Session,

@@ -2,7 +2,8 @@
 
 - :func:`resolve_scene`: the scene a program runs in (given, named by the program, or the one its
   demonstration was recorded in), checked against the program (:func:`check_program_scene`);
-- :func:`load_track`: the demonstration's gripper trajectory (for ``--path demo`` and the baseline);
+- :func:`demo_track`: the demonstration's gripper trajectory (:mod:`dlovr.execution.demo_track`), for
+  ``--path demo`` and the baseline;
 - :func:`find_recording`: the demonstration a program was compiled from;
 - :func:`run_program`: simulate, execute, judge (:class:`dlovr.execution.engine.Engine`) ->
   :class:`dlovr.execution.scoring.RunResult`, or a network program's
@@ -20,18 +21,16 @@ import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, cast, overload
+from typing import Any, overload
 
 import numpy as np
 
+from dlovr.execution.demo_track import DemoTrack, load_track
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import (
     FINAL_SETTLE_S,
-    FREE_WINDOW_S,
-    GOAL_SENSE_S,
     START_TOL_DEG,
     START_TOL_M,
-    DemoTrack,
     ExecOptions,
     principal_states,
 )
@@ -114,28 +113,6 @@ def resolve_scene(program: Program, scene_ref: str | None, recording: Path | Non
     scene = load_checked_scene(ref)
     check_program_scene(program, scene)
     return scene
-
-
-def load_track(path: str | Path) -> DemoTrack:
-    """The gripper trajectory a recording commanded (raises ``dlovr.recording.RecordingError``)."""
-    from dlovr.recording import Recording
-
-    rec = Recording(path)
-    steps, pos, quat = rec.commands()
-    end_force = free_force = None
-    wrench = rec.wrench()
-    if wrench is not None and len(wrench.t):
-        t1 = float(wrench.t[-1])
-        end_force = _mean3(wrench.window(t1 - GOAL_SENSE_S, t1))
-        free_force = _mean3(wrench.window(*FREE_WINDOW_S))
-    return DemoTrack(steps * rec.dt, pos, quat, end_force, free_force, wrench)
-
-
-def _mean3(rows: np.ndarray) -> tuple[float, float, float] | None:
-    """The mean of (k, 3) rows as a tuple; None without rows."""
-    if len(rows) == 0:
-        return None
-    return cast(tuple[float, float, float], tuple(float(x) for x in np.asarray(rows, float).mean(axis=0)))
 
 
 def demo_track(program: Program, recording: str | Path | None = None) -> DemoTrack | None:

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from dlovr.execution.executor import DemoTrack, ExecOptions
+from dlovr.execution.demo_track import DemoTrack
+from dlovr.execution.executor import ExecOptions
 from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import run_openloop, run_program

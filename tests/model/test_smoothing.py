@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.engine import smoothed
-from dlovr.execution.executor import DemoTrack
 from dlovr.model import smoothing as sm
 from dlovr.model.discrete import parse_discrete_situation as P
 from dlovr.model.program import PoseTrack, Program, TimedSituation, compile_program

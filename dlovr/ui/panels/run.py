@@ -19,9 +19,10 @@ from typing import Any
 
 import viser
 
+from dlovr.execution.demo_track import load_track
 from dlovr.execution.engine import Engine
 from dlovr.execution.executor import Event, ExecOptions
-from dlovr.execution.run import check_program_scene, find_recording, load_track, not_found
+from dlovr.execution.run import check_program_scene, find_recording, not_found
 from dlovr.execution.scoring import RunResult
 from dlovr.model.program import Program, ProgramError
 from dlovr.ui.app import App
