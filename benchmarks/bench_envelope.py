@@ -24,7 +24,8 @@ demonstration's commands open loop, the program's false detections over the macr
 how the sensed goal check judged the blind runs (missed goals it caught, reached goals it doubted).
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
 per row). ``--rows`` keeps the rows whose name contains one of the given words; ``--trials 5`` for a
-quick look; ``--no-replay`` and ``--blind-only`` leave columns out. The trials run through
+quick look; ``--no-replay``, ``--blind-only`` and ``--network-only`` (only the network program) leave
+columns out. The trials run through
 :func:`dlovr.execution.trials.run_trials` on ``--workers`` local processes.
 """
 
@@ -106,16 +107,9 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     out: dict[str, Any] = {"row": row.name, "vary": list(row.vary), "noise_n": row.noise,
                            "trials": args.trials, "seed": args.seed}
     t0 = time.perf_counter()
-    replay = not args.no_replay
-    blind = run_trials(TrialSetup(program=base["program"], track=base["track"], baseline=replay, **common),
-                       args.trials, workers=args.workers)
-    out["program"] = _rate(blind, "program")
-    out["replay"] = _rate(blind, "openloop") if replay else None
-    out["false"], out["macros"] = _false(blind)
-    out["goal_check"] = goal_check_counts(blind)
-    failed = [t["program"] for t in blind if not t["program"]["success"]]
-    out["first_deviations"] = [p.get("first_deviation") for p in failed]
-    if row.moves_objects and not args.blind_only:
+    if not args.network_only:
+        out.update(_blind(base, common, args))
+    if row.moves_objects and not args.blind_only and not args.network_only:
         reg = run_trials(TrialSetup(program=base["program"], track=base["track"], registered=True, **common),
                          args.trials, workers=args.workers)
         out["registered"] = _rate(reg, "program")
@@ -131,8 +125,19 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
                          args.trials, workers=args.workers)
         out["network"] = _rate(net, "program")
     out["wall_s"] = round(time.perf_counter() - t0, 1)
-    out["failed_trials"] = [t["trial"] for t in blind if not t["program"]["success"]]
     return out
+
+
+def _blind(base: dict[str, Any], common: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
+    """The blind program's columns (with the replay's unless ``--no-replay``)."""
+    replay = not args.no_replay
+    blind = run_trials(TrialSetup(program=base["program"], track=base["track"], baseline=replay, **common),
+                       args.trials, workers=args.workers)
+    failed = [t["program"] for t in blind if not t["program"]["success"]]
+    return {"program": _rate(blind, "program"), "replay": _rate(blind, "openloop") if replay else None,
+            "false": _false(blind)[0], "macros": _false(blind)[1], "goal_check": goal_check_counts(blind),
+            "first_deviations": [p.get("first_deviation") for p in failed],
+            "failed_trials": [t["trial"] for t in blind if not t["program"]["success"]]}
 
 
 def _pct(x: float | None) -> str:
@@ -145,13 +150,18 @@ def _check_text(g: dict[str, int] | None) -> str:
     return f"caught {g['caught']} of {g['missed']} missed, doubted {g['doubted']} of {g['reached']} reached"
 
 
+def _below(program: float | None, replay: float | None) -> bool:
+    return program is not None and replay is not None and program < replay
+
+
 def table(results: list[dict[str, Any]]) -> str:
     lines = ["| row | program (blind) | registered | blind + replan | network | replay | false detections "
              "| goal check |", "|---|---|---|---|---|---|---|---|"]
     for r in results:
-        below = " **below replay**" if r["replay"] is not None and r["program"] < r["replay"] else ""
-        fd = f"{r['false']} of {r['macros']} ({r['false'] / max(r['macros'], 1):.1%})"
-        cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r['program'])}{below}",
+        below = " **below replay**" if _below(r.get("program"), r.get("replay")) else ""
+        n_false, n_macros = r.get("false", 0), max(r.get("macros", 0), 1)
+        fd = "-" if "false" not in r else f"{n_false} of {r['macros']} ({n_false / n_macros:.1%})"
+        cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r.get('program'))}{below}",
                  _pct(r.get("registered")), _pct(r.get("replan")), _pct(r.get("network")),
                  _pct(r.get("replay")), fd,
                  _check_text(r.get("goal_check"))]
@@ -194,6 +204,8 @@ def main() -> None:
                     help="with --network: also the blind program recovering through it (a column)")
     ap.add_argument("--replan-only", action="store_true",
                     help="with --replan: leave the network program's own column out (faster)")
+    ap.add_argument("--network-only", action="store_true",
+                    help="with --network: only the network program's column (the blind program's left out)")
     ap.add_argument("--trials", type=int, default=50)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
@@ -219,10 +231,10 @@ def main() -> None:
     for row in todo:
         results.append(run_row(row, base, args))
         r = results[-1]
-        print(f"{row.name}: program {_pct(r['program'])}, registered {_pct(r.get('registered'))}, "
+        print(f"{row.name}: program {_pct(r.get('program'))}, registered {_pct(r.get('registered'))}, "
               f"replan {_pct(r.get('replan'))}, network {_pct(r.get('network'))}, "
               f"replay {_pct(r.get('replay'))}, "
-              f"false {r['false']}/{r['macros']} ({r['wall_s']} s)", flush=True)
+              f"false {r.get('false', '-')}/{r.get('macros', '-')} ({r['wall_s']} s)", flush=True)
         (out / "envelope.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
     text = table(results)
     (out / "envelope.md").write_text(text + "\n", encoding="utf-8")
