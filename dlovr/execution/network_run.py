@@ -505,12 +505,12 @@ class _NetworkRun:
         back, ses.back = ses.back, None
         if back is not None:  # the detection taken back by its latency, now that it has been sensed
             ses.sim.set_target(back[0], back[1])
-        searched, changed = 0.0, False
+        searched = 0.0
         if run.ended == "motion" and self._unconfirmed(choice, sensed, m):
-            searched, changed = yield from self._search(k, choice, m)
+            searched, _ = yield from self._search(k, choice, m)
             tn, _ = _true_node(self.nprog, ses.sim)
             sensed = sensed_contact_vector(ses.f, self.tare, _free_force(m, self.nopts.free_force))
-        found = self._identify(choice, run, sensed, tn, changed)
+        found = self._identify(choice, run, sensed, tn)
         sv = rounded_vector(sensed)
         if found is None:
             self._outside(k, choice, run, sv, t0)
@@ -550,12 +550,14 @@ class _NetworkRun:
         """Go on along the macro's last motion (its commanded direction and speed over its last
         :data:`SEARCH_BASE_S`, at most :data:`SEARCH_SPEED`, the orientation held) up to ``search`` m,
         sensing at every step, until
-        for :data:`SEARCH_CONFIRM_S` the sensed vector is nearer another successor's than the left
-        situation's (within ``tolerance``; a vector that fits none, as a drag's rubbing may show, is
-        not taken for a change); then hold ``sense_settle`` s. A motion that ended short of its
-        transition (objects farther than demonstrated, the groove's end beyond the drag) so reaches
-        it, where the transition shows no force step to detect. Returns how far it went (m; 0 when
-        the macro's end stood still) and whether the situation changed."""
+        for :data:`SEARCH_CONFIRM_S` the sensed vector no longer fits the left situation best (another
+        successor's fits better, or none within ``tolerance``: a contact no demonstration sensed
+        there, as the tip at the groove's end); then hold ``sense_settle`` s. That change is the
+        transition the macro searched for, as a detector's firing is: the loop then takes the planned
+        target as it does after a motion (a spontaneous transition's outcome is sensed). A motion
+        that ended short of its transition (objects farther than demonstrated, the groove's end
+        beyond the drag) so reaches it, where the transition shows no force step to detect. Returns
+        how far it went (m; 0 when the macro's end stood still) and whether the situation changed."""
         ses, sim, nopts = self.ses, self.ses.sim, self.nopts
         hist = list(self.commanded)
         if len(hist) < 2 or hist[-1][0] - hist[0][0] <= 0.0:
@@ -577,7 +579,7 @@ class _NetworkRun:
             yield
             v = sensed_contact_vector(ses.f, self.tare, free)
             where = identify(cands, v, nopts.tolerance)
-            other = other + ses.dt if where is not None and where.node != stay.node else 0.0
+            other = other + ses.dt if where is None or where.node != stay.node else 0.0
         found = other >= SEARCH_CONFIRM_S - 1e-12
         ses.emit("search", k, f"macro {k}: {'the situation changed' if found else 'nothing changed'} "
                  f"after {moved * 1000:.1f} mm")
@@ -585,17 +587,15 @@ class _NetworkRun:
         return moved, found
 
     def _identify(
-        self, choice: Choice, run: MacroRun, sensed: np.ndarray | None, true_node: str, searched: bool = False
+        self, choice: Choice, run: MacroRun, sensed: np.ndarray | None, true_node: str
     ) -> Successor | None:
         """The successor reached: the tracker's (oracle), the planned one (a macro ended by its motion,
-        not a spontaneous one, unless a search sensed the situation change), or the one whose vector
-        fits the sensed one."""
+        not a spontaneous one; searched on or not), or the one whose vector fits the sensed one."""
         plan, nopts = choice.macro, self.nopts
         if self.ses.opts.detect == "oracle":
             return next((s for s in choice.successors if s.node == true_node), None)
         borrowed = nopts.tracks and borrows_motion(self.nprog, plan, choice.node)
-        blind = nopts.blind_motion and not searched
-        if run.ended == "motion" and blind and "S" not in plan.classes and not borrowed:
+        if run.ended == "motion" and nopts.blind_motion and "S" not in plan.classes and not borrowed:
             # a transition without force signal gives the wrench nothing to tell: as a compiled
             # program does, take the demonstrated motion to have made the planned transition
             # (not a spontaneous one, whose outcome the motion does not choose, nor an instable one

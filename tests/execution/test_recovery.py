@@ -191,9 +191,9 @@ def _searcher(prog, wall_x: float, speed: float = 0.01, search: float = SEARCH_M
     top = prog.network.locate(S(TOP))
     goal = (-0.6, 0.0, -0.8)
 
-    def force_at(p):  # a contact with vector v adds -v F (F = 1 N); rubbing at 22-26 mm fits nothing
-        rub = 0.022 <= p[0] <= 0.026 and wall_x > 0.026
-        return -np.array(goal if p[0] >= wall_x else (0.0, 1.0, 0.0) if rub else (0.0, 0.0, -1.0))
+    def force_at(p):  # a contact with vector v adds -v F (F = 1 N); a 10 ms blip at 22 mm fits nothing
+        blip = 0.022 <= p[0] <= 0.0221 and wall_x > 0.0221
+        return -np.array(goal if p[0] >= wall_x else (0.0, 1.0, 0.0) if blip else (0.0, 0.0, -1.0))
 
     ses = _Ses(force_at)
     scene = SimpleNamespace(dlo=SimpleNamespace(mass=0.0))
@@ -207,8 +207,7 @@ def _searcher(prog, wall_x: float, speed: float = 0.01, search: float = SEARCH_M
 
 def test_a_macro_that_ended_by_its_motion_short_of_its_transition_searches_on_until_it_is_sensed(prog):
     """Along the macro's last motion (+x, 10 mm/s), the orientation held, until the sensed vector has
-    shown the target for SEARCH_CONFIRM_S (a vector that fits no situation on the way, rubbing, does
-    not stop it); then the loop takes the sensed situation, not the bet."""
+    shown the target for SEARCH_CONFIRM_S (a shorter blip that fits no situation does not stop it)."""
     run, ses, choice = _searcher(prog, wall_x=0.03)
     m = SimpleNamespace(detection=())
     assert run._unconfirmed(choice, np.array([0.0, 0.0, -1.0]), m)  # still the situation it left
@@ -218,6 +217,19 @@ def test_a_macro_that_ended_by_its_motion_short_of_its_transition_searches_on_un
     assert np.allclose(np.array(ses.poses)[:, 1:], [0.0, 0.3])  # straight on along +x
     assert ses.sim.target_quat.tolist() == [1.0, 0.0, 0.0, 0.0]
     assert [k for k, _ in ses.events] == ["search", "search"] and "changed" in ses.events[1][1]
+
+
+def test_a_search_stops_where_the_sensed_vector_fits_no_situation(prog):
+    """A contact no demonstration sensed there (the tip at the groove's end) is the change searched for."""
+    top = prog.network.locate(S(TOP))
+    ses = _Ses(lambda p: -np.array((0.0, 1.0, 0.0) if p[0] >= 0.025 else (0.0, 0.0, -1.0)))
+    run = _NetworkRun(prog, ses, SimpleNamespace(dlo=SimpleNamespace(mass=0.0)),
+                      NetworkOptions(take_back=False, search=SEARCH_M), start=top)
+    for i in range(51):
+        run.commanded.append((0.9 + i * 0.002, np.array([0.019 + i * 0.00002, 0.0, 0.3])))
+    choice = prog.replan(top, (0.02, 0.0, 0.3))
+    moved, changed = _drive(run._search(1, choice, SimpleNamespace(detection=())))
+    assert changed and 0.005 <= moved <= 0.005 + 0.01 * SEARCH_CONFIRM_S + 1e-4
 
 
 def test_a_search_is_bounded_slow_and_only_where_it_can_sense_the_target(prog):
