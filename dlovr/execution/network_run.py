@@ -48,8 +48,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
+from collections.abc import Generator
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -66,7 +68,8 @@ from dlovr.execution.executor import (
     run_macro,
 )
 from dlovr.model.detection import THRESHOLD_PARAM
-from dlovr.model.planning import Choice, MacroPlan, NetworkProgram, Successor, identify
+from dlovr.model.network import SENSE_HOLD_S
+from dlovr.model.planning import Choice, MacroPlan, NetworkProgram, Successor, expected_vector, identify
 from dlovr.model.program import ContactSpec, Detection, Macro, Motion, PoseTrack, ProgramError, risk
 from dlovr.model.tracks import join
 from dlovr.transforms import matrix_to_rotvec, quat_rotate, quat_to_matrix, unit
@@ -88,16 +91,35 @@ class NetworkOptions:
     reference's track, a detection is taken back by how late the same detectors fire on the reference
     demonstration's own recorded wrench (:func:`reference_wrench`), as a compiled program's is
     (``dlovr.execution.executor.detection_lag``), once the contact has been sensed at the pose where it
-    was detected (:meth:`_NetworkRun._sense`)."""
+    was detected (:meth:`_NetworkRun._sense`); ``search`` (m): a macro that ended by its motion while
+    the sensed vector still shows the situation it left goes on along its last motion up to this
+    far, sensing, until the situation changes (:meth:`_NetworkRun._search`; 0: never, as network
+    runs; a compiled program's recovery searches :data:`SEARCH_M`)."""
 
     tolerance: float = 0.8
-    sense_settle: float = 0.05
+    sense_settle: float = SENSE_HOLD_S
     free_force: float = 0.05
     max_macros: int = 50
     tracks: bool = True
     blind_motion: bool = True
     sigma: float | None = 0.25
     take_back: bool = True
+    search: float = 0.0
+
+
+#: How far (m) a recovery's network loop searches on along a macro's last motion
+#: (:meth:`_NetworkRun._search`).
+SEARCH_M = 0.02
+#: Over how much of its end (s of commanded motion) a macro's last direction and speed are taken.
+SEARCH_BASE_S = 0.1
+#: The fastest (m/s) a search goes on: a macro's end faster than this (a fast lowering) is searched on
+#: at this speed, slow enough to feel what it reaches.
+SEARCH_SPEED = 0.03
+#: How long (s) the sensed vector must show another situation than the one left for a search to stop.
+SEARCH_CONFIRM_S = 0.02
+#: How far apart (distance of unit vectors) the expected vectors of the situation left and of the
+#: planned target must be for a search to tell them apart (nearer: the search cannot sense the target).
+SEARCH_CONTRAST = 0.2
 
 
 @dataclass(frozen=True)
@@ -124,6 +146,8 @@ class NetMacro:
     #: how long (s) before its detection the transition was taken to have come: the gripper went back
     #: to where it was then after sensing (0: not taken back)
     taken_back: float = 0.0
+    #: how far (m) it searched on along its last motion before sensing (:meth:`_NetworkRun._search`)
+    searched: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -403,6 +427,10 @@ class _NetworkRun:
         self.resume: float | None = None
         self.last_end: float | None = None  # where the last macro ended on the reference's clock (s)
         self.reason, self.arrived = "", False
+        #: the commanded gripper positions of the macro's last :data:`SEARCH_BASE_S` (time s, m, world)
+        self.commanded: deque[tuple[float, np.ndarray]] = deque(
+            maxlen=max(2, round(SEARCH_BASE_S / ses.dt) + 1)
+        )
 
     def steps(self) -> Steps[None]:
         """Macros until the goal, a failure or ``max_macros``; then the motion after the goal."""
@@ -458,7 +486,8 @@ class _NetworkRun:
             self._log(k, choice, t0, float(sim.time), "final", None, self.node, classes=())
             self.path.append(self.node)
             return True
-        run = yield from run_macro(m, ses, track, t_from=self.resume)
+        self.commanded.clear()
+        run = yield from _commanded(run_macro(m, ses, track, t_from=self.resume), sim, self.commanded)
         self.resume = run.resume_at if span is not None else None
         self.last_end = None if span is None else (self.resume if self.resume is not None else span[1])
         if run.ended not in ENDED_OK:
@@ -476,13 +505,18 @@ class _NetworkRun:
         back, ses.back = ses.back, None
         if back is not None:  # the detection taken back by its latency, now that it has been sensed
             ses.sim.set_target(back[0], back[1])
+        searched = 0.0
+        if run.ended == "motion" and self._unconfirmed(choice, sensed, m):
+            searched, _ = yield from self._search(k, choice, m)
+            tn, _ = _true_node(self.nprog, ses.sim)
+            sensed = sensed_contact_vector(ses.f, self.tare, _free_force(m, self.nopts.free_force))
         found = self._identify(choice, run, sensed, tn)
         sv = rounded_vector(sensed)
         if found is None:
             self._outside(k, choice, run, sv, t0)
             return False
         lag = 0.0 if back is None else back[2]
-        self._log(k, choice, t0, run.ended_at, run.ended, sv, found.node, back=lag)
+        self._log(k, choice, t0, run.ended_at, run.ended, sv, found.node, back=lag, searched=searched)
         plan = choice.macro
         if found.node != plan.target:
             self.replans += 1
@@ -492,11 +526,71 @@ class _NetworkRun:
         self.path.append(self.node)
         return True
 
+    def _stay(self, choice: Choice) -> Successor:
+        """The situation the macro left, as a successor (probability 0): it did not move on."""
+        n = self.net.node(choice.node)
+        return Successor(n.id, n.situation, n.principal, expected_vector(n), 0.0)
+
+    def _unconfirmed(self, choice: Choice, sensed: np.ndarray | None, m: Macro) -> bool:
+        """Whether a macro that ended by its motion should search on (:meth:`_search`): searching is
+        on, the sensed vector is nearer the situation it left than any successor's, and the planned
+        target's expected vector is at least :data:`SEARCH_CONTRAST` from the left one's."""
+        if self.nopts.search <= 0.0 or self.ses.opts.detect == "oracle" or choice.macro.final:
+            return False
+        stay = self._stay(choice)
+        target = next((c for c in choice.successors if c.node == choice.macro.target), None)
+        if stay.vector is None or target is None or target.vector is None:
+            return False
+        if math.dist(stay.vector, target.vector) < SEARCH_CONTRAST:
+            return False
+        where = identify([stay, *choice.successors], sensed, self.nopts.tolerance)
+        return where is not None and where.node == stay.node
+
+    def _search(self, k: int, choice: Choice, m: Macro) -> Steps[tuple[float, bool]]:
+        """Go on along the macro's last motion (its commanded direction and speed over its last
+        :data:`SEARCH_BASE_S`, at most :data:`SEARCH_SPEED`, the orientation held) up to ``search`` m,
+        sensing at every step, until
+        for :data:`SEARCH_CONFIRM_S` the sensed vector no longer fits the left situation best (another
+        successor's fits better, or none within ``tolerance``: a contact no demonstration sensed
+        there, as the tip at the groove's end); then hold ``sense_settle`` s. That change is the
+        transition the macro searched for, as a detector's firing is: the loop then takes the planned
+        target as it does after a motion (a spontaneous transition's outcome is sensed). A motion
+        that ended short of its transition (objects farther than demonstrated, the groove's end
+        beyond the drag) so reaches it, where the transition shows no force step to detect. Returns
+        how far it went (m; 0 when the macro's end stood still) and whether the situation changed."""
+        ses, sim, nopts = self.ses, self.ses.sim, self.nopts
+        hist = list(self.commanded)
+        if len(hist) < 2 or hist[-1][0] - hist[0][0] <= 0.0:
+            return 0.0, False
+        d = hist[-1][1] - hist[0][1]
+        speed = float(np.linalg.norm(d)) / (hist[-1][0] - hist[0][0])
+        if speed < 1e-3:  # (1 mm/s) nothing to go on along
+            return 0.0, False
+        direction, free = d / np.linalg.norm(d), _free_force(m, nopts.free_force)
+        speed = min(speed, SEARCH_SPEED)
+        start, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
+        stay, cands = self._stay(choice), [self._stay(choice), *choice.successors]
+        ses.emit("search", k, f"macro {k}: still sensed at {stay.node}, not {choice.macro.target}: going on "
+                 f"along its last motion ({speed * 1000:.0f} mm/s) up to {nopts.search * 1000:.0f} mm")
+        step, moved, other = speed * ses.dt, 0.0, 0.0
+        while moved + step <= nopts.search + 1e-12 and other < SEARCH_CONFIRM_S - 1e-12:
+            moved += step
+            ses.step(start + moved * direction, quat)
+            yield
+            v = sensed_contact_vector(ses.f, self.tare, free)
+            where = identify(cands, v, nopts.tolerance)
+            other = other + ses.dt if where is None or where.node != stay.node else 0.0
+        found = other >= SEARCH_CONFIRM_S - 1e-12
+        ses.emit("search", k, f"macro {k}: {'the situation changed' if found else 'nothing changed'} "
+                 f"after {moved * 1000:.1f} mm")
+        yield from _hold_target(ses, nopts.sense_settle)
+        return moved, found
+
     def _identify(
         self, choice: Choice, run: MacroRun, sensed: np.ndarray | None, true_node: str
     ) -> Successor | None:
         """The successor reached: the tracker's (oracle), the planned one (a macro ended by its motion,
-        not a spontaneous one), or the one whose vector fits the sensed one."""
+        not a spontaneous one; searched on or not), or the one whose vector fits the sensed one."""
         plan, nopts = choice.macro, self.nopts
         if self.ses.opts.detect == "oracle":
             return next((s for s in choice.successors if s.node == true_node), None)
@@ -538,6 +632,7 @@ class _NetworkRun:
         classes: tuple[str, ...] | None = None,
         reason: str = "",
         back: float = 0.0,
+        searched: float = 0.0,
     ) -> None:
         """Append the :class:`NetMacro` of macro ``k`` (with the tracker's node now)."""
         plan: MacroPlan = choice.macro
@@ -558,6 +653,7 @@ class _NetworkRun:
                 true_principals=tp,
                 reason=reason,
                 taken_back=back,
+                searched=searched,
             )
         )
 
@@ -592,6 +688,21 @@ class _NetworkRun:
             final_principals=final, reason=reason, path=tuple(self.path), replans=self.replans,
             macros=tuple(self.macros), sim_time=float(sim.time), wall_time=wall_time,
         )
+
+
+T = TypeVar("T")
+
+
+def _commanded(gen: Generator[None, None, T], sim: Any, into: deque[tuple[float, np.ndarray]]) -> Steps[T]:
+    """The steps of ``gen``, keeping after each the simulator's time and commanded gripper position
+    (m, world) in ``into``; its result."""
+    try:
+        while True:
+            next(gen)
+            into.append((float(sim.time), np.array(sim.target_pos, dtype=float)))
+            yield
+    except StopIteration as stop:
+        return stop.value
 
 
 def network_steps(

@@ -53,6 +53,7 @@ from dlovr.execution.executor import (
     program_steps,
 )
 from dlovr.execution.network_run import (
+    SEARCH_M,
     NetworkOptions,
     network_steps_from,
     rounded_vector,
@@ -63,16 +64,24 @@ from dlovr.model.program import Program, ProgramError
 
 #: How many times by default a run plans again through the network after its goal check failed.
 MAX_REPLANS = 2
+#: How long (s) the gripper holds after going back (:func:`retrace`) before it senses.
+RETRACE_SETTLE_S = 0.3
+
+#: Commanded gripper poses in time order: (time s, position m, quaternion wxyz), world frame.
+Poses = list[tuple[float, np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
 class Recovery:
     """What a compiled program recovers through: the network program (of the same scene and goal),
-    the most replans (:data:`MAX_REPLANS`) and the network loop's options."""
+    the most replans (:data:`MAX_REPLANS`) and the network loop's options (by default searching on
+    :data:`dlovr.execution.network_run.SEARCH_M` along a macro that ended by its motion short of its
+    transition, :meth:`dlovr.execution.network_run._NetworkRun._search`)."""
 
     network: NetworkProgram
     max_replans: int = MAX_REPLANS
-    options: NetworkOptions = field(default_factory=NetworkOptions)
+    options: NetworkOptions = field(default_factory=lambda: NetworkOptions(search=SEARCH_M))
+    retrace: bool = True
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_replans, int) and self.max_replans >= 0):
@@ -131,6 +140,19 @@ def unconfirmed_nodes(nprog: NetworkProgram, out: Execution) -> set[str] | None:
     return {str(n) for n in found} or None
 
 
+def confirmed_node(nprog: NetworkProgram, out: Execution, position: Any) -> Successor | None:
+    """The network node of the situation the program's last detection confirmed (probability 1), when
+    it has a demonstrated path to the goal from ``position`` (m, world); else None. After
+    :func:`retrace` the gripper is back where that detection left it: dragging back rubs the cable
+    against what it touches (the force then tells less than the detection did)."""
+    done = [r for r in out.runs if r.ended == "detected"]
+    nid = nprog.network.locate(done[-1].macro.to_situation) if done else None
+    if nid is None or nid == nprog.network.goal or nprog.replan(nid, position) is None:
+        return None
+    n = nprog.network.node(nid)
+    return Successor(n.id, n.situation, n.principal, expected_vector(n), 1.0)
+
+
 def near_nodes(nprog: NetworkProgram, nodes: list[Any], position: Any) -> list[Any]:
     """Those of ``nodes`` the demonstrations entered near ``position`` (m, world), by the rule the
     planner picks departures by (:meth:`dlovr.model.planning.NetworkProgram.applicable`): a node's
@@ -156,14 +178,18 @@ def recovering_steps(
     of the module docstring; the attempts land in ``out.replans``."""
     from dlovr.sim import SimulationDiverged
 
-    yield from program_steps(program, ses, out, track)
+    commanded: Poses = []
+    yield from _commanded_poses(program_steps(program, ses, out, track), ses, commanded)
     if out.diverged is not None or not program.goal:
         return
     try:
         if out.runs and out.runs[-1].ended not in ENDED_OK:  # stopped at a macro: what was reached?
             yield from final_hold(ses, out, track)
         while out.goal_sensed is False and len(out.replans) < recovery.max_replans:
-            attempt = yield from _replan(ses, out, track, recovery, scene)
+            back = 0.0
+            if not out.replans and recovery.retrace:
+                back = yield from retrace(ses, out, commanded)
+            attempt = yield from _replan(ses, out, track, recovery, scene, back > 0.0)
             out.replans.append(attempt)
             if not attempt.node:
                 break
@@ -175,25 +201,73 @@ def recovering_steps(
     out.sim_time = float(sim.time)
 
 
+def _commanded_poses(gen: Steps[Any], ses: Session, into: Poses) -> Steps[None]:
+    """The steps of ``gen``, keeping after each the time (s) and the commanded gripper pose (m,
+    wxyz, world) in ``into``, where it changed."""
+    sim = ses.sim
+    try:
+        while True:
+            next(gen)
+            pos, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
+            if not into or not (np.array_equal(pos, into[-1][1]) and np.array_equal(quat, into[-1][2])):
+                into.append((float(sim.time), pos, quat))
+            yield
+    except StopIteration:
+        return
+
+
+def retrace(ses: Session, out: Execution, commanded: Poses) -> Steps[float]:
+    """Go back along the commanded motion, at its own pace, to where the program's last detection
+    left the gripper, when macros ran after it: they ended by their motion (bets nothing sensed) or
+    failed, so the gripper is where the demonstration's went, not where the cable is; from the last
+    detection the network loop repeats their motions and searches on where one ended short of its
+    transition. Then hold :data:`RETRACE_SETTLE_S`. Returns how long (s) the motion back took (0: not
+    gone back)."""
+    done = [r for r in out.runs if r.ended == "detected"]
+    if not done or done[-1] is out.runs[-1] or not commanded:
+        return 0.0
+    since = done[-1].ended_at  # from the pose commanded as it ended (its take-back included) on
+    first = max((i for i, c in enumerate(commanded) if c[0] <= since + 1e-9), default=0)
+    back = commanded[first:]
+    if len(back) < 2:
+        return 0.0
+    n = len(out.runs) - out.runs.index(done[-1]) - 1
+    ses.emit("retrace", 0, f"going back along the {n} macros after the last detection (macro "
+             f"{done[-1].macro.index}, {back[-1][0] - back[0][0]:.2f} s of motion)")
+    for (t1, _, _), (t0, pos, quat) in zip(back[::-1], back[-2::-1], strict=False):
+        for _ in range(max(1, round((t1 - t0) / ses.dt))):
+            ses.step(pos, quat)
+            yield
+    pos, quat = back[0][1], back[0][2]
+    for _ in range(round(RETRACE_SETTLE_S / ses.dt)):
+        ses.step(pos, quat)
+        yield
+    return back[-1][0] - back[0][0]
+
+
 def _replan(
-    ses: Session, out: Execution, track: DemoTrack | None, recovery: Recovery, scene: Any
+    ses: Session, out: Execution, track: DemoTrack | None, recovery: Recovery, scene: Any,
+    retraced: bool = False,
 ) -> Steps[Replan]:
-    """One attempt: identify the sensed situation, run the network loop from it, hold, check."""
+    """One attempt: identify the sensed situation (after a :func:`retrace`: the force sensed now), run
+    the network loop from it, hold, check."""
     sim, nopts, t0 = ses.sim, recovery.options, float(ses.sim.time)
     weight = ses.weight()
     tare = weight if weight is not None else np.zeros(3)
-    force = out.goal_force if out.goal_force is not None else ses.f
+    force = out.goal_force if out.goal_force is not None and not retraced else ses.f
     v = sensed_contact_vector(force, tare, nopts.free_force)
     sv = rounded_vector(v)
     pos = tuple(float(x) for x in sim.data.mocap_pos[sim.built.mocap_id])
     among = unconfirmed_nodes(recovery.network, out) if not out.replans else None
-    found = sensed_node(recovery.network, v, pos, nopts.tolerance, among)
+    found = confirmed_node(recovery.network, out, pos) if retraced else None
+    found = found or sensed_node(recovery.network, v, pos, nopts.tolerance, among)
     if found is None:
         why = (f"the sensed contact vector {list(sv) if sv else 'none (free space)'} fits no situation of "
                "the network with a path to the goal: not planning again")
         ses.emit("outside", 0, why)
         return Replan("", "", sv, (), False, why, out.goal_sensed, out.goal_angle, t0, float(sim.time))
-    what = f"the goal check did not confirm the goal; sensed {found.node} ({found.situation})"
+    how = "back where the last detection confirmed" if retraced and found.probability == 1.0 else "sensed"
+    what = f"the goal check did not confirm the goal; {how} {found.node} ({found.situation})"
     ses.emit("replan", 0, f"{what}: planning again through the network")
     res, arrived = yield from network_steps_from(recovery.network, ses, scene, nopts, found.node)
     yield from final_hold(ses, out, track)

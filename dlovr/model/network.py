@@ -702,17 +702,33 @@ def _edge_track(
     return stretch(demos[xs[k][0]].commands, xs[k][0], a.t, b.t)
 
 
+#: When a run senses the situation a transition led to, after entering it (s): its detectors fire
+#: about this late (the step's rise to its threshold and the filters; 38-46 ms on the peg-in-hole
+#: reference, 42 ms median over trials), then it holds :data:`SENSE_HOLD_S` and senses
+#: (``dlovr.execution.network_run``). A node's sensed vector is taken over the same window.
+SENSE_DELAY_S = 0.04
+#: How long (s) a run holds still after a detection before it senses the contact vector.
+SENSE_HOLD_S = 0.05
+
+
 def sensed_vectors(
     demos: Sequence[Demonstration],
     node_ids: Sequence[Sequence[str]],
-    settle: float = 0.05,
+    delay: float = SENSE_DELAY_S,
+    hold: float = SENSE_HOLD_S,
     floor: float = 0.02,
 ) -> dict[str, Vec3]:
-    """Per node id, the contact vector the demonstrations sensed while it held: in each occurrence
-    (after its first ``settle`` s), ``-(mean force - tare)`` with the tare the mean force in the
-    demonstration's first situation when that one touches nothing (the cable's weight), unit, or zero
-    under ``floor`` N; the occurrences' mean, normalised (zero when most were zero). ``node_ids``:
-    per demonstration, the node id of each of its states. Demonstrations without a wrench, or not
+    """Per node id, the contact vector the demonstrations sensed where a run senses it: in each
+    occurrence, over the window a run senses in after entering it (from ``delay`` s, the detection's
+    latency, for ``hold`` s, the sensing hold; from half its stay when it held less than ``delay``,
+    to its end when less than ``delay + hold``; the first situation, entered by no transition: its
+    stay after 50 ms), ``-(mean force - tare)`` with the tare the mean force
+    in the demonstration's first situation (after its first 50 ms) when that one touches nothing (the
+    cable's weight), unit, or zero under ``floor`` N; the occurrences' mean, normalised (zero when
+    most were zero). A node's force may change over a long stay (a drag pushes harder and tilts it):
+    the vector a run can compare with is the one just after the transition, not the stay's mean.
+    ``node_ids``: per
+    demonstration, the node id of each of its states. Demonstrations without a wrench, or not
     starting in free space, give none."""
     per: dict[str, list[np.ndarray]] = {}
     for d, nids in zip(demos, node_ids, strict=True):
@@ -720,12 +736,14 @@ def sensed_vectors(
         if w is None or not d.states or situation_stability(d.states[0].situation) != "free":
             continue
         first = d.states[0]
-        base = w.window(first.t + settle, first.t + first.duration)
+        base = w.window(first.t + 0.05, first.t + first.duration)  # after its first 50 ms
         if len(base) < 3:
             continue
         tare = base.mean(axis=0)
-        for s, nid in zip(d.states, nids, strict=True):
-            f = w.window(s.t + min(settle, 0.5 * s.duration), s.t + s.duration)
+        for i, (s, nid) in enumerate(zip(d.states, nids, strict=True)):
+            # the first situation was entered by no transition (the recording's start, still settling)
+            a, b = s.t + min(delay, 0.5 * s.duration), s.t + min(delay + hold, s.duration)
+            f = base if i == 0 else w.window(a, b)
             if len(f) == 0:  # held shorter than the wrench's sampling period
                 continue
             v = -(f.mean(axis=0) - tare)

@@ -5,12 +5,14 @@ a hand-made network; the simulated case is in test_network_run.py (it shares tha
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from dlovr.execution.executor import ExecOptions, Execution, Replan
-from dlovr.execution.recovery import Recovery, check_recovery, sensed_node
+from dlovr.execution.network_run import SEARCH_CONFIRM_S, SEARCH_M, SEARCH_SPEED, NetworkOptions, _NetworkRun
+from dlovr.execution.recovery import RETRACE_SETTLE_S, Recovery, check_recovery, retrace, sensed_node
 from dlovr.execution.scoring import format_result, score
 from dlovr.execution.trials import replan_counts
 from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
@@ -142,3 +144,121 @@ def test_past_bets_nothing_sensed_the_situation_is_one_the_program_aimed_at_sinc
     assert sensed_node(prog, (0, -1, 0), (0.1, 0.0, 0.3), 0.8, among).node == net.locate(S(WALL))
     out.runs = [NS(macro=m, ended="motion") for m in macros]
     assert unconfirmed_nodes(prog, out) is None  # type: ignore[arg-type]  # nothing sensed: any node
+
+
+# --------------------------------------------------------------------------------------------------
+# Searching on and going back (the network loop's search, the recovery's retrace)
+# --------------------------------------------------------------------------------------------------
+
+
+class _Ses:
+    """A session whose sensed force is ``force_at(commanded position)`` (no cable, no lag)."""
+
+    def __init__(self, force_at):
+        self.force_at, self.dt, self.events = force_at, 0.002, []
+        self.sim = SimpleNamespace(target_pos=np.array([0.02, 0.0, 0.3]),
+                                   target_quat=np.array([1.0, 0.0, 0.0, 0.0]), time=1.0)
+        self.opts = SimpleNamespace(detect="force")
+        self.f, self.poses = force_at(self.sim.target_pos), []
+
+    def step(self, pos, quat):
+        self.sim.target_pos, self.sim.target_quat = np.array(pos, float), np.array(quat, float)
+        self.sim.time += self.dt
+        self.f = self.force_at(self.sim.target_pos)
+        self.poses.append(self.sim.target_pos.copy())
+
+    def hold(self, pos, quat, seconds):
+        for _ in range(round(seconds / self.dt)):
+            self.step(pos, quat)
+            yield
+
+    def emit(self, kind, macro, text):
+        self.events.append((kind, text))
+
+
+def _drive(gen):
+    try:
+        while True:
+            next(gen)
+    except StopIteration as stop:
+        return stop.value
+
+
+def _searcher(prog, wall_x: float, speed: float = 0.01, search: float = SEARCH_M):
+    """A network loop at TOP (the tip pressed down, vector -z) whose macro toward the goal (vector
+    (-0.6, 0, -0.8)) ended by its motion at x = 0.02 m, moving along +x at ``speed``; the goal's
+    contact begins at ``wall_x``."""
+    top = prog.network.locate(S(TOP))
+    goal = (-0.6, 0.0, -0.8)
+
+    def force_at(p):  # a contact with vector v adds -v F (F = 1 N); a 10 ms blip at 22 mm fits nothing
+        blip = 0.022 <= p[0] <= 0.0221 and wall_x > 0.0221
+        return -np.array(goal if p[0] >= wall_x else (0.0, 1.0, 0.0) if blip else (0.0, 0.0, -1.0))
+
+    ses = _Ses(force_at)
+    scene = SimpleNamespace(dlo=SimpleNamespace(mass=0.0))
+    run = _NetworkRun(prog, ses, scene, NetworkOptions(take_back=False, search=search), start=top)
+    for i in range(51):  # the macro's last 0.1 s of commanded motion
+        run.commanded.append((0.9 + i * 0.002, np.array([0.02 - speed * (0.1 - i * 0.002), 0.0, 0.3])))
+    choice = prog.replan(top, (0.02, 0.0, 0.3))
+    assert choice is not None and choice.macro.target == prog.network.goal
+    return run, ses, choice
+
+
+def test_a_macro_that_ended_by_its_motion_short_of_its_transition_searches_on_until_it_is_sensed(prog):
+    """Along the macro's last motion (+x, 10 mm/s), the orientation held, until the sensed vector has
+    shown the target for SEARCH_CONFIRM_S (a shorter blip that fits no situation does not stop it)."""
+    run, ses, choice = _searcher(prog, wall_x=0.03)
+    m = SimpleNamespace(detection=())
+    assert run._unconfirmed(choice, np.array([0.0, 0.0, -1.0]), m)  # still the situation it left
+    assert not run._unconfirmed(choice, np.array([-0.6, 0.0, -0.8]), m)  # the target: confirmed
+    moved, changed = _drive(run._search(1, choice, m))
+    assert changed and 0.010 <= moved <= 0.010 + 0.01 * SEARCH_CONFIRM_S + 1e-4
+    assert np.allclose(np.array(ses.poses)[:, 1:], [0.0, 0.3])  # straight on along +x
+    assert ses.sim.target_quat.tolist() == [1.0, 0.0, 0.0, 0.0]
+    assert [k for k, _ in ses.events] == ["search", "search"] and "changed" in ses.events[1][1]
+
+
+def test_a_search_stops_where_the_sensed_vector_fits_no_situation(prog):
+    """A contact no demonstration sensed there (the tip at the groove's end) is the change searched for."""
+    top = prog.network.locate(S(TOP))
+    ses = _Ses(lambda p: -np.array((0.0, 1.0, 0.0) if p[0] >= 0.025 else (0.0, 0.0, -1.0)))
+    run = _NetworkRun(prog, ses, SimpleNamespace(dlo=SimpleNamespace(mass=0.0)),
+                      NetworkOptions(take_back=False, search=SEARCH_M), start=top)
+    for i in range(51):
+        run.commanded.append((0.9 + i * 0.002, np.array([0.019 + i * 0.00002, 0.0, 0.3])))
+    choice = prog.replan(top, (0.02, 0.0, 0.3))
+    moved, changed = _drive(run._search(1, choice, SimpleNamespace(detection=())))
+    assert changed and 0.005 <= moved <= 0.005 + 0.01 * SEARCH_CONFIRM_S + 1e-4
+
+
+def test_a_search_is_bounded_slow_and_only_where_it_can_sense_the_target(prog):
+    run, ses, choice = _searcher(prog, wall_x=0.05)  # 3 cm on: beyond the search
+    m = SimpleNamespace(detection=())
+    moved, changed = _drive(run._search(1, choice, m))
+    assert not changed and moved == pytest.approx(SEARCH_M, abs=2e-4)
+    run, ses, choice = _searcher(prog, wall_x=0.025, speed=0.35)  # a fast lowering: searched slowly
+    t0 = ses.sim.time
+    moved, changed = _drive(run._search(1, choice, m))
+    assert changed and ses.sim.time - t0 >= moved / SEARCH_SPEED and SEARCH_SPEED <= 0.05
+    run, ses, choice = _searcher(prog, wall_x=0.03, speed=0.0)  # the macro ended standing still
+    assert _drive(run._search(1, choice, m)) == (0.0, False) and ses.poses == []
+    run, _, choice = _searcher(prog, wall_x=0.03, search=0.0)  # network runs do not search
+    assert not run._unconfirmed(choice, np.array([0.0, 0.0, -1.0]), m)
+
+
+def test_a_recovery_first_goes_back_along_its_bets_to_its_last_detection():
+    """The macros after the last detection ended by their motion: the gripper goes back along the
+    commanded poses, in reverse at their pace, to the pose commanded when that detection ended."""
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    poses = [(t, np.array([x, 0.0, 0.3]), q) for t, x in ((0.5, 0.0), (1.0, 0.01), (1.5, 0.02), (2.0, 0.03))]
+    runs = [SimpleNamespace(ended="detected", ended_at=1.0, macro=SimpleNamespace(index=5)),
+            SimpleNamespace(ended="motion", ended_at=2.0, macro=SimpleNamespace(index=6))]
+    ses = _Ses(lambda p: np.zeros(3))
+    back = _drive(retrace(ses, SimpleNamespace(runs=runs), poses))  # type: ignore[arg-type]
+    assert back == pytest.approx(1.0)
+    xs = [round(float(p[0]), 4) for p in ses.poses]
+    assert xs[0] == 0.02 and xs[-1] == 0.01 and 0.0 not in xs and 0.03 not in xs
+    assert len(xs) == round(1.0 / ses.dt) + round(RETRACE_SETTLE_S / ses.dt)
+    # nothing ran after the last detection: nothing to go back along
+    assert _drive(retrace(ses, SimpleNamespace(runs=runs[:1]), poses)) == 0.0  # type: ignore[arg-type]

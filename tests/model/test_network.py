@@ -10,13 +10,17 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from dlovr.model.derivation import WrenchSeries
 from dlovr.model.discrete import DiscreteSituation, parse_discrete_situation
 from dlovr.model.network import (
+    SENSE_DELAY_S,
+    SENSE_HOLD_S,
     Demonstration,
     Network,
     NetworkError,
     build_network,
     edge_risk,
+    sensed_vectors,
 )
 from dlovr.model.planning import NetworkProgram, Successor, identify, reference_path
 from dlovr.model.program import PoseTrack, TimedSituation
@@ -152,6 +156,32 @@ def test_demonstrations_of_different_scenes_are_refused_with_one_line():
     assert "\n" not in msg and "b.mcap" in msg and "a.mcap" in msg and "table" in msg and "box" in msg
     with pytest.raises(NetworkError, match="no demonstrations"):
         build_network([])
+
+
+def test_a_nodes_sensed_vector_is_what_a_run_senses_just_after_entering_it():
+    """A run senses SENSE_DELAY_S (its detection's latency) + SENSE_HOLD_S (its hold) after a
+    transition: a node's expected vector is its demonstrations' force over that window, not over the
+    whole stay (in the groove the force first presses down, then the drag tilts it along -x for the
+    rest of the 2 s), nor before the window (a knock in the first 30 ms along +x)."""
+    dt, weight = 0.002, np.array([0.0, 0.0, -0.1])
+    t = np.arange(0.0, 3.0, dt)
+    force = np.tile(weight, (len(t), 1))  # free space: the cable's weight
+    v = np.zeros((len(t), 3))
+    g = t >= 1.0  # the groove, entered at 1 s
+    v[g & (t < 1.03)] = (1.0, 0.0, 0.0)
+    v[g & (t >= 1.03) & (t < 1.15)] = (0.0, 0.0, -1.0)
+    v[g & (t >= 1.15)] = (-1.0, 0.0, 0.0)
+    assert 0.03 < SENSE_DELAY_S and SENSE_DELAY_S + SENSE_HOLD_S < 0.15  # a run senses at about 0.09 s
+    force -= 0.5 * v  # a contact with vector v adds about -v F
+    d = replace(demo("A", [FREE, GROOVE], [1.0, 2.0]), wrench=WrenchSeries(t, force, np.zeros_like(force)))
+    net = build_network([d])
+    groove = net.node(node(net, S(GROOVE)))
+    np.testing.assert_allclose(groove.sensed, (0.0, 0.0, -1.0), atol=0.01)  # (the tare: to 1 s inclusive)
+    assert net.node(node(net, S(FREE))).sensed == (0.0, 0.0, 0.0)
+    # a stay shorter than the detection's latency: its second half
+    short = sensed_vectors([replace(d, states=(d.states[0], replace(d.states[1], duration=0.02)))],
+                           [["n1", "n2"]])
+    np.testing.assert_allclose(short["n2"], (1.0, 0.0, 0.0), atol=0.01)
 
 
 def test_json_round_trip_is_exact_and_versioned():
