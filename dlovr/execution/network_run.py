@@ -427,8 +427,8 @@ class _NetworkRun:
         self.resume: float | None = None
         self.last_end: float | None = None  # where the last macro ended on the reference's clock (s)
         self.reason, self.arrived = "", False
-        #: the commanded gripper positions of the macro's last :data:`SEARCH_BASE_S` (time s, m, world)
-        self.commanded: deque[tuple[float, np.ndarray]] = deque(
+        #: the commanded gripper poses of the macro's last :data:`SEARCH_BASE_S` (:data:`Pose`)
+        self.commanded: deque[Pose] = deque(
             maxlen=max(2, round(SEARCH_BASE_S / ses.dt) + 1)
         )
 
@@ -487,7 +487,7 @@ class _NetworkRun:
             self.path.append(self.node)
             return True
         self.commanded.clear()
-        run = yield from _commanded(run_macro(m, ses, track, t_from=self.resume), sim, self.commanded)
+        run = yield from commanded_poses(run_macro(m, ses, track, t_from=self.resume), sim, self.commanded)
         self.resume = run.resume_at if span is not None else None
         self.last_end = None if span is None else (self.resume if self.resume is not None else span[1])
         if run.ended not in ENDED_OK:
@@ -692,14 +692,22 @@ class _NetworkRun:
 
 T = TypeVar("T")
 
+#: Commanded gripper poses in time order: (time s, position m, quaternion wxyz), world frame.
+Pose = tuple[float, np.ndarray, np.ndarray]
 
-def _commanded(gen: Generator[None, None, T], sim: Any, into: deque[tuple[float, np.ndarray]]) -> Steps[T]:
-    """The steps of ``gen``, keeping after each the simulator's time and commanded gripper position
-    (m, world) in ``into``; its result."""
+
+def commanded_poses(
+    gen: Generator[None, None, T], sim: Any, into: deque[Pose] | list[Pose], changed_only: bool = False
+) -> Steps[T]:
+    """The steps of ``gen``, keeping after each the simulator's time and commanded gripper pose in
+    ``into`` (with ``changed_only``: only where the pose changed); its result."""
     try:
         while True:
             next(gen)
-            into.append((float(sim.time), np.array(sim.target_pos, dtype=float)))
+            pos, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
+            same = bool(into) and np.array_equal(pos, into[-1][1]) and np.array_equal(quat, into[-1][2])
+            if not (changed_only and same):
+                into.append((float(sim.time), pos, quat))
             yield
     except StopIteration as stop:
         return stop.value

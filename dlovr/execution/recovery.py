@@ -55,6 +55,8 @@ from dlovr.execution.executor import (
 from dlovr.execution.network_run import (
     SEARCH_M,
     NetworkOptions,
+    Pose,
+    commanded_poses,
     network_steps_from,
     rounded_vector,
     sensed_contact_vector,
@@ -67,8 +69,6 @@ MAX_REPLANS = 2
 #: How long (s) the gripper holds after going back (:func:`retrace`) before it senses.
 RETRACE_SETTLE_S = 0.3
 
-#: Commanded gripper poses in time order: (time s, position m, quaternion wxyz), world frame.
-Poses = list[tuple[float, np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -178,8 +178,8 @@ def recovering_steps(
     of the module docstring; the attempts land in ``out.replans``."""
     from dlovr.sim import SimulationDiverged
 
-    commanded: Poses = []
-    yield from _commanded_poses(program_steps(program, ses, out, track), ses, commanded)
+    commanded: list[Pose] = []
+    yield from commanded_poses(program_steps(program, ses, out, track), ses.sim, commanded, changed_only=True)
     if out.diverged is not None or not program.goal:
         return
     try:
@@ -201,22 +201,7 @@ def recovering_steps(
     out.sim_time = float(sim.time)
 
 
-def _commanded_poses(gen: Steps[Any], ses: Session, into: Poses) -> Steps[None]:
-    """The steps of ``gen``, keeping after each the time (s) and the commanded gripper pose (m,
-    wxyz, world) in ``into``, where it changed."""
-    sim = ses.sim
-    try:
-        while True:
-            next(gen)
-            pos, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
-            if not into or not (np.array_equal(pos, into[-1][1]) and np.array_equal(quat, into[-1][2])):
-                into.append((float(sim.time), pos, quat))
-            yield
-    except StopIteration:
-        return
-
-
-def retrace(ses: Session, out: Execution, commanded: Poses) -> Steps[float]:
+def retrace(ses: Session, out: Execution, commanded: list[Pose]) -> Steps[float]:
     """Go back along the commanded motion, at its own pace, to where the program's last detection
     left the gripper, when macros ran after it: they ended by their motion (bets nothing sensed) or
     failed, so the gripper is where the demonstration's went, not where the cable is; from the last
