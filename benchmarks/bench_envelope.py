@@ -17,7 +17,8 @@ Rows (each ``--trials`` trials from ``--seed``, the same perturbed scenes for ev
 - each ``--vary`` key alone at two sizes (``dlo.length`` 5 / 10 %, ...).
 
 Columns: the program blind, the program registered (rows that move objects), the network program
-(``--network``: a network program, e.g. from ``bench_network.py --keep DIR``), with ``--replan`` the
+(``--network``: a network program, e.g. from ``bench_network.py --keep DIR``; blind, and registered
+on rows that move objects), with ``--replan`` the
 blind program recovering through that network where its goal check says it missed the goal
 (:mod:`dlovr.execution.recovery`), the replay of the
 demonstration's commands open loop, the program's false detections over the macros it ran, and
@@ -124,6 +125,10 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
         net = run_trials(TrialSetup(program=base["network"], track=None, use_track=False, **common),
                          args.trials, workers=args.workers)
         out["network"] = _rate(net, "program")
+        if row.moves_objects and not args.blind_only:
+            net = run_trials(TrialSetup(program=base["network"], track=None, use_track=False, registered=True,
+                                        **common), args.trials, workers=args.workers)
+            out["network_registered"] = _rate(net, "program")
     out["wall_s"] = round(time.perf_counter() - t0, 1)
     return out
 
@@ -155,15 +160,15 @@ def _below(program: float | None, replay: float | None) -> bool:
 
 
 def table(results: list[dict[str, Any]]) -> str:
-    lines = ["| row | program (blind) | registered | blind + replan | network | replay | false detections "
-             "| goal check |", "|---|---|---|---|---|---|---|---|"]
+    lines = ["| row | program (blind) | registered | blind + replan | network | network registered | replay "
+             "| false detections | goal check |", "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         below = " **below replay**" if _below(r.get("program"), r.get("replay")) else ""
         n_false, n_macros = r.get("false", 0), max(r.get("macros", 0), 1)
         fd = "-" if "false" not in r else f"{n_false} of {r['macros']} ({n_false / n_macros:.1%})"
         cells = [f"{r['row']} ({r['trials']} trials, seed {r['seed']})", f"{_pct(r.get('program'))}{below}",
                  _pct(r.get("registered")), _pct(r.get("replan")), _pct(r.get("network")),
-                 _pct(r.get("replay")), fd,
+                 _pct(r.get("network_registered")), _pct(r.get("replay")), fd,
                  _check_text(r.get("goal_check"))]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -177,11 +182,11 @@ def plot(results: list[dict[str, Any]], path: Path) -> None:
 
     cols = [("program", "program (blind)", "tab:blue"), ("registered", "registered", "tab:green"),
             ("replan", "blind + replan", "tab:red"), ("network", "network", "tab:purple"),
-            ("replay", "replay", "tab:orange")]
+            ("network_registered", "network registered", "tab:pink"), ("replay", "replay", "tab:orange")]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.55 * len(results) + 2), 4.0))
-    w = 0.16
+    w = 0.13
     for k, (key, label, color) in enumerate(cols):
-        xs = [i + (k - 2) * w for i, r in enumerate(results) if r.get(key) is not None]
+        xs = [i + (k - 2.5) * w for i, r in enumerate(results) if r.get(key) is not None]
         ys = [r[key] for r in results if r.get(key) is not None]
         if ys:
             ax.bar(xs, ys, width=w, label=label, color=color)
@@ -232,7 +237,8 @@ def main() -> None:
         results.append(run_row(row, base, args))
         r = results[-1]
         print(f"{row.name}: program {_pct(r.get('program'))}, registered {_pct(r.get('registered'))}, "
-              f"replan {_pct(r.get('replan'))}, network {_pct(r.get('network'))}, "
+              f"replan {_pct(r.get('replan'))}, network {_pct(r.get('network'))} "
+              f"(registered {_pct(r.get('network_registered'))}), "
               f"replay {_pct(r.get('replay'))}, "
               f"false {r.get('false', '-')}/{r.get('macros', '-')} ({r['wall_s']} s)", flush=True)
         (out / "envelope.json").write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
