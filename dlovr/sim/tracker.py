@@ -153,8 +153,9 @@ class ContactTracker:
         # a number per distinct list of primitives (0: none), and the situations made from them
         self._codes: dict[tuple[Any, ...], int] = {(): 0}
         self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
+        self._g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]] = {}  # see _refreshed
         # the situation's plan (_refreshed) and its edge contacts (_edges_of)
-        self._plan: _Plan = ([], ([], _NO_EDGES[0], _NO_EDGES[1]))
+        self._plan: _Plan = ([], ([], _NO_EDGES[0], _NO_EDGES[1]), [])
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -172,6 +173,11 @@ class ContactTracker:
         if self._disc is not None:
             self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
+        # the plan of the situation that the discretizer made the current state's discrete one of, and
+        # that discretizer (None: not so made): a situation of the same plan is discretized again by
+        # its contacts at the plan's redo places alone (Discretizer.again)
+        self._disc_plan: tuple[_Plan, Discretizer] | None = None
+        self._z: Vec3 | None = None  # the gripper's z of the last situation made or refreshed
         # the points and vectors (with their squared length) of the situation's E contacts on edges:
         # their point-or-line decisions depend on these vectors, so the situation is made again once
         # one turns (none: it never is)
@@ -225,16 +231,23 @@ class ContactTracker:
             return self._situation
         gripper_z = getattr(record, "gripper_z", None)
         z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
+        last_z = self._z
+        if z == last_z and _same_bits(z, last_z):  # the same z: the same tuple (and gripper primitives)
+            z = last_z
+        else:
+            self._z = z
         if (
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            sit = _refreshed(self._situation, pts, z, self._plan[0])
+            sit = _refreshed(self._situation, pts, z, self._plan[0], self._g_envs)
             if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
         else:  # made again, or made from the same primitives before (_structure)
             key = (len(pts), tip, *self._env_codes)
-            sit, self._plan = _structure(self._structures, key, self._env, pts, self._normal, angle, z)
+            sit, self._plan = _structure(
+                self._structures, key, self._env, pts, self._normal, angle, z, self._g_envs
+            )
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
         ks, ia, ib = self._plan[1]
         vectors = []
@@ -370,15 +383,23 @@ class ContactTracker:
         self._label_step(pts, table, arrays)
         prev = self.current
         topo = self.classify(pts, record)
-        if prev is not None and (
-            prev.topological is topo  # the cached situation, vectors and all: discretize is pure
-            or (prev.topological == topo and _vector_independent(topo))
-        ):
+        if prev is not None and prev.topological is topo:  # the cached situation: discretize is pure
             disc, same, new = prev.discrete, True, False
+        elif prev is not None and prev.topological == topo and _vector_independent(topo):
+            disc, same, new = prev.discrete, True, False
+            self._disc_plan = None  # its spans may differ from the plan's
         else:
-            disc = self._discretizer()(topo)
-            same = prev is not None and prev.discrete == disc
-            new = not same or cast(ContactState, prev).topological != topo
+            d, plan, made = self._discretizer(), self._plan, self._disc_plan
+            if prev is not None and made is not None and made[0] is plan and made[1] is d:
+                # refreshed from the plan of the last one made: equal to it but for the annotations
+                disc = d.again(prev.discrete, topo, plan[2])
+                same = disc is prev.discrete or prev.discrete == disc
+                new = not same
+            else:
+                disc = d(topo)
+                same = prev is not None and prev.discrete == disc
+                new = not same or cast(ContactState, prev).topological != topo
+            self._disc_plan = (plan, d)
         if table is not None and len(table) and self._spans[0] is topo:  # the kernel's sums
             forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
@@ -442,6 +463,7 @@ def _tuple(v: Any) -> Any:
 def _structure(
     made: dict[tuple[Any, ...], tuple[Situation, _Plan]], key: tuple[Any, ...],
     env: list[list[EnvPrimitive]], pts: np.ndarray, normal: Any, angle: float, z: Vec3,
+    g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]],
 ) -> tuple[Situation, _Plan]:
     """``situation_from_points`` of the points' primitives ``env``, the tip at ``angle`` (degrees)
     and the gripper's ``z``, and its :func:`_plan` with its :func:`_edges_of`. What it contracts
@@ -452,23 +474,30 @@ def _structure(
     same few again and again."""
     got = made.get(key)
     if got is not None:
-        return _refreshed(got[0], pts, z, got[1][0]), got[1]
+        return _refreshed(got[0], pts, z, got[1][0], g_envs), got[1]
     sit = situation_from_points(env, pts[1:] - pts[:-1], normal, tip_angle_deg=angle, gripper_z=z)
     if len(made) >= _STRUCTURES_KEPT:
         made.clear()
     items = _plan(sit, len(pts) - 1)
-    plan = (items, _edges_of(sit, items))
+    edges = _edges_of(sit, items)
+    plan = (items, edges, sorted({*edges[0], *(k for k, it in enumerate(items) if it[6])}))
     made[key] = (sit, plan)
     return sit, plan
 
 
-def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem]) -> Situation:
+def _refreshed(
+    sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem],
+    g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]],
+) -> Situation:
     """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
     from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
     its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
     cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (the
-    tracker keeps it with the situation)."""
+    tracker keeps it with the situation). ``g_envs``: by a plan's environment with the gripper (its
+    identity), that environment, the ``z`` and the one made of them last: made again only when the
+    ``z`` tuple is another (the tracker keeps one tuple while the gripper's z keeps its bits), so that
+    the discretizer finds it by identity (:class:`dlovr.model.discrete.Discretizer`)."""
     xyz = pts.tolist()  # once: a contact's two points as Python floats
     new = object.__new__
     contacts = []
@@ -477,7 +506,13 @@ def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_Pla
         dlo = new(DloPrimitive)  # the fields of a checked one: no __init__ (see _made)
         dlo.__dict__.update(kind=kind, index=i, span=span, vector=(b[0] - a[0], b[1] - a[1], b[2] - a[2]))
         if g:  # G's z is not compared: the canonical order stays
-            env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
+            got = g_envs.get(id(env))
+            if got is None or got[0] is not env or got[1] is not gripper_z:
+                if len(g_envs) >= _STRUCTURES_KEPT:
+                    g_envs.clear()
+                made = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
+                got = g_envs[id(env)] = (env, gripper_z, made)
+            env = got[2]
         c = new(Contact)
         c.__dict__.update(dlo=dlo, env=env)
         contacts.append(c)
@@ -495,8 +530,10 @@ _NO_EDGES: _EdgeVectors = (np.zeros(0, np.int64), np.zeros(0, np.int64), [])
 _PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], int, int, bool]
 
 
-#: A situation's :func:`_plan` and its :func:`_edges_of`.
-_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray, np.ndarray]]
+#: A situation's :func:`_plan`, its :func:`_edges_of` and the places of the contacts whose discrete
+#: contact can follow its annotations (:meth:`dlovr.model.discrete.Discretizer.again`): the E contacts
+#: on edges (their DLO vectors) and those with the gripper (its ``z``).
+_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray, np.ndarray], list[int]]
 
 
 def _plan(sit: Situation, n: int) -> list[_PlanItem]:
@@ -537,6 +574,12 @@ def _turned(edge_vectors: _EdgeVectors, pts: np.ndarray) -> bool:
         if nn <= 0.0 or dv < 0.0 or dv * dv < _COS2_TURN * nn:  # a zero's sign changes none of these
             return True
     return False
+
+
+def _same_bits(a: Any, b: Any) -> bool:
+    """Do two equal tuples of floats hold the same bits (the signs of their zeros too)?"""
+    sign = math.copysign
+    return 0.0 not in a or all(x != 0.0 or sign(1.0, x) == sign(1.0, y) for x, y in zip(a, b, strict=True))
 
 
 def _vector_independent(topo: Situation) -> bool:
