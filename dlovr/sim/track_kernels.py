@@ -158,6 +158,7 @@ def track_step(
     piece_map: np.ndarray,
     spans: np.ndarray,
     edges: np.ndarray,
+    edge_ref: np.ndarray,
     reuse: bool,
     gf: np.ndarray,
     gi: np.ndarray,
@@ -179,7 +180,7 @@ def track_step(
     and every query point moved by less than its slack, or within its budgets; else every pair
     (``FULL``), or the pairs of the points that moved beyond (``PARTIAL``), are labelled again and
     spliced in. Then the hits are made with hysteresis (:func:`update_hits`) and the forces summed,
-    and ``edges`` are checked (:func:`turned`).
+    and ``edges`` are checked against ``edge_ref`` (:func:`turned`).
 
     Returns (outcome, whether the kept hits changed, bad row, whether an edge turned):
     ``KEPT``/``PARTIAL``/``FULL``,
@@ -246,19 +247,21 @@ def track_step(
             return GROW, False, -1, False
     changed = update_hits(_labels(lab_i, lab_f, width).hits, work_i, work_f)
     span_forces(spans, point_of, table, w.forces)
-    return outcome, changed, -1, turned(pts, edges, params[P_COS2_TURN])
+    return outcome, changed, -1, turned(pts, edges, edge_ref, params[P_COS2_TURN])
 
 
 @njit(inner=True)
-def turned(pts: np.ndarray, edges: np.ndarray, cos2: float) -> bool:
+def turned(pts: np.ndarray, edges: np.ndarray, ref: np.ndarray, cos2: float) -> bool:
     """Has the DLO vector of an edge contact turned by more than the angle whose squared cosine is
     ``cos2`` since its situation was made? ``edges`` rows: the two cable points whose difference is
-    the vector (held exactly as floats), the vector then ``v`` (3) and ``v . v``. The sums of
-    ``dlovr.transforms.dot`` written out, in its order (the tracker's Python did the same before)."""
+    the vector; ``ref``: the cable's points when the situation was made (its vectors ``v`` are
+    theirs). The sums of ``dlovr.transforms.dot`` written out, in its order (as the tracker's Python
+    did before)."""
     for e in range(edges.shape[0]):
-        ia, ib = int(edges[e, 0]), int(edges[e, 1])
+        ia, ib = edges[e, 0], edges[e, 1]
         d0, d1, d2 = pts[ib, 0] - pts[ia, 0], pts[ib, 1] - pts[ia, 1], pts[ib, 2] - pts[ia, 2]
-        v0, v1, v2, vv = edges[e, 2], edges[e, 3], edges[e, 4], edges[e, 5]
+        v0, v1, v2 = ref[ib, 0] - ref[ia, 0], ref[ib, 1] - ref[ia, 1], ref[ib, 2] - ref[ia, 2]
+        vv = v0 * v0 + v1 * v1 + v2 * v2
         dv = d0 * v0 + d1 * v1 + d2 * v2
         nn = (d0 * d0 + d1 * d1 + d2 * d2) * vv
         if nn <= 0.0 or dv < 0.0 or dv * dv < cos2 * nn:  # a zero's sign changes none of these

@@ -155,7 +155,7 @@ class ContactTracker:
         self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
         self._g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]] = {}  # see _refreshed
         # the situation's plan (_refreshed) and its edge contacts (_edges_of)
-        self._plan: _Plan = ([], ([], [], []), [])
+        self._plan: _Plan = ([], ([], _NO_PAIRS), [])
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -176,10 +176,9 @@ class ContactTracker:
         # the plan and discretizer that made the current discrete situation (None: not so; _discretized)
         self._disc_plan: tuple[_Plan, Discretizer] | None = None
         self._z: Vec3 | None = None  # the gripper's z of the last situation made or refreshed
-        # the rows of the situation's E contacts on edges (_edge_rows): their point-or-line decisions
-        # depend on their DLO vectors, so the situation is made again once one turns (_edge_turned: the
-        # kernel's check at this step)
-        self._edge_vectors: np.ndarray = _NO_EDGES
+        # the situation's edge contacts' points (_edges_of) and the cable's points when it was made: it is
+        # made again once one's DLO vector turns (_edge_turned, the kernel's check at this step)
+        self._edge_pairs, self._edge_ref = _NO_PAIRS, _NO_REF
         self._edge_turned = False
 
     def restart(self, record: Any) -> ContactState:
@@ -241,7 +240,8 @@ class ContactTracker:
             made = self._structures, key, self._env, pts, self._normal, angle, z, self._g_envs
             sit, self._plan = _structure(*made)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
-        self._edge_vectors = _edge_rows(sit, self._plan[1])
+        ks, pairs = self._plan[1]  # the vectors are those of these points (the kernel's check)
+        self._edge_pairs, self._edge_ref = (pairs, pts.copy()) if ks else (_NO_PAIRS, _NO_REF)
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -283,8 +283,8 @@ class ContactTracker:
         pmap = pm[1] if has and pm is not None else _NO_MAP
         while True:
             out, changed, bad, self._edge_turned = _track_step(
-                pts, table, has, pmap, self._spans[1], self._edge_vectors, self.reuse, self._gf, self._gi,
-                self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
+                pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse, self._gf,
+                self._gi,                self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
             )
             if out != _GROW:
                 break
@@ -504,10 +504,8 @@ def _refreshed(
     return _made(Situation, contacts=tuple(contacts))
 
 
-#: The rows of a situation's E contacts on edges as :func:`dlovr.sim.track_kernels.turned` reads them:
-#: the two points (first, second) whose difference is the DLO vector, and the vector ``(x, y, z)`` and
-#: ``x² + y² + z²`` when the situation was made (its point-or-line decisions were made from it).
-_NO_EDGES = np.zeros((0, 6))
+#: No E contacts on edges (:func:`_edges_of`'s point pairs), and no cable points kept for them.
+_NO_PAIRS, _NO_REF = np.zeros((0, 2), np.int64), np.zeros((0, 3))
 
 #: Per contact of a situation, what :func:`_refreshed` keeps of it: the DLO primitive's kind, index and
 #: span, the environment primitives, the two points whose difference is its vector, and whether the
@@ -518,7 +516,7 @@ _PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], 
 #: A situation's :func:`_plan`, its :func:`_edges_of` and the places of the contacts whose discrete
 #: contact can follow its annotations (:meth:`dlovr.model.discrete.Discretizer.again`): the E contacts
 #: on edges (their DLO vectors) and those with the gripper (its ``z``).
-_Plan = tuple[list[_PlanItem], tuple[list[int], list[int], list[int]], list[int]]
+_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray], list[int]]
 
 
 def _plan(sit: Situation, n: int) -> list[_PlanItem]:
@@ -540,11 +538,12 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     return obj
 
 
-def _edges_of(sit: Situation, plan: list[_PlanItem]) -> tuple[list[int], list[int], list[int]]:
+def _edges_of(sit: Situation, plan: list[_PlanItem]) -> tuple[list[int], np.ndarray]:
     """The E contacts on edges (:func:`_on_edge`) of ``sit``: their places in it and, from its
-    :func:`_plan`, the two points whose difference is each one's DLO vector."""
+    :func:`_plan`, the two points whose difference is each one's DLO vector (as
+    :func:`dlovr.sim.track_kernels.turned` reads them: a (k, 2) array)."""
     ks = [k for k, c in enumerate(sit.contacts) if _on_edge(c)]
-    return ks, [plan[k][4] for k in ks], [plan[k][5] for k in ks]
+    return ks, np.array([(plan[k][4], plan[k][5]) for k in ks], np.int64).reshape(-1, 2)
 
 
 def _discretized(
@@ -563,19 +562,6 @@ def _discretized(
     disc = d(topo)
     same = prev is not None and prev.discrete == disc
     return disc, same, not same or cast(ContactState, prev).topological != topo
-
-
-def _edge_rows(sit: Situation, edges: tuple[list[int], list[int], list[int]]) -> np.ndarray:
-    """The rows of ``sit``'s E contacts on edges (``edges``: :func:`_edges_of`) as
-    :func:`dlovr.sim.track_kernels.turned` reads them (:data:`_NO_EDGES`)."""
-    ks, ia, ib = edges
-    if not ks:
-        return _NO_EDGES
-    rows = []
-    for k, a, b in zip(ks, ia, ib, strict=True):
-        v0, v1, v2 = cast(Vec3, sit.contacts[k].dlo.vector)
-        rows.append((a, b, v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2))
-    return np.array(rows, dtype=float)
 
 
 def _gripper_z(record: Any, last: Vec3 | None) -> Vec3:
