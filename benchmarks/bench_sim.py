@@ -272,6 +272,7 @@ _PARTS = (
     ("dlovr.sim.tracker", "situation_from_points", "    made again (situation_from_points)"),
     ("dlovr.sim.tracker", "_refreshed", "    refreshed (_refreshed)"),
     ("dlovr.model.discrete:Discretizer", "__call__", "  the discrete situation (Discretizer)"),
+    ("dlovr.model.discrete:Discretizer", "again", "  its changing contacts only (Discretizer.again)"),
     ("dlovr.sim.tracker:ContactTracker", "_forces", "  the forces made again (_forces)"),
     ("dlovr.model.transitions:Debouncer", "push", "  the debouncer (Debouncer.push)"),
 )
