@@ -271,8 +271,8 @@ _PARTS = (
     ("dlovr.sim.tracker:ContactTracker", "classify", "  the situation (classify), of it:"),
     ("dlovr.sim.tracker", "situation_from_points", "    made again (situation_from_points)"),
     ("dlovr.sim.tracker", "_refreshed", "    refreshed (_refreshed)"),
-    ("dlovr.sim.tracker", "_turned", "    the edge vectors' turn check (_turned)"),
     ("dlovr.model.discrete:Discretizer", "__call__", "  the discrete situation (Discretizer)"),
+    ("dlovr.model.discrete:Discretizer", "again", "  its changing contacts only (Discretizer.again)"),
     ("dlovr.sim.tracker:ContactTracker", "_forces", "  the forces made again (_forces)"),
     ("dlovr.model.transitions:Debouncer", "push", "  the debouncer (Debouncer.push)"),
 )

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -598,10 +599,12 @@ class Discretizer:
         self.book, self.params, self.size, self.line_band_deg = book, params, size, line_band_deg
         # key -> [parts, the last discrete contact made of them by span, key]
         self._memo: dict[tuple[Any, ...], list[Any]] = {}
-        # the memo's entries of an E and of a V contact by the identity of an environment without the
-        # gripper (the tuple itself kept beside them): a simulation's situations share these tuples
+        # the memo's entries of an E and of a V contact by the identity of an environment (the tuple
+        # itself kept beside them; one with the gripper holds its z): a simulation's situations share
+        # these tuples
         self._by_env: dict[int, list[Any]] = {}
         self._lines: frozenset[tuple[Any, ...]] = frozenset()  # edge contacts that were line contacts
+        self._gripper: dict[tuple[Any, ...], _Parts] = {}  # a gripper contact's parts by its topology
         self._now: set[tuple[Any, ...]] | None = None  # those of the situation being made
 
     def __call__(self, situation: Situation) -> DiscreteSituation:
@@ -613,6 +616,30 @@ class Discretizer:
         finally:
             self._now = None
         return out
+
+    def again(self, last: DiscreteSituation, situation: Situation, redo: Sequence[int]) -> DiscreteSituation:
+        """``self(situation)`` for a situation whose contacts are, but for the annotations at ``redo``,
+        those of the situation that the last call made ``last`` from: the same DLO kinds, spans and
+        environment tuples, the same parameters. Only the contacts at ``redo`` are made again (those
+        whose state or vector can follow an annotation: the E contacts on edges, from their DLO
+        vector; the gripper's, from its ``z``); each other one is ``last``'s, which is what the call
+        would give (its state and vector come from the facts alone, by its topology and span).
+        ``last`` itself when every contact made again is the one it had. The point-or-line decisions
+        are remembered as by a call."""
+        self._now = set()
+        try:
+            contact, cs = self.contact, situation.contacts
+            out = list(last.contacts)
+            changed = False
+            for k in redo:
+                dc = contact(cs[k])
+                if dc is not out[k]:
+                    out[k] = dc
+                    changed = True
+            self._lines = frozenset(self._now)
+        finally:
+            self._now = None
+        return DiscreteSituation(tuple(out)) if changed else last
 
     def forget(self) -> None:
         """Forget the last situation's point-or-line decisions (the next situation starts afresh)."""
@@ -657,15 +684,37 @@ class Discretizer:
             if len(self._memo) >= self.size:
                 self._memo.clear()
                 self._by_env.clear()
-            got = self._memo[key] = [_contact_parts(contact, self.book, self.params), {}, key]
-        if not any(e.kind == "G" for e in env):  # its z takes part in the key
-            ent = self._by_env.get(id(env))
-            if ent is None or ent[0] is not env:
-                if len(self._by_env) >= self.size:
-                    self._by_env.clear()
-                ent = self._by_env[id(env)] = [env, None, None]
-            ent[1 if e_kind else 2] = got
+                self._gripper.clear()
+            got = self._memo[key] = [self._parts(contact, e_kind), {}, key]
+        ent = self._by_env.get(id(env))  # a tuple holds its z (the gripper's) for its life
+        if ent is None or ent[0] is not env:
+            if len(self._by_env) >= self.size:
+                self._by_env.clear()
+            ent = self._by_env[id(env)] = [env, None, None]
+        ent[1 if e_kind else 2] = got
         return got
+
+
+    def _parts(self, contact: Contact, e_kind: bool) -> _Parts:
+        """:func:`_contact_parts` of ``contact``: for a gripper contact, whose parts but the contact
+        vector (the gripper's z made a unit vector) come from its topology alone, those kept by its
+        DLO kind and environment (the gripper's z left out), the vector made the way
+        :func:`_contact_parts` makes it."""
+        env = contact.env
+        if contact.is_free or not any(e.kind == "G" for e in env):
+            return _contact_parts(contact, self.book, self.params)
+        key = (e_kind, env)  # an EnvPrimitive compares (and hashes) without its z
+        base = self._gripper.get(key)
+        if base is None:
+            base = self._gripper[key] = _contact_parts(contact, self.book, self.params)
+            return base
+        z = next(e.z for e in env if e.kind == "G")
+        try:
+            c = contact_vector(ContactFacts((), (), None, None, z), gripper=True)
+            vec: Vec3 | None = (float(c[0]), float(c[1]), float(c[2]))
+        except ValueError:  # a gripper contact without its z axis
+            vec = None
+        return base[0], base[1], base[2], vec, base[4]
 
 
 _SPANS_KEPT = 256

@@ -49,7 +49,8 @@ W_QPTS, W_FORCES, W_NEED_H, W_NEED_I, W_NEED_F, W_AGAIN_N, W_HEAD = range(15, 22
 L_K, L_Q, L_H, L_N, L_HEAD = 0, 1, 2, 3, 4
 # parameters (float64): radius, contact tolerance of the labels (leave), tangential tolerance, enter
 # and leave distances
-P_RADIUS, P_TOL, P_TTOL, P_ENTER, P_LEAVE = 0, 1, 2, 3, 4
+# and the least squared cosine of the angle by which an edge contact's DLO vector may turn (:func:`turned`)
+P_RADIUS, P_TOL, P_TTOL, P_ENTER, P_LEAVE, P_COS2_TURN = 0, 1, 2, 3, 4, 5
 
 
 class Work(NamedTuple):
@@ -156,6 +157,8 @@ def track_step(
     has_arrays: bool,
     piece_map: np.ndarray,
     spans: np.ndarray,
+    edges: np.ndarray,
+    edge_ref: np.ndarray,
     reuse: bool,
     gf: np.ndarray,
     gi: np.ndarray,
@@ -176,9 +179,11 @@ def track_step(
     The last labels (``lab_*``; an empty header for none) are kept when the same pairs are queried
     and every query point moved by less than its slack, or within its budgets; else every pair
     (``FULL``), or the pairs of the points that moved beyond (``PARTIAL``), are labelled again and
-    spliced in. Then the hits are made with hysteresis (:func:`update_hits`) and the forces summed.
+    spliced in. Then the hits are made with hysteresis (:func:`update_hits`) and the forces summed,
+    and ``edges`` are checked against ``edge_ref`` (:func:`turned`).
 
-    Returns (outcome, whether the kept hits changed, bad row): ``KEPT``/``PARTIAL``/``FULL``,
+    Returns (outcome, whether the kept hits changed, bad row, whether an edge turned):
+    ``KEPT``/``PARTIAL``/``FULL``,
     ``GROW`` (the labels or the work arrays need the room in the work header's ``W_NEED_*``: grow
     them, keeping their contents, and call again; nothing was changed) or ``BAD_PIECE`` (row
     ``bad row`` of the table names a piece that ``piece_map`` lacks).
@@ -206,7 +211,7 @@ def track_step(
         for i in range(nc):
             obj, piece = int(table[i, T_OBJ]), int(table[i, T_PIECE])
             if not (0 <= obj < piece_map.shape[0] and 0 <= piece < width_map) or piece_map[obj, piece] < 0:
-                return BAD_PIECE, False, i
+                return BAD_PIECE, False, i, False
             point, seg = int(table[i, T_POINT]), int(table[i, T_SEGMENT])
             if point < 0 and seg >= 0:  # on a segment: the contact projected onto it
                 ax, ay, az = pts[seg, 0], pts[seg, 1], pts[seg, 2]
@@ -239,10 +244,29 @@ def track_step(
     outcome = _outcome(reuse, k, nq, lab_i, lab_f, work_i, pairs, qpts, again)
     if outcome == FULL or outcome == PARTIAL:
         if not _relabel(outcome == FULL, k, nq, n_pieces, gf, gi, params, lab_i, lab_f, work_i, work_f):
-            return GROW, False, -1
+            return GROW, False, -1, False
     changed = update_hits(_labels(lab_i, lab_f, width).hits, work_i, work_f)
     span_forces(spans, point_of, table, w.forces)
-    return outcome, changed, -1
+    return outcome, changed, -1, turned(pts, edges, edge_ref, params[P_COS2_TURN])
+
+
+@njit(inner=True)
+def turned(pts: np.ndarray, edges: np.ndarray, ref: np.ndarray, cos2: float) -> bool:
+    """Has the DLO vector of an edge contact turned by more than the angle whose squared cosine is
+    ``cos2`` since its situation was made? ``edges`` rows: the two cable points whose difference is
+    the vector; ``ref``: the cable's points when the situation was made (its vectors ``v`` are
+    theirs). The sums of ``dlovr.transforms.dot`` written out, in its order (as the tracker's Python
+    did before)."""
+    for e in range(edges.shape[0]):
+        ia, ib = edges[e, 0], edges[e, 1]
+        d0, d1, d2 = pts[ib, 0] - pts[ia, 0], pts[ib, 1] - pts[ia, 1], pts[ib, 2] - pts[ia, 2]
+        v0, v1, v2 = ref[ib, 0] - ref[ia, 0], ref[ib, 1] - ref[ia, 1], ref[ib, 2] - ref[ia, 2]
+        vv = v0 * v0 + v1 * v1 + v2 * v2
+        dv = d0 * v0 + d1 * v1 + d2 * v2
+        nn = (d0 * d0 + d1 * d1 + d2 * d2) * vv
+        if nn <= 0.0 or dv < 0.0 or dv * dv < cos2 * nn:  # a zero's sign changes none of these
+            return True
+    return False
 
 
 @njit(inner=True)

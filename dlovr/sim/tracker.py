@@ -153,8 +153,9 @@ class ContactTracker:
         # a number per distinct list of primitives (0: none), and the situations made from them
         self._codes: dict[tuple[Any, ...], int] = {(): 0}
         self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
+        self._g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]] = {}  # see _refreshed
         # the situation's plan (_refreshed) and its edge contacts (_edges_of)
-        self._plan: _Plan = ([], ([], _NO_EDGES[0], _NO_EDGES[1]))
+        self._plan: _Plan = ([], ([], _NO_PAIRS), [])
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -172,10 +173,13 @@ class ContactTracker:
         if self._disc is not None:
             self._disc.forget()  # and the point-or-line decisions of the last step
         self._situation_env = -1  # the primitives' version the situation was made from
-        # the points and vectors (with their squared length) of the situation's E contacts on edges:
-        # their point-or-line decisions depend on these vectors, so the situation is made again once
-        # one turns (none: it never is)
-        self._edge_vectors: _EdgeVectors = _NO_EDGES
+        # the plan and discretizer that made the current discrete situation (None: not so; _discretized)
+        self._disc_plan: tuple[_Plan, Discretizer] | None = None
+        self._z: Vec3 | None = None  # the gripper's z of the last situation made or refreshed
+        # the situation's edge contacts' points (_edges_of) and the cable's points when it was made: it is
+        # made again once one's DLO vector turns (_edge_turned, the kernel's check at this step)
+        self._edge_pairs, self._edge_ref = _NO_PAIRS, _NO_REF
+        self._edge_turned = False
 
     def restart(self, record: Any) -> ContactState:
         """Forget all history (hysteresis, changes, debouncing) and start again from ``record``.
@@ -221,27 +225,23 @@ class ContactTracker:
         self._tip_held = bool(tip)
         signature = (n, self._version, tip)
         last = self._signature
-        if signature == last and self._situation is not None and not _turned(self._edge_vectors, pts):
+        if signature == last and self._situation is not None and not self._edge_turned:
             return self._situation
-        gripper_z = getattr(record, "gripper_z", None)
-        z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
+        z = self._z = _gripper_z(record, self._z)
         if (
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            sit = _refreshed(self._situation, pts, z, self._plan[0])
+            sit = _refreshed(self._situation, pts, z, self._plan[0], self._g_envs)
             if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
         else:  # made again, or made from the same primitives before (_structure)
             key = (len(pts), tip, *self._env_codes)
-            sit, self._plan = _structure(self._structures, key, self._env, pts, self._normal, angle, z)
+            made = self._structures, key, self._env, pts, self._normal, angle, z, self._g_envs
+            sit, self._plan = _structure(*made)
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
-        ks, ia, ib = self._plan[1]
-        vectors = []
-        for k in ks:
-            v0, v1, v2 = cast(Vec3, sit.contacts[k].dlo.vector)
-            vectors.append((v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2))
-        self._edge_vectors = (ia, ib, vectors) if ks else _NO_EDGES
+        ks, pairs = self._plan[1]  # the vectors are those of these points (the kernel's check)
+        self._edge_pairs, self._edge_ref = (pairs, pts.copy()) if ks else (_NO_PAIRS, _NO_REF)
         return sit
 
     def _normal(self, face: str) -> list[float]:
@@ -253,12 +253,12 @@ class ContactTracker:
 
     def _params(self) -> np.ndarray:
         """The labelling's parameters for :func:`dlovr.sim.track_kernels.track_step`: the radius (m),
-        the labels' contact tolerance (the leave one), the tangential tolerance and the centerline
-        distances at which a pair enters contact and leaves it."""
+        the labels' contact tolerance (the leave one), the tangential tolerance, the centerline
+        distances at which a pair enters contact and leaves it, and ``cos²(TURN_DEG)``."""
         tols = self._tols
         if tols is None or tols[0] != self.enter_tol or tols[1] != self.leave_tol:
             r = self.geometry.radius
-            params = np.array([r, self.leave_tol, r / 5.0, r + self.enter_tol, r + self.leave_tol])
+            params = np.array([r, self.leave_tol, r / 5, r + self.enter_tol, r + self.leave_tol, _COS2])
             tols = self._tols = (self.enter_tol, self.leave_tol, params)
         return tols[2]
 
@@ -282,9 +282,9 @@ class ContactTracker:
             pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
         pmap = pm[1] if has and pm is not None else _NO_MAP
         while True:
-            out, changed, bad = _track_step(
-                pts, table, has, pmap, self._spans[1], self.reuse, self._gf, self._gi, self._params(),
-                self._lab_i, self._lab_f, self._work_i, self._work_f,
+            out, changed, bad, self._edge_turned = _track_step(
+                pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse, self._gf,
+                self._gi,                self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
             )
             if out != _GROW:
                 break
@@ -370,15 +370,15 @@ class ContactTracker:
         self._label_step(pts, table, arrays)
         prev = self.current
         topo = self.classify(pts, record)
-        if prev is not None and (
-            prev.topological is topo  # the cached situation, vectors and all: discretize is pure
-            or (prev.topological == topo and _vector_independent(topo))
-        ):
+        if prev is not None and prev.topological is topo:  # the cached situation: discretize is pure
             disc, same, new = prev.discrete, True, False
+        elif prev is not None and prev.topological == topo and _vector_independent(topo):
+            disc, same, new = prev.discrete, True, False
+            self._disc_plan = None  # its spans may differ from the plan's
         else:
-            disc = self._discretizer()(topo)
-            same = prev is not None and prev.discrete == disc
-            new = not same or cast(ContactState, prev).topological != topo
+            d, plan = self._discretizer(), self._plan
+            disc, same, new = _discretized(d, prev, topo, plan, self._disc_plan)
+            self._disc_plan = (plan, d)
         if table is not None and len(table) and self._spans[0] is topo:  # the kernel's sums
             forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
@@ -442,6 +442,7 @@ def _tuple(v: Any) -> Any:
 def _structure(
     made: dict[tuple[Any, ...], tuple[Situation, _Plan]], key: tuple[Any, ...],
     env: list[list[EnvPrimitive]], pts: np.ndarray, normal: Any, angle: float, z: Vec3,
+    g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]],
 ) -> tuple[Situation, _Plan]:
     """``situation_from_points`` of the points' primitives ``env``, the tip at ``angle`` (degrees)
     and the gripper's ``z``, and its :func:`_plan` with its :func:`_edges_of`. What it contracts
@@ -452,42 +453,59 @@ def _structure(
     same few again and again."""
     got = made.get(key)
     if got is not None:
-        return _refreshed(got[0], pts, z, got[1][0]), got[1]
+        return _refreshed(got[0], pts, z, got[1][0], g_envs), got[1]
     sit = situation_from_points(env, pts[1:] - pts[:-1], normal, tip_angle_deg=angle, gripper_z=z)
     if len(made) >= _STRUCTURES_KEPT:
         made.clear()
     items = _plan(sit, len(pts) - 1)
-    plan = (items, _edges_of(sit, items))
+    edges = _edges_of(sit, items)
+    plan = (items, edges, sorted({*edges[0], *(k for k, it in enumerate(items) if it[6])}))
     made[key] = (sit, plan)
     return sit, plan
 
 
-def _refreshed(sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem]) -> Situation:
+def _refreshed(
+    sit: Situation, pts: np.ndarray, gripper_z: Vec3, plan: list[_PlanItem],
+    g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]] | None = None,
+) -> Situation:
     """``sit`` with the annotations that :func:`dlovr.model.topology.situation_from_points` takes
     from the cable and the gripper refreshed: each DLO primitive's vector ``D_i = P_{i+1} - P_i`` at
     its index (the last segment's at the tip) and the gripper primitive's ``z``. The same objects
     ``situation_from_points`` makes from unchanged primitives and tip decision, at a fraction of the
     cost (no contraction of every point's primitives). ``plan``: :func:`_plan` of ``sit`` (the
-    tracker keeps it with the situation)."""
+    tracker keeps it with the situation). ``g_envs`` (the tracker's, else none): by a plan's
+    environment with the gripper (its identity), that environment, the ``z`` and the one made of them
+    last: made again only when the ``z`` tuple is another (the tracker keeps one tuple while the
+    gripper's z keeps its bits, :func:`_gripper_z`), so that the discretizer finds it by identity
+    (:class:`dlovr.model.discrete.Discretizer`)."""
     xyz = pts.tolist()  # once: a contact's two points as Python floats
+    if g_envs is None:
+        g_envs = {}
     new = object.__new__
     contacts = []
     for kind, i, span, env, ia, ib, g in plan:
         a, b = xyz[ia], xyz[ib]
-        dlo = new(DloPrimitive)  # the fields of a checked one: no __init__ (see _made)
-        dlo.__dict__.update(kind=kind, index=i, span=span, vector=(b[0] - a[0], b[1] - a[1], b[2] - a[2]))
+        dlo = new(DloPrimitive)  # the fields of a checked one: no __init__ (see _made), set one by one
+        f = dlo.__dict__  # (cheaper than update's keywords)
+        f["kind"], f["index"], f["span"] = kind, i, span
+        f["vector"] = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
         if g:  # G's z is not compared: the canonical order stays
-            env = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
+            got = g_envs.get(id(env))
+            if got is None or got[0] is not env or got[1] is not gripper_z:
+                if len(g_envs) >= _STRUCTURES_KEPT:
+                    g_envs.clear()
+                made = tuple(EnvPrimitive("G", (), gripper_z) if e.kind == "G" else e for e in env)
+                got = g_envs[id(env)] = (env, gripper_z, made)
+            env = got[2]
         c = new(Contact)
-        c.__dict__.update(dlo=dlo, env=env)
+        f = c.__dict__
+        f["dlo"], f["env"] = dlo, env
         contacts.append(c)
     return _made(Situation, contacts=tuple(contacts))
 
 
-#: The points (first and second rows) and vectors ``(x, y, z, x² + y² + z²)`` of a situation's E contacts
-#: on edges, as :func:`_turned` reads them.
-_EdgeVectors = tuple[np.ndarray, np.ndarray, list[tuple[float, float, float, float]]]
-_NO_EDGES: _EdgeVectors = (np.zeros(0, np.int64), np.zeros(0, np.int64), [])
+#: No E contacts on edges (:func:`_edges_of`'s point pairs), and no cable points kept for them.
+_NO_PAIRS, _NO_REF = np.zeros((0, 2), np.int64), np.zeros((0, 3))
 
 #: Per contact of a situation, what :func:`_refreshed` keeps of it: the DLO primitive's kind, index and
 #: span, the environment primitives, the two points whose difference is its vector, and whether the
@@ -495,8 +513,10 @@ _NO_EDGES: _EdgeVectors = (np.zeros(0, np.int64), np.zeros(0, np.int64), [])
 _PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], int, int, bool]
 
 
-#: A situation's :func:`_plan` and its :func:`_edges_of`.
-_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray, np.ndarray]]
+#: A situation's :func:`_plan`, its :func:`_edges_of` and the places of the contacts whose discrete
+#: contact can follow its annotations (:meth:`dlovr.model.discrete.Discretizer.again`): the E contacts
+#: on edges (their DLO vectors) and those with the gripper (its ``z``).
+_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray], list[int]]
 
 
 def _plan(sit: Situation, n: int) -> list[_PlanItem]:
@@ -518,25 +538,45 @@ def _made(cls: type[_T], **fields: Any) -> _T:
     return obj
 
 
-def _edges_of(sit: Situation, plan: list[_PlanItem]) -> tuple[list[int], np.ndarray, np.ndarray]:
+def _edges_of(sit: Situation, plan: list[_PlanItem]) -> tuple[list[int], np.ndarray]:
     """The E contacts on edges (:func:`_on_edge`) of ``sit``: their places in it and, from its
-    :func:`_plan`, the two points whose difference is each one's DLO vector."""
+    :func:`_plan`, the two points whose difference is each one's DLO vector (as
+    :func:`dlovr.sim.track_kernels.turned` reads them: a (k, 2) array)."""
     ks = [k for k, c in enumerate(sit.contacts) if _on_edge(c)]
-    return ks, np.array([plan[k][4] for k in ks], np.int64), np.array([plan[k][5] for k in ks], np.int64)
+    return ks, np.array([(plan[k][4], plan[k][5]) for k in ks], np.int64).reshape(-1, 2)
 
 
-def _turned(edge_vectors: _EdgeVectors, pts: np.ndarray) -> bool:
-    """Has the DLO vector of an edge contact (its two points, its vector ``v`` when the situation was
-    made and ``v . v``) turned by more than ``TURN_DEG`` since (its point-or-line decision may then
-    change)? The dot products are :func:`dlovr.transforms.dot`'s sums written out."""
-    ia, ib, vectors = edge_vectors
-    if not vectors:
-        return False
-    for (d0, d1, d2), (v0, v1, v2, vv) in zip((pts[ib] - pts[ia]).tolist(), vectors, strict=True):
-        dv, nn = d0 * v0 + d1 * v1 + d2 * v2, (d0 * d0 + d1 * d1 + d2 * d2) * vv
-        if nn <= 0.0 or dv < 0.0 or dv * dv < _COS2_TURN * nn:  # a zero's sign changes none of these
-            return True
-    return False
+def _discretized(
+    d: Discretizer, prev: ContactState | None, topo: Situation, plan: _Plan,
+    made: tuple[_Plan, Discretizer] | None,
+) -> tuple[DiscreteSituation, bool, bool]:
+    """The discrete situation of ``topo`` (made from ``plan``) by ``d``, whether it equals the last
+    state's (``prev``) and whether the state is a change. ``made``: the plan and discretizer that
+    made ``prev``'s discrete situation (None: not so made); when they are these, ``topo`` equals
+    ``prev``'s situation but for the annotations, and only its contacts at the plan's redo places
+    are made again (:meth:`dlovr.model.discrete.Discretizer.again`)."""
+    if prev is not None and made is not None and made[0] is plan and made[1] is d:
+        disc = d.again(prev.discrete, topo, plan[2])
+        same = disc is prev.discrete or prev.discrete == disc
+        return disc, same, not same
+    disc = d(topo)
+    same = prev is not None and prev.discrete == disc
+    return disc, same, not same or cast(ContactState, prev).topological != topo
+
+
+def _gripper_z(record: Any, last: Vec3 | None) -> Vec3:
+    """``record.gripper_z`` as a tuple of Python floats (``(0, 0, 1)`` without one): ``last`` itself
+    when it holds the same bits (so that the gripper primitives made of it are kept, see
+    :func:`_refreshed`)."""
+    gripper_z = getattr(record, "gripper_z", None)
+    z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
+    return last if last is not None and z == last and _same_bits(z, last) else z
+
+
+def _same_bits(a: Any, b: Any) -> bool:
+    """Do two equal tuples of floats hold the same bits (the signs of their zeros too)?"""
+    sign = math.copysign
+    return 0.0 not in a or all(x != 0.0 or sign(1.0, x) == sign(1.0, y) for x, y in zip(a, b, strict=True))
 
 
 def _vector_independent(topo: Situation) -> bool:
@@ -591,7 +631,7 @@ _STRUCTURES_KEPT = 4096
 #: An edge contact's DLO vector is looked at again (its point-or-line decision made again) once it has
 #: turned by more than this since the last time (degrees): well inside the decision's 3° band.
 TURN_DEG = 0.25
-_COS2_TURN = math.cos(math.radians(TURN_DEG)) ** 2
+_COS2 = math.cos(math.radians(TURN_DEG)) ** 2
 _KEPT, _GROW = tk.KEPT, tk.GROW
 _track_step = tk.track_step
 _NO_TABLE = np.zeros((0, T_WIDTH))

@@ -402,6 +402,37 @@ def test_discretizer_gives_what_discretize_gives_annotations_and_all():
         d(parse_situation("VS/G & E3/c.F1 & VE/N"))
 
 
+def test_the_discretizer_makes_again_only_the_contacts_that_follow_annotations():
+    """Discretizer.again (a situation refreshed from the same contraction, the tracker's per-step
+    path): the same discrete situation as a full call, through the line band's hysteresis, with the
+    gripper's z and the edge contact's DLO vector changing and the other contacts kept as they were;
+    the last discrete situation itself when nothing it holds changed."""
+    import dataclasses
+
+    book = FactBook(
+        {"box.F1": ff("box.F1", UP), "box.F2": ff("box.F2", X), "a.F1": ff("a.F1", UP)},
+        [PairFact("box.F1", "box.F2", False, 270)],
+    )
+    topo = parse_situation("VS/G & E3/N & E9/(box.F1,box.F2) & E12/a.F1 & VE/box.F1")
+    full, fast = Discretizer(book, line_band_deg=3.0), Discretizer(book, line_band_deg=3.0)
+    last, names = None, []
+    for k, x in enumerate([0.0, 0.0, 0.2, 0.3, 0.2, 0.1]):  # off the crease (y): 0-16.7 deg
+        vec = (x, 1.0, 0.0)
+        c = list(topo.contacts)
+        z = (0.0, 0.1 * (k // 2), 1.0)
+        c[0] = dataclasses.replace(c[0], env=(dataclasses.replace(c[0].env[0], z=z),))
+        c[2] = dataclasses.replace(c[2], dlo=dataclasses.replace(c[2].dlo, vector=vec, span=(8, 9)))
+        sit = type(topo)(tuple(c))
+        want = full(sit)
+        got = fast(sit) if last is None else fast.again(last, sit, [0, 2])
+        assert repr(got) == repr(want) and [x.span for x in got.contacts] == [x.span for x in want.contacts]
+        if k == 1:
+            assert got is last  # nothing changed: the same z, the same decision
+        last = got
+        names.append(got.contacts[2].state.name[:5])
+    assert names == ["E/E^L", "E/E^L", "E/E^L", "E/E^P", "E/E^P", "E/E^L"]  # 11.3: held by the band, then not
+
+
 def test_the_discretizer_holds_a_line_contact_by_its_band():
     """docs/model.md 3.2 step 4: hysteresis on the point-or-line decision. A line contact on an edge stays one
     until its DLO vector is more than the parallel tolerance plus the band from the crease (10 + 3 deg);
