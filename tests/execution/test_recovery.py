@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -151,6 +152,9 @@ def test_past_bets_nothing_sensed_the_situation_is_one_the_program_aimed_at_sinc
 # --------------------------------------------------------------------------------------------------
 
 
+_Q = np.array([1.0, 0.0, 0.0, 0.0])  # the gripper's orientation, held
+
+
 class _Ses:
     """A session whose sensed force is ``force_at(commanded position)`` (no cable, no lag)."""
 
@@ -197,9 +201,9 @@ def _searcher(prog, wall_x: float, speed: float = 0.01, search: float = SEARCH_M
 
     ses = _Ses(force_at)
     scene = SimpleNamespace(dlo=SimpleNamespace(mass=0.0))
-    run = _NetworkRun(prog, ses, scene, NetworkOptions(take_back=False, search=search), start=top)
+    run = _NetworkRun(prog, cast(Any, ses), scene, NetworkOptions(take_back=False, search=search), start=top)
     for i in range(51):  # the macro's last 0.1 s of commanded motion
-        run.commanded.append((0.9 + i * 0.002, np.array([0.02 - speed * (0.1 - i * 0.002), 0.0, 0.3])))
+        run.commanded.append((0.9 + i * 0.002, np.array([0.02 - speed * (0.1 - i * 0.002), 0.0, 0.3]), _Q))
     choice = prog.replan(top, (0.02, 0.0, 0.3))
     assert choice is not None and choice.macro.target == prog.network.goal
     return run, ses, choice
@@ -209,7 +213,7 @@ def test_a_macro_that_ended_by_its_motion_short_of_its_transition_searches_on_un
     """Along the macro's last motion (+x, 10 mm/s), the orientation held, until the sensed vector has
     shown the target for SEARCH_CONFIRM_S (a shorter blip that fits no situation does not stop it)."""
     run, ses, choice = _searcher(prog, wall_x=0.03)
-    m = SimpleNamespace(detection=())
+    m = cast(Any, SimpleNamespace(detection=()))
     assert run._unconfirmed(choice, np.array([0.0, 0.0, -1.0]), m)  # still the situation it left
     assert not run._unconfirmed(choice, np.array([-0.6, 0.0, -0.8]), m)  # the target: confirmed
     moved, changed = _drive(run._search(1, choice, m))
@@ -223,18 +227,18 @@ def test_a_search_stops_where_the_sensed_vector_fits_no_situation(prog):
     """A contact no demonstration sensed there (the tip at the groove's end) is the change searched for."""
     top = prog.network.locate(S(TOP))
     ses = _Ses(lambda p: -np.array((0.0, 1.0, 0.0) if p[0] >= 0.025 else (0.0, 0.0, -1.0)))
-    run = _NetworkRun(prog, ses, SimpleNamespace(dlo=SimpleNamespace(mass=0.0)),
+    run = _NetworkRun(prog, cast(Any, ses), SimpleNamespace(dlo=SimpleNamespace(mass=0.0)),
                       NetworkOptions(take_back=False, search=SEARCH_M), start=top)
     for i in range(51):
-        run.commanded.append((0.9 + i * 0.002, np.array([0.019 + i * 0.00002, 0.0, 0.3])))
+        run.commanded.append((0.9 + i * 0.002, np.array([0.019 + i * 0.00002, 0.0, 0.3]), _Q))
     choice = prog.replan(top, (0.02, 0.0, 0.3))
-    moved, changed = _drive(run._search(1, choice, SimpleNamespace(detection=())))
+    moved, changed = _drive(run._search(1, choice, cast(Any, SimpleNamespace(detection=()))))
     assert changed and 0.005 <= moved <= 0.005 + 0.01 * SEARCH_CONFIRM_S + 1e-4
 
 
 def test_a_search_is_bounded_slow_and_only_where_it_can_sense_the_target(prog):
     run, ses, choice = _searcher(prog, wall_x=0.05)  # 3 cm on: beyond the search
-    m = SimpleNamespace(detection=())
+    m = cast(Any, SimpleNamespace(detection=()))
     moved, changed = _drive(run._search(1, choice, m))
     assert not changed and moved == pytest.approx(SEARCH_M, abs=2e-4)
     run, ses, choice = _searcher(prog, wall_x=0.025, speed=0.35)  # a fast lowering: searched slowly

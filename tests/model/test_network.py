@@ -176,6 +176,7 @@ def test_a_nodes_sensed_vector_is_what_a_run_senses_just_after_entering_it():
     d = replace(demo("A", [FREE, GROOVE], [1.0, 2.0]), wrench=WrenchSeries(t, force, np.zeros_like(force)))
     net = build_network([d])
     groove = net.node(node(net, S(GROOVE)))
+    assert groove.sensed is not None
     np.testing.assert_allclose(groove.sensed, (0.0, 0.0, -1.0), atol=0.01)  # (the tare: to 1 s inclusive)
     assert net.node(node(net, S(FREE))).sensed == (0.0, 0.0, 0.0)
     # a stay shorter than the detection's latency: its second half
