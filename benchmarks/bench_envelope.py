@@ -139,8 +139,9 @@ def _blind(base: dict[str, Any], common: dict[str, Any], args: argparse.Namespac
     blind = run_trials(TrialSetup(program=base["program"], track=base["track"], baseline=replay, **common),
                        args.trials, workers=args.workers)
     failed = [t["program"] for t in blind if not t["program"]["success"]]
+    n_false, n_macros = _false(blind)
     return {"program": _rate(blind, "program"), "replay": _rate(blind, "openloop") if replay else None,
-            "false": _false(blind)[0], "macros": _false(blind)[1], "goal_check": goal_check_counts(blind),
+            "false": n_false, "macros": n_macros, "goal_check": goal_check_counts(blind),
             "first_deviations": [p.get("first_deviation") for p in failed],
             "failed_trials": [t["trial"] for t in blind if not t["program"]["success"]]}
 

@@ -569,7 +569,8 @@ class _NetworkRun:
         direction, free = d / np.linalg.norm(d), _free_force(m, nopts.free_force)
         speed = min(speed, SEARCH_SPEED)
         start, quat = np.array(sim.target_pos, dtype=float), np.array(sim.target_quat, dtype=float)
-        stay, cands = self._stay(choice), [self._stay(choice), *choice.successors]
+        stay = self._stay(choice)
+        cands = [stay, *choice.successors]
         ses.emit("search", k, f"macro {k}: still sensed at {stay.node}, not {choice.macro.target}: going on "
                  f"along its last motion ({speed * 1000:.0f} mm/s) up to {nopts.search * 1000:.0f} mm")
         step, moved, other = speed * ses.dt, 0.0, 0.0

@@ -220,13 +220,8 @@ def retrace(ses: Session, out: Execution, commanded: list[Pose]) -> Steps[float]
     ses.emit("retrace", 0, f"going back along the {n} macros after the last detection (macro "
              f"{done[-1].macro.index}, {back[-1][0] - back[0][0]:.2f} s of motion)")
     for (t1, _, _), (t0, pos, quat) in zip(back[::-1], back[-2::-1], strict=False):
-        for _ in range(max(1, round((t1 - t0) / ses.dt))):
-            ses.step(pos, quat)
-            yield
-    pos, quat = back[0][1], back[0][2]
-    for _ in range(round(RETRACE_SETTLE_S / ses.dt)):
-        ses.step(pos, quat)
-        yield
+        yield from ses.hold(pos, quat, max(t1 - t0, ses.dt))  # at least one step
+    yield from ses.hold(back[0][1], back[0][2], RETRACE_SETTLE_S)
     return back[-1][0] - back[0][0]
 
 

@@ -283,8 +283,8 @@ class ContactTracker:
         pmap = pm[1] if has and pm is not None else _NO_MAP
         while True:
             out, changed, bad, self._edge_turned = _track_step(
-                pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse, self._gf,
-                self._gi,                self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
+                pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse,
+                self._gf, self._gi, self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
             )
             if out != _GROW:
                 break
