@@ -41,6 +41,12 @@ from dlovr.cli.common import EXIT_BAD_INPUT, UserError, finishes_on_sigterm, os_
     type=click.FloatRange(0.0, 1.0),
     help="White noise (N) of the robot's force sensor: detection thresholds respect it.",
 )
+@click.option(
+    "--calibrate",
+    is_flag=True,
+    help="Calibrate the detectors the demonstration leaves without force signal by running the "
+    "program in its scene with a few cables changed (minutes a recording; docs/programs.md).",
+)
 @cluster_option
 @finishes_on_sigterm
 @os_errors_as_user_errors
@@ -52,6 +58,7 @@ def compile_cmd(
     network_path: str | None,
     cluster: str | None,
     sensor_noise: float | None = None,
+    calibrate: bool = False,
 ) -> None:
     """Compile recordings (files or directories of *.mcap) into macro programs (JSON + text listing),
     or with --network NET.json a transition network into a network program.
@@ -64,7 +71,12 @@ def compile_cmd(
     unchanged since they were last compiled there (with the same --sensor-noise) are skipped. An
     existing program is replaced only when compile wrote it there (unchanged since) or with --force:
     a program edited by hand is kept and its recording fails (one line). A recording that cannot be read is
-    named and the others are compiled. Exit status: 0 all compiled or skipped; 2 any failed.
+    named and the others are compiled. With --calibrate, each macro whose demonstration shows no force
+    signal for its transition is run in the demonstration's scene with the cable as demonstrated, 5 %
+    shorter and longer, 0.7x and 1.4x as stiff, ended by the contact tracker, and its detection is
+    derived from the wrench sensed there where that gives a usable signal (the program says per
+    parameter and per macro; docs/programs.md, "Calibrated detection"). Exit status: 0 all compiled
+    or skipped; 2 any failed.
     """
     import os
     from pathlib import Path
@@ -96,13 +108,18 @@ def compile_cmd(
     if cluster is not None:  # workers elsewhere: absolute paths (on storage every node sees)
         paths = [p.resolve() for p in paths]
         output_dir = str(Path(output_dir).resolve()) if output_dir else None
-    tasks = [Task(str(p), (str(p), output_dir, force, sensor_noise)) for p in paths]
+    cal = None
+    if calibrate:
+        from dlovr.execution.calibration import calibrate_recording
+
+        cal = calibrate_recording
+    tasks = [Task(str(p), (str(p), output_dir, force, sensor_noise, cal)) for p in paths]
     done = sorted(
         run_batch(compile_one, tasks, workers=workers, cluster=cluster, label="compiling"),
         key=lambda d: d.index,
     )
     results = [d.value if d.ok else CompileResult(d.key, None, error=d.error) for d in done]
-    record_compiled(results, output_dir, sensor_noise)
+    record_compiled(results, output_dir, sensor_noise, calibrate)
     if _report(results, summarize(done).retried):
         raise SystemExit(EXIT_BAD_INPUT)
 

@@ -143,12 +143,16 @@ def _directions(
     return []  # T, S: the step's own direction
 
 
-def _quiet(wrench: WrenchSeries, u: np.ndarray, t0: float, t1: float, lag: float) -> float:
-    """The largest rise of the force along ``u`` (N) within ``lag`` s, between ``t0`` and ``t1``."""
+def _quiet(wrench: WrenchSeries, u: np.ndarray, t0: float, t1: float, lag: float, ends_from: float = -np.inf,
+           ) -> float:
+    """The largest rise of the force along ``u`` (N) within ``lag`` s, between ``t0`` and ``t1``
+    (only rises that end at ``ends_from`` or later: a detector armed then)."""
     a, b = np.searchsorted(wrench.t, t0, side="left"), np.searchsorted(wrench.t, t1, side="right")
     t, x = wrench.t[a:b], (wrench.force[a:b] * u).sum(axis=1)
     best, j = 0.0, 0
     for i in range(len(t)):
+        if t[i] < ends_from:
+            continue
         while t[j] < t[i] - lag - 1e-12:
             j += 1
         best = max(best, float(x[i] - x[j : i + 1].min()))
@@ -170,11 +174,15 @@ def derive(
     t_next: float,
     rules: DerivationRules | None = None,
     axes: Sequence[Vec] = (),
+    armed_at: float | None = None,
 ) -> Derived:
     """The detector parameters of class ``cls`` for a transition at ``t`` (s), the previous situation
     having held since ``t_prev`` and the new one until ``t_next``; ``released``/``established``: the
     contact vectors (unit, world) of the principal contacts the transition ends and begins;
-    ``axes``: the axes (unit, world) of those that are pinches (zero vector, docs/model.md)."""
+    ``axes``: the axes (unit, world) of those that are pinches (zero vector, docs/model.md).
+    ``armed_at`` (s): when a run's detector is armed, where it is known (a calibration run in
+    simulation, :mod:`dlovr.execution.calibration`): the quiet level is measured from then on
+    (its reference reaching back one window) instead of from :attr:`DerivationRules.armed_from`."""
     if wrench is None or len(wrench.t) == 0:
         return _default(cls, "no wrench signal in the recording")
     r = rules or DerivationRules()
@@ -189,11 +197,13 @@ def derive(
     p = dict(DEFAULT_PARAMS[cls])
     texts = {k: f"default: {cls} keeps it" for k in p}
     key = THRESHOLD_PARAM[cls]
-    armed = t_prev + r.armed_from * (t - t_prev) - r.window_s  # the reference reaches back one window
+    armed = t_prev + r.armed_from * (t - t_prev) if armed_at is None else armed_at
+    armed -= r.window_s  # the reference reaches back one window
     # up to one window before the transition: the force may start to change before the contact
     # label does (the transition's onset belongs to the step, not to the quiet level)
     quiet_to = t - r.window_s
-    quiet = _quiet(wrench, u, max(t_prev + r.gap_s, armed), quiet_to, r.window_s) if u is not None else 0.0
+    ends = -np.inf if armed_at is None else armed_at  # a known arming: rises that end after it
+    quiet = 0.0 if u is None else _quiet(wrench, u, max(t_prev + r.gap_s, armed), quiet_to, r.window_s, ends)
     thr, texts[key] = _threshold(r, size, noise, quiet, name)
     p[key] = round(thr, 6)
     lag_key = "window_s" if cls == "S" else "ref_lag_s"  # S compares over its own window

@@ -207,7 +207,9 @@ class Program:
     the demonstration's end one for the goal check to confirm the goal, derived from how far it turned
     in the demonstration while the goal held (:func:`dlovr.model.derivation.goal_tolerance_deg`);
     None (not written): no contact at the goal, or a program compiled before it existed (the executor's
-    default then)."""
+    default then). ``calibration``: what the compiler's calibration in simulation ran and what came of
+    it per macro (``dlovr compile --calibrate``, :mod:`dlovr.execution.calibration`; the calibrated
+    parameters' texts say ``calibrated: ...``); empty (not written): not calibrated."""
 
     name: str
     source: str
@@ -219,9 +221,11 @@ class Program:
     smoothing_s: float = 0.0
     smoothing: str = ""
     goal_tolerance_deg: float | None = None
+    calibration: str = ""
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
+        d.pop("calibration")
         for m in d["macros"]:
             if m["frame"] is None:
                 del m["frame"]
@@ -230,6 +234,8 @@ class Program:
             out |= {"smoothing_s": self.smoothing_s, "smoothing": self.smoothing}
         if self.goal_tolerance_deg is not None:
             out["goal_tolerance_deg"] = self.goal_tolerance_deg
+        if self.calibration:
+            out["calibration"] = self.calibration
         return {**out, "macros": d["macros"], "summary": d["summary"]}
 
     def dumps(self) -> str:
@@ -308,6 +314,8 @@ class Program:
                     lines.append(f"         {k}: {how}")
             if m.kind == "final":
                 lines.append("       to the demonstrated end pose (no detection)")
+        if self.calibration:
+            lines.append(f"calibration: {self.calibration}")
         s = self.summary
         lines.append(
             f"{s.get('macros', 0)} macros (the last one final), {s.get('risky', 0)} risky, "
@@ -536,4 +544,5 @@ def _read_program(raw: Any, source: str | Path) -> Program:
         smoothing_s=float(smoothing),
         smoothing=str(raw.get("smoothing", "")),
         goal_tolerance_deg=None if tol is None else float(tol),
+        calibration=str(raw.get("calibration", "")),
     )

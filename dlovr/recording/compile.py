@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -206,10 +206,11 @@ def for_sensor_noise(prog: Any, sigma: float) -> Any:
     return replace(prog, macros=tuple(macros))
 
 
-def _cache_key(digest: str, sensor_noise: float | None) -> str:
-    """What the compile cache keeps of a recording: its content hash, and the sensor noise its
-    program was set for (a program for a sensor is not the plain one)."""
-    return f"{digest} sensor_noise={sensor_noise!r}" if sensor_noise else digest
+def _cache_key(digest: str, sensor_noise: float | None, calibrated: bool = False) -> str:
+    """What the compile cache keeps of a recording: its content hash, the sensor noise its program
+    was set for (a program for a sensor is not the plain one) and whether it was calibrated."""
+    key = f"{digest} sensor_noise={sensor_noise!r}" if sensor_noise else digest
+    return key + " calibrated" if calibrated else key
 
 
 def _file_sha256(path: Path) -> str | None:
@@ -220,12 +221,14 @@ def _file_sha256(path: Path) -> str | None:
         return None
 
 
-def _cache_entry(recording: Path, jpath: Path, tpath: Path, sensor_noise: float | None) -> dict[str, Any]:
+def _cache_entry(
+    recording: Path, jpath: Path, tpath: Path, sensor_noise: float | None, calibrated: bool = False
+) -> dict[str, Any]:
     """The compile cache's entry of a recording just compiled: what it was compiled from (its
     :func:`_cache_key`) and the hashes of the two program files written (so that a later compile
     knows them for its own: it replaces them without --force, unlike a file edited since)."""
     return {
-        "recording": _cache_key(_sha256(recording), sensor_noise),
+        "recording": _cache_key(_sha256(recording), sensor_noise, calibrated),
         "json": _file_sha256(jpath),
         "txt": _file_sha256(tpath),
     }
@@ -242,11 +245,18 @@ def _replaceable(entry: Any, jpath: Path, tpath: Path) -> Path | None:
     return None
 
 
+#: A program's calibration in simulation (``dlovr.execution.calibration.calibrate_recording``: the
+#: program and its recording in, the program calibrated out), which the recording layer cannot import.
+Calibrate = Callable[[Any, Path], Any]
+
+
 def compile_one(
-    path: str, out_dir: str | None, force: bool = False, sensor_noise: float | None = None
+    path: str, out_dir: str | None, force: bool = False, sensor_noise: float | None = None,
+    calibrate: Calibrate | None = None,
 ) -> CompileResult:
     """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job), its
-    detections set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`)."""
+    detections calibrated in simulation by ``calibrate`` when given (``dlovr compile --calibrate``),
+    then set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`)."""
     p = Path(path)
     if p.exists() and not p.is_file():  # a device (/dev/zero) or a pipe: hashing it would never end
         why = "not a regular file (a device or a pipe), not a recording"
@@ -263,7 +273,7 @@ def compile_one(
         cache = json.loads(cache_file.read_text()) if cache_file.is_file() else {}
         entry = cache.get(p.name)
         made_from = entry.get("recording") if isinstance(entry, dict) else entry  # a string: an older cache
-        fresh = made_from == _cache_key(digest, sensor_noise)
+        fresh = made_from == _cache_key(digest, sensor_noise, calibrate is not None)
         if not force and fresh and jpath.is_file() and tpath.is_file():
             s = json.loads(jpath.read_text()).get("summary", {})
             return CompileResult(str(p), str(jpath), s.get("macros", 0), s.get("risky", 0), skipped=True)
@@ -277,6 +287,8 @@ def compile_one(
         prog, ended = _compile(p)
     except RecordingError as e:
         return CompileResult(str(p), None, error=str(e))
+    if calibrate is not None:
+        prog = calibrate(prog, p)
     if sensor_noise:
         prog = for_sensor_noise(prog, sensor_noise)
     try:  # atomic; a file that appeared meanwhile (another writer's) is kept, unless --force
@@ -289,7 +301,8 @@ def compile_one(
 
 
 def record_compiled(
-    results: Sequence[CompileResult], out_dir: str | None, sensor_noise: float | None = None
+    results: Sequence[CompileResult], out_dir: str | None, sensor_noise: float | None = None,
+    calibrated: bool = False,
 ) -> None:
     """Remember what the recordings just compiled were compiled from (content hash, sensor noise) and
     the hashes of the program files written (in the parent process; :func:`_cache_entry`). A skipped
@@ -299,7 +312,7 @@ def record_compiled(
         if r.error is None and r.json_path is not None and not r.skipped:
             jpath, tpath = program_paths(r.path, Path(r.json_path).parent)
             by_dir.setdefault(jpath.parent, {})[Path(r.path).name] = _cache_entry(
-                Path(r.path), jpath, tpath, sensor_noise
+                Path(r.path), jpath, tpath, sensor_noise, calibrated
             )
     for d, entries in by_dir.items():
         f = d / CACHE_NAME
