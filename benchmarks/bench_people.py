@@ -1,7 +1,7 @@
 """Programs from person-like demonstrations against the scripted program and their own replays.
 
 Run: ``.venv/bin/python benchmarks/bench_people.py [--scripts peg_in_hole ...] [--demos 5] [--trials 20]
-[--person 1] [--seed 0] [--workers 1] [--out DIR]``
+[--person 1] [--seed 0] [--workers 1] [--out DIR] [--calibrate]``
 
 For each built-in script (``scenes/NAME.script.toml``): ``--demos`` demonstrations played by the
 person-like demonstrator (docs/people.md; ``--person 2``: twice the default drift and tremor), recorded
@@ -10,7 +10,10 @@ with seed ``--seed`` and compiled; each program's class sequence against the sam
 count against the scripted one's, and, with ``--trials`` > 0, how often the program and its open-loop
 replay reach the goal under the standard variation (cable length +-10 %, stiffness x0.5-2, friction
 +-30 %, obstacles +-5 mm; trial seed 0). One table, one row a demonstration, then the totals per
-script. The recordings stay in ``--out`` (default: a temporary folder).
+script. The recordings stay in ``--out`` (default: a temporary folder). With ``--calibrate`` each
+program is compiled as ``dlovr compile --calibrate`` compiles it (its detections without force signal
+calibrated in simulation, docs/programs.md "Calibrated detection"; 2-4 min a demonstration), and
+``cal`` gives how many of its macros were calibrated of those without force signal.
 
 For peg-in-hole each row also gives ``corner``: how much of the drag along the groove (the gripper's
 travel along -y, mm) is left when the tip reaches the groove's corner (``V/VI``), as recorded and as
@@ -27,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dlovr.execution.calibration import calibrate_recording, needs_calibration
 from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
 from dlovr.execution.demo_track import load_track
 from dlovr.execution.executor import ExecOptions
@@ -100,6 +104,19 @@ def corner_margin(rec: Path) -> str:
     return f"{left[0]:.1f}/{left[1]:.1f}"
 
 
+def _compiled(rec: Path, calibrate: bool) -> tuple[Program, str]:
+    """The recording's program (calibrated with ``calibrate``) and how many of its macros without
+    force signal were calibrated (``K/N``; "-" uncalibrated)."""
+    prog = compile_recording(rec)
+    if not calibrate:
+        return prog, "-"
+    weak = sum(needs_calibration(m, ExecOptions().min_snr) for m in prog.classed)
+    prog = calibrate_recording(prog, rec)
+    done = sum(any(d.derivation.get("step_n", "").startswith("calibrated") for d in m.detection)
+               for m in prog.classed)
+    return prog, f"{done}/{weak}"
+
+
 def _pct(x: float) -> str:
     return "-" if x != x else f"{x:.0%}"  # NaN: no trials run
 
@@ -113,25 +130,27 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--out", help="folder for the recordings (kept; reused when there)")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="calibrate the programs (dlovr compile --calibrate)")
     args = ap.parse_args()
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_people_"))
     print(f"{args.demos} demonstrations a script, demo.person={args.person:g}, seed {args.seed}, "
           f"{args.trials} trials each (seed 0, {' '.join(VARY)}); recordings in {out}")
     print(f"{'script':<12} {'demo':>4} {'macros':>6} {'ratio':>5} {'edit':>4} {'same':>4} "
-          f"{'program':>7} {'replay':>6} {'corner':>9}  classes")
+          f"{'program':>7} {'replay':>6} {'corner':>9} {'cal':>5}  classes")
     for name in args.scripts:
         t0 = time.perf_counter()
         ref = Program.load(ROOT / "recordings" / "programs" / f"{name}.program.json")
         rows = []
         for k, rec in enumerate(record(name, args, out / name)):
-            prog = compile_recording(rec)
+            prog, cal = _compiled(rec, args.calibrate)
             dist = edit_distance(labels(prog), labels(ref))
             ok, replay = success(prog, rec, args) if args.trials > 0 else (float("nan"), float("nan"))
             rows.append((len(prog.macros), dist, ok, replay))
             corner = corner_margin(rec) if name == "peg_in_hole" else ""
             print(f"{name:<12} {k:>4} {len(prog.macros):>6} {len(prog.macros) / len(ref.macros):>5.2f} "
                   f"{dist:>4} {'yes' if dist == 0 else 'no':>4} {_pct(ok):>7} {_pct(replay):>6} "
-                  f"{corner:>9}  {' '.join(labels(prog))}", flush=True)
+                  f"{corner:>9} {cal:>5}  {' '.join(labels(prog))}", flush=True)
         same = sum(r[1] == 0 for r in rows)
         worst = max(r[0] for r in rows) / len(ref.macros)
         mean_ok = sum(r[2] for r in rows) / len(rows)
