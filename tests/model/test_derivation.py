@@ -125,6 +125,21 @@ def test_the_quiet_level_before_the_transition_raises_the_threshold():
         assert d.params["step_n"] == pytest.approx(0.1) and d.params["ref_lag_s"] == 0.15
 
 
+def test_a_known_arming_counts_only_the_rises_a_detector_armed_then_would_see():
+    """With ``armed_at`` (a calibration run knows when its detector is armed) a swing that is over
+    before the arming does not lift the threshold; one that ends after it does."""
+    w = series(1.0, [0, 0, 0.0], [0, 0, -0.1])
+    f = w.force.copy()
+    f[(w.t > 0.6) & (w.t < 0.65), 2] -= 0.06  # a swing along -v, over at 0.65 s
+    w = WrenchSeries(w.t, f, w.torque)
+    assert derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0).params["force_threshold_n"] == \
+        pytest.approx(0.075, abs=1e-6)  # armed from half the stretch on: the swing counts
+    late = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0, armed_at=0.8)
+    assert late.params["force_threshold_n"] == pytest.approx(0.04)  # 40 % of the 0.1 N step
+    early = derive("E", [], [(0.0, 0.0, 1.0)], w, 0.0, 1.0, 2.0, armed_at=0.62)
+    assert early.params["force_threshold_n"] == pytest.approx(0.075, abs=1e-6)
+
+
 def test_a_pinch_derives_its_e_threshold_along_its_axis():
     """A pinch begins (zero contact vector, axis z): the step is measured along the axis line, in the
     sign it took, not in the step's own direction (docs/model.md, Pinch)."""
