@@ -42,11 +42,11 @@ from dlovr.execution.executor import (
     ENDED_OK,
     HISTORY_S,
     ExecOptions,
+    Guard,
     Session,
-    _arm_at,
-    _Guard,
-    _period,
+    arm_at,
     bounces,
+    macro_period,
     principal_states,
     run_macro,
     to_start,
@@ -182,7 +182,7 @@ def calibration_run(
             ses.opts = replace(opts, detect="oracle") if oracle else opts
             state["on"] = oracle
             t0, t_from = float(sim.time), resume
-            period = _period(m, opts, path, resume)
+            period = macro_period(m, opts, path, resume)
             run = _drain(run_macro(m, ses, path, by_motion=m.index in skip, t_from=resume))
             resume = run.resume_at
             if oracle:
@@ -225,7 +225,7 @@ def combined(
     """The parameters of ``m``'s ``cls`` detector from the calibration runs ``logs`` (each of which
     saw the transition), or None and why there is no usable signal: per run the derivation from the
     run's wrench (:func:`dlovr.model.derivation.derive`, its quiet level from where the run's
-    detector is armed, :func:`dlovr.execution.executor._arm_at` of ``opts`` following ``track``)
+    detector is armed, :func:`dlovr.execution.executor.arm_at` of ``opts`` following ``track``)
     with and without its fraction of the step;
     then the smallest step, the largest noise, the threshold at least every run's floor (noise,
     quiet level) and the fraction of the smallest step, the widest cone. Usable where that threshold
@@ -240,7 +240,7 @@ def combined(
         s = log.seen
         assert s is not None
         w = log.wrench()
-        armed = s.t0 + _arm_at(m, opts, track, s.period) * s.period
+        armed = s.t0 + arm_at(m, opts, track, s.period) * s.period
         derived.append(derive(cls, released, established, w, s.t0, s.t, s.t_next, r, axes, armed).params)
         floors.append(derive(cls, released, established, w, s.t0, s.t, s.t_next,
                              replace(r, fraction=0.0), axes, armed).params)
@@ -266,12 +266,12 @@ def combined(
 def fires_at(m: Macro, log: RunLog, opts: ExecOptions, track: DemoTrack | None) -> float | None:
     """When (s, run time) ``m``'s detectors fire on the wrench of a calibration run (as the sensor
     chain gave it) as a run would run them: started ``opts.blank`` into the macro and armed from
-    :func:`dlovr.execution.executor._arm_at` on; None if they never fire."""
+    :func:`dlovr.execution.executor.arm_at` on; None if they never fire."""
     s = log.seen
     assert s is not None
     rate = 1.0 / float(np.median(np.diff(log.t)))
-    guard = _Guard(m, opts, rate)
-    arm = _arm_at(m, opts, track, s.period)
+    guard = Guard(m, opts, rate)
+    arm = arm_at(m, opts, track, s.period)
     zero, history = np.zeros(3), deque(maxlen=max(1, round(HISTORY_S * rate)))
     started = False
     for t, f in zip(log.t, log.force, strict=True):

@@ -306,7 +306,7 @@ def pace(m: Macro, opts: ExecOptions) -> float:
     return max(mo.duration, fastest, opts.min_duration)
 
 
-class _Guard:
+class Guard:
     """The sensing side of one macro: the force detectors of its classes, or the oracle."""
 
     def __init__(self, m: Macro, opts: ExecOptions, rate_hz: float, turn: Quat = (1.0, 0.0, 0.0, 0.0)):
@@ -427,7 +427,7 @@ class Session:
         self.events: list[Event] = []
         #: the macro running (its index; 0 before the first) and its guard (None in a final motion)
         self.macro = 0
-        self.guard: _Guard | None = None
+        self.guard: Guard | None = None
         #: how much further the cable's tip is from the gripper than demonstrated (m, gripper frame),
         #: once the tip's first touch has been felt (:func:`tip_offset`); turns are repeated about it
         self.tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -726,7 +726,7 @@ def _path(
     return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)
 
 
-def _period(m: Macro, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
+def macro_period(m: Macro, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None) -> float:
     if track is None:
         return pace(m, opts)
     t0 = m.t - m.motion.duration if t_from is None else min(t_from, m.t - m.motion.duration)
@@ -745,7 +745,7 @@ def bounces(macros: Any, within: float) -> set[int]:
     return out
 
 
-def _arm_at(m: Macro, opts: ExecOptions, track: DemoTrack | None, period: float) -> float:
+def arm_at(m: Macro, opts: ExecOptions, track: DemoTrack | None, period: float) -> float:
     """The fraction of the motion after which the force detectors may fire (``opts.arm``; following
     the recorded track, also ``phase_blank`` s into the stretch's last motion phase: the gripper
     setting off or stopping earlier shakes the wrench, which is no transition; at the latest 50 ms
@@ -779,11 +779,11 @@ def run_macro(
     sim, opts = ses.sim, ses.opts
     path = _path(m, sim, opts, track, t_from, ses.tool)
     path, shift = _in_object_frame(path, m, ses)
-    period = _period(m, opts, track, t_from)
+    period = macro_period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
     allowed = opts.allowance * scale
-    guard = ses.guard = _Guard(m, opts, 1.0 / ses.dt, ses.turn)
-    arm = _arm_at(m, opts, track, period)
+    guard = ses.guard = Guard(m, opts, 1.0 / ses.dt, ses.turn)
+    arm = arm_at(m, opts, track, period)
     t0 = float(sim.time)
     force = not guard.oracle
     blank = opts.blank if force else 0.0
@@ -898,7 +898,7 @@ def detection_lag(m: Macro, ses: Session, track: DemoTrack | None, period: float
     """How long (s) after the transition the macro's force detectors fired, as the executor takes it
     back (:func:`_detected`): as late as they fire on the demonstration's own wrench
     (:func:`demo_detection_lag`, at most :data:`MAX_DEMO_LAG_S`), else their own smoothing
-    (:meth:`_Guard.lag`); 0 for the oracle. ``period`` (s): the macro's stretch, from ``t0``
+    (:meth:`Guard.lag`); 0 for the oracle. ``period`` (s): the macro's stretch, from ``t0``
     (demonstration time, s)."""
     guard = ses.guard
     if guard is None or guard.oracle:
@@ -914,7 +914,7 @@ def demo_detection_lag(
     wrench the demonstration sensed, run as :func:`run_macro` runs them: the recorded force resampled
     at the run's rate (``rate_hz``, linear between samples) and low-passed as the run's sensor chain
     does (``opts.filter_tau``, no noise), the detectors started ``blank`` s into the stretch that
-    begins at ``t0`` (demonstration time, s) and lasts ``period`` s, armed from :func:`_arm_at` on.
+    begins at ``t0`` (demonstration time, s) and lasts ``period`` s, armed from :func:`arm_at` on.
     None without a recorded wrench or where they do not fire within ``period`` after ``m.t``.
 
     A detection comes this late in a run that repeats the demonstration exactly: the step's rise to
@@ -922,10 +922,10 @@ def demo_detection_lag(
     w = None if track is None else track.wrench
     if w is None or len(w.t) < 2 or period <= 0.0 or rate_hz <= 0.0:
         return None
-    guard = _Guard(m, opts, rate_hz)
+    guard = Guard(m, opts, rate_hz)
     if not guard.detectors:
         return None
-    dt, arm = 1.0 / rate_hz, _arm_at(m, opts, track, period)
+    dt, arm = 1.0 / rate_hz, arm_at(m, opts, track, period)
     start = max(t0 - HISTORY_S, float(w.t[0]))
     ts = np.arange(start, min(m.t + period, float(w.t[-1])) + 0.5 * dt, dt)
     fs = np.stack([np.interp(ts, w.t, w.force[:, i]) for i in range(3)], axis=1)
@@ -945,7 +945,7 @@ def demo_detection_lag(
 def run_final(m: Macro, ses: Session, track: DemoTrack | None) -> Steps[None]:
     """The motion after the last classed transition, to the demonstrated end pose (no detection)."""
     path = _path(m, ses.sim, ses.opts, track, tool=ses.tool)
-    period = _period(m, ses.opts, track)
+    period = macro_period(m, ses.opts, track)
     t0 = float(ses.sim.time)
     ses.guard = None
     ses.emit("final", m.index, "final motion to the demonstrated end pose")

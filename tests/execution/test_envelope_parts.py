@@ -15,7 +15,7 @@ from dlovr.execution.executor import (
     GOAL_ANGLE_DEG,
     DemoTrack,
     ExecOptions,
-    _Guard,
+    Guard,
     goal_check,
     macro_shift,
 )
@@ -91,11 +91,11 @@ def test_goal_check_compares_the_sensed_contact_vector_with_the_demonstrations()
 
 def test_the_executor_sets_its_detectors_for_the_noise_it_assumes():
     touch = PEG.classed[0]
-    quiet, noisy = _Guard(touch, ExecOptions(), 500.0), _Guard(touch, ExecOptions(noise=0.02), 500.0)
+    quiet, noisy = Guard(touch, ExecOptions(), 500.0), Guard(touch, ExecOptions(noise=0.02), 500.0)
     assert quiet.detectors[0].smooth == 0.0 and noisy.detectors[0].smooth > 0.0
-    told = _Guard(touch, ExecOptions(noise=0.02, sensor_noise=0.0), 500.0)
+    told = Guard(touch, ExecOptions(noise=0.02, sensor_noise=0.0), 500.0)
     assert told.detectors[0].smooth == 0.0  # a sensor said to be clean: the program's own parameters
-    assert _Guard(PEG.classed[4], ExecOptions(noise=0.2), 500.0).weak  # too noisy: ends by its motion
+    assert Guard(PEG.classed[4], ExecOptions(noise=0.2), 500.0).weak  # too noisy: ends by its motion
 
 
 # -- short simulations (the 0.9 s touch demonstration of conftest.py) --------------------------------
