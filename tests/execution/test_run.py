@@ -251,13 +251,13 @@ def test_the_first_touch_takes_back_the_detectors_own_latency(peg):
     demonstrated contact (it was left 1.2 mm low for the whole run, which turned objects' groove then
     held the tip in: 4 of 50 trials of ``objects.yaw=10`` missed the goal that the replay reached)."""
     from dlovr.execution.engine import Engine
-    from dlovr.execution.executor import _period, demo_detection_lag
+    from dlovr.execution.executor import demo_detection_lag, macro_period
     from dlovr.execution.run import fresh_simulator
 
     program, scene, track = peg
     first = program.classed[0]
     opts = ExecOptions()
-    period = _period(first, opts, track)
+    period = macro_period(first, opts, track)
     lag = demo_detection_lag(first, opts, track, period, 500.0, first.t - period)
     assert lag is not None and 0.02 < lag < 0.06
     sim, why = fresh_simulator(scene)
