@@ -78,6 +78,7 @@ def step_record(
     cfg: np.ndarray,
     bounds: np.ndarray,
     ncon: int,
+    pos: np.ndarray,
     quat: np.ndarray,
     pts: np.ndarray,
     table: np.ndarray,
@@ -92,11 +93,13 @@ def step_record(
     ``bounds``: squared segment length bounds (lo, hi), the segment length and the largest relative
     stretch. Fills ``pts`` (the cable points), the rows of ``table`` (one per rod-obstacle contact, in
     MuJoCo's order), ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
-    per axis) and ``torque`` (:func:`hold_torque`; ``quat`` is the gripper's, wxyz).
+    per axis) and ``torque`` (:func:`hold_torque`; ``pos`` and ``quat`` are the gripper's, wxyz).
 
-    Returns (code, index, value, rows, self pairs): code 0, or the first failed check: 1 the count
-    of the fatal warnings differs from the baseline, 2 NaN/inf in qpos or qvel, 3 in the cable
-    points, 4 segment ``index`` stretched by ``value`` (relative) beyond the largest stretch.
+    Returns (code, index, value, rows, self pairs, (gripper position, quaternion, force)): code 0,
+    or the first failed check: 1 the count of the fatal warnings differs from the baseline, 2
+    NaN/inf in qpos or qvel, 3 in the cable points, 4 segment ``index`` stretched by ``value``
+    (relative) beyond the largest stretch; the gripper's pose and force as tuples of floats
+    (``pos``, ``quat`` and ``grip``'s values: what the tracker's states hold).
     """
     conf = _config(cfg)
     fatal, piece_of_geom, obj_of_geom = conf.fatal, conf.piece_of_geom, conf.obj_of_geom
@@ -184,7 +187,8 @@ def step_record(
         t[T_FORCE] = force
         t[T_ACTIVE] = 1.0 if adr >= 0 else 0.0
         rows += 1
-    return code, index, value, rows, nself
+    poses = (pos[0], pos[1], pos[2]), (quat[0], quat[1], quat[2], quat[3]), (grip[0], grip[1], grip[2])
+    return code, index, value, rows, nself, poses
 
 
 @njit

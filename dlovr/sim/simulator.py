@@ -314,18 +314,21 @@ class Simulator:
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
         m, d, tracker, dt = self.model, self.data, self.tracker, self._dt
-        for k in range(n):
+        state = rec = None
+        for _ in range(n):
             _move_gripper(  # self._move_mocap(), inline: this runs every step
                 self._mocap_pos, self._mocap_quat, self.target_pos, self.target_quat, self.max_speed * dt,
                 self.max_angular_speed * dt,
             )
             mujoco.mj_step(m, d)
             self.step_index += 1
-            rec = self.record(check=True)
-            if tracker is not None and k < n - 1:
-                tracker.update(rec)
-        if tracker is not None:
-            object.__setattr__(rec, "state", tracker.update(rec))
+            rec, poses = self._record(True)
+            if tracker is not None:  # tracker.update(rec) of what the record's kernel made already
+                ca = rec.contact_arrays
+                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses)
+        if state is not None:
+            object.__setattr__(rec, "state", state)
+        assert rec is not None, "step(n) needs n >= 1"
         return rec
 
     def _diverged(self, code: int, index: int, value: float) -> SimulationDiverged:
@@ -362,6 +365,11 @@ class Simulator:
         SimulationDiverged): the warnings counted since the last reset, NaN/inf in the state or the
         cable points, a segment stretched beyond ``max_stretch``. One kernel call
         (:func:`dlovr.sim.kernels.step_record`) reads MuJoCo's arrays once."""
+        return self._record(check)[0]
+
+    def _record(self, check: bool) -> tuple[StepRecord, tuple[Any, Any, Any]]:
+        """:meth:`record`, and the gripper's position, quaternion and force as tuples of floats (what
+        the tracker's state keeps)."""
         d, views = self.data, self._views
         ncon = d.ncon
         ne = d.ne  # equality constraint rows come first, in a fixed layout while ne is unchanged
@@ -375,9 +383,9 @@ class Simulator:
         table = empty((ncon, _T_WIDTH))
         grip, torque = empty(3), empty(3)
         arena = views.contacts() if ncon else views.arena
-        code, index, value, rows, nself = _step_record(
-            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
-            table, grip, torque,
+        code, index, value, rows, nself, poses = _step_record(
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_pos,
+            self._mocap_quat, pts, table, grip, torque,
         )
         if check and code:
             raise self._diverged(code, index, value)
@@ -386,7 +394,7 @@ class Simulator:
             pairs = empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
         tp, tq = self.target_pos, self.target_quat  # shared when read-only (set_target's), else copied
-        return StepRecord._of(
+        rec = StepRecord._of(
             self.step_index,
             d.time,
             pts,
@@ -398,6 +406,7 @@ class Simulator:
             grip,
             torque,
         )
+        return rec, poses
 
     def gripper_force(self) -> np.ndarray:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
