@@ -382,7 +382,9 @@ class Simulator:
         pts = empty(self._pts_shape)
         table = empty((ncon, _T_WIDTH))
         grip, torque = empty(3), empty(3)
-        arena = views.contacts() if ncon else views.arena
+        arena = views.arena
+        if ncon and not len(arena):  # the contact structs' view, taken at the first contact
+            arena = views.contacts()
         code, index, value, rows, nself, poses = _step_record(
             views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_pos,
             self._mocap_quat, pts, table, grip, torque,

@@ -383,7 +383,8 @@ class ContactTracker:
             forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
             forces = self._forces(topo, table)
-        state = ContactState._of(step, t, topo, disc, forces, *poses)
+        gripper_pos, gripper_quat, gripper_force = poses
+        state = ContactState._of(step, t, topo, disc, forces, gripper_pos, gripper_quat, gripper_force)
         if new:
             self.changes.append(state)
         self.current = state
