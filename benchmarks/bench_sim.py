@@ -265,8 +265,8 @@ def read_rows(paths: list[Path]) -> list[Row]:
 
 # the parts of a tracked step that --parts times: (owner module or class, attribute, label)
 _PARTS = (
-    ("dlovr.sim.simulator:Simulator", "record", "the record (Simulator.record)"),
-    ("dlovr.sim.tracker:ContactTracker", "update", "the tracker in all (ContactTracker.update)"),
+    ("dlovr.sim.simulator:Simulator", "_record", "the record (Simulator._record)"),
+    ("dlovr.sim.tracker:ContactTracker", "_state", "the tracker in all (ContactTracker._state)"),
     ("dlovr.sim.tracker:ContactTracker", "_label_step", "  its kernel and the Python by it (_label_step)"),
     ("dlovr.sim.tracker:ContactTracker", "classify", "  the situation (classify), of it:"),
     ("dlovr.sim.tracker", "situation_from_points", "    made again (situation_from_points)"),

@@ -87,8 +87,9 @@ def replay(
     divergence: str | None = None
     wrench_bytes = [] if wrench is None else _wrench_rows(wrench)
     # the recorded targets are the exact ones used (validated and normalised when recorded): set as
-    # they are (normalising again may change the last bit), rows of private copies (records copy them)
-    pos_rows, quat_rows = list(np.array(pos, dtype=float)), list(np.array(quat, dtype=float))
+    # they are (normalising again may change the last bit), rows of private copies made read-only
+    # (the records share them, as they share set_target's)
+    pos_rows, quat_rows = list(_read_only(pos)), list(_read_only(quat))
     t0 = time.perf_counter()
     start = sim.record()
     tracker.restart(start)
@@ -114,6 +115,13 @@ def replay(
     if verify and divergence is None:
         divergence = _compare_states([p for p in recorded_states if not p.get("end")], replayed, dt)
     return ReplayResult(len(steps), len(steps) * dt, wall, replayed, divergence, tuple(warnings))
+
+
+def _read_only(a: Any) -> np.ndarray:
+    """A private float64 copy of ``a``, read-only."""
+    out = np.array(a, dtype=float)
+    out.flags.writeable = False
+    return out
 
 
 def _check_state(want: np.ndarray, got: np.ndarray, k: int, dt: float) -> str | None:

@@ -11,6 +11,7 @@ distance, normal (3, obstacle toward rod), position (3, MuJoCo's midway point), 
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -77,6 +78,7 @@ def step_record(
     cfg: np.ndarray,
     bounds: np.ndarray,
     ncon: int,
+    pos: np.ndarray,
     quat: np.ndarray,
     pts: np.ndarray,
     table: np.ndarray,
@@ -91,11 +93,13 @@ def step_record(
     ``bounds``: squared segment length bounds (lo, hi), the segment length and the largest relative
     stretch. Fills ``pts`` (the cable points), the rows of ``table`` (one per rod-obstacle contact, in
     MuJoCo's order), ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
-    per axis) and ``torque`` (:func:`hold_torque`; ``quat`` is the gripper's, wxyz).
+    per axis) and ``torque`` (:func:`hold_torque`; ``pos`` and ``quat`` are the gripper's, wxyz).
 
-    Returns (code, index, value, rows, self pairs): code 0, or the first failed check: 1 the count
-    of the fatal warnings differs from the baseline, 2 NaN/inf in qpos or qvel, 3 in the cable
-    points, 4 segment ``index`` stretched by ``value`` (relative) beyond the largest stretch.
+    Returns (code, index, value, rows, self pairs, (gripper position, quaternion, force)): code 0,
+    or the first failed check: 1 the count of the fatal warnings differs from the baseline, 2
+    NaN/inf in qpos or qvel, 3 in the cable points, 4 segment ``index`` stretched by ``value``
+    (relative) beyond the largest stretch; the gripper's pose and force as tuples of floats
+    (``pos``, ``quat`` and ``grip``'s values: what the tracker's states hold).
     """
     conf = _config(cfg)
     fatal, piece_of_geom, obj_of_geom = conf.fatal, conf.piece_of_geom, conf.obj_of_geom
@@ -183,7 +187,60 @@ def step_record(
         t[T_FORCE] = force
         t[T_ACTIVE] = 1.0 if adr >= 0 else 0.0
         rows += 1
-    return code, index, value, rows, nself
+    poses = (pos[0], pos[1], pos[2]), (quat[0], quat[1], quat[2], quat[3]), (grip[0], grip[1], grip[2])
+    return code, index, value, rows, nself, poses
+
+
+@njit
+def move_gripper(
+    pos: np.ndarray, quat: np.ndarray, target_pos: np.ndarray, target_quat: np.ndarray, vmax: float,
+    wmax: float,
+) -> None:
+    """Moves the gripper's pose (``pos``, m, and ``quat``, wxyz: MuJoCo's mocap arrays, in place) one
+    step toward the target at most ``vmax`` (m) and ``wmax`` (rad) per step: the target itself when
+    it lies within them, else the position along the straight line and the orientation along the
+    shortest arc (:func:`dlovr.transforms.slerp`). The same IEEE operations in the same order as the
+    Python floats of :func:`dlovr.transforms.norm`, ``dot`` and ``slerp`` (sums from 0.0, left to
+    right; ``math.acos`` and ``sin`` from the C library both ways), so the same bits: this feeds
+    MuJoCo and recordings replay bit for bit."""
+    p0, p1, p2 = pos[0], pos[1], pos[2]
+    t0, t1, t2 = target_pos[0], target_pos[1], target_pos[2]
+    if p0 != t0 or p1 != t1 or p2 != t2:  # a gripper already at its target stays put
+        d0, d1, d2 = t0 - p0, t1 - p1, t2 - p2
+        dist = np.sqrt(0.0 + d0 * d0 + d1 * d1 + d2 * d2)
+        if dist <= vmax:
+            pos[0], pos[1], pos[2] = t0, t1, t2
+        else:
+            f = vmax / dist
+            pos[0], pos[1], pos[2] = p0 + d0 * f, p1 + d1 * f, p2 + d2 * f
+    q0, q1, q2, q3 = quat[0], quat[1], quat[2], quat[3]
+    r0, r1, r2, r3 = target_quat[0], target_quat[1], target_quat[2], target_quat[3]
+    if q0 == r0 and q1 == r1 and q2 == r2 and q3 == r3:
+        return
+    c = 0.0 + q0 * r0 + q1 * r1 + q2 * r2 + q3 * r3
+    angle = 2.0 * math.acos(min(1.0, abs(c)))
+    if angle <= wmax:
+        quat[0], quat[1], quat[2], quat[3] = r0, r1, r2, r3
+        return
+    s = wmax / angle
+    # slerp(q, target, s): both made unit first
+    n = np.sqrt(0.0 + q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    a0, a1, a2, a3 = q0 / n, q1 / n, q2 / n, q3 / n
+    n = np.sqrt(0.0 + r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    b0, b1, b2, b3 = r0 / n, r1 / n, r2 / n, r3 / n
+    c = 0.0 + a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3
+    if c < 0.0:
+        b0, b1, b2, b3, c = -b0, -b1, -b2, -b3, -c
+    if c > 0.9995:  # close: along the chord, made unit
+        v0, v1, v2, v3 = a0 + s * (b0 - a0), a1 + s * (b1 - a1), a2 + s * (b2 - a2), a3 + s * (b3 - a3)
+        n = np.sqrt(0.0 + v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+        quat[0], quat[1], quat[2], quat[3] = v0 / n, v1 / n, v2 / n, v3 / n
+        return
+    th = math.acos(min(1.0, c))
+    sin = math.sin(th)
+    wa, wb = math.sin((1.0 - s) * th) / sin, math.sin(s * th) / sin
+    quat[0], quat[1] = wa * a0 + wb * b0, wa * a1 + wb * b1
+    quat[2], quat[3] = wa * a2 + wb * b2, wa * a3 + wb * b3
 
 
 @njit

@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import dot, norm, quat_rotate, slerp
+from dlovr.transforms import dot, quat_rotate
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -124,6 +124,13 @@ class SimState:
 _NO_PAIRS = np.zeros((0, 2), np.int64)
 _T_WIDTH = kernels.T_WIDTH
 _step_record = kernels.step_record
+_move_gripper = kernels.move_gripper
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` (a private array) made read-only."""
+    a.flags.writeable = False
+    return a
 
 
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
@@ -226,8 +233,8 @@ class Simulator:
         self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
         mujoco.mj_forward(m, self.data)
         self._reset_warnings()
-        self.target_pos = self._mocap_pos.copy()
-        self.target_quat = self._mocap_quat.copy()
+        self.target_pos = _frozen(self._mocap_pos.copy())
+        self.target_quat = _frozen(self._mocap_quat.copy())
         deep = [c for c in self.contacts() if c.dist < -0.5 * float(m.flex_radius[built.flex_id])]
         if deep:
             c = min(deep, key=lambda c: c.dist)
@@ -251,41 +258,29 @@ class Simulator:
 
         Called every step by programs and scripts: the checks run on Python floats, and the
         quaternion is divided by its :func:`dlovr.transforms.norm` computed once (the same bits as
-        ``quat_normalize``)."""
+        ``quat_normalize``). The target arrays are private copies made read-only, so that the steps'
+        records share them instead of copying them (a target assigned directly is copied by each
+        record while it is writeable)."""
         p = np.array(pos, dtype=float)  # a private copy
         if p.shape != (3,) or not all(map(math.isfinite, p.tolist())):
             raise ValueError(f"gripper target position must be 3 finite numbers, got {pos!r}")
-        self.target_pos = p
+        self.target_pos = _frozen(p)
         if quat is not None:
             q = np.asarray(quat, dtype=float)
             w = q.tolist() if q.shape == (4,) else None
             n = math.sqrt(dot(w, w)) if w is not None and all(map(math.isfinite, w)) else 0.0
             if w is None or n < 1e-9:
                 raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
-            self.target_quat = np.array([x / n for x in w])  # q / n, element by element
+            self.target_quat = _frozen(np.array([x / n for x in w]))  # q / n, element by element
 
     def _move_mocap(self) -> None:
+        """The gripper one step toward its target at bounded speed (:func:`dlovr.sim.kernels.move_gripper`,
+        in MuJoCo's mocap arrays)."""
         dt = self._dt
-        pos, target = self._mocap_pos, self.target_pos
-        p, t = pos.tolist(), target.tolist()
-        # a gripper already at its target stays put (the general formulas below give the same values)
-        if p != t:
-            # in Python floats (not np.linalg.norm: this feeds MuJoCo), the roundings of target - pos,
-            # dlovr.transforms.norm (its sum from 0.0, left to right) and pos + delta * (vmax / dist)
-            d0, d1, d2 = t[0] - p[0], t[1] - p[1], t[2] - p[2]
-            dist = norm([d0, d1, d2])
-            vmax = self.max_speed * dt
-            if dist <= vmax:
-                pos[:] = target
-            else:
-                f = vmax / dist
-                pos[:] = [p[0] + d0 * f, p[1] + d1 * f, p[2] + d2 * f]
-        q, tq = self._mocap_quat.tolist(), self.target_quat.tolist()
-        if q != tq:
-            c = dot(q, tq)
-            angle = 2.0 * math.acos(min(1.0, abs(c)))
-            wmax = self.max_angular_speed * dt
-            self._mocap_quat[:] = self.target_quat if angle <= wmax else slerp(q, tq, wmax / angle)
+        _move_gripper(
+            self._mocap_pos, self._mocap_quat, self.target_pos, self.target_quat, self.max_speed * dt,
+            self.max_angular_speed * dt,
+        )
 
     # -- stepping -----------------------------------------------------------------------------------
 
@@ -318,16 +313,22 @@ class Simulator:
 
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
-        m, d, tracker = self.model, self.data, self.tracker
-        for k in range(n):
-            self._move_mocap()
+        m, d, tracker, dt = self.model, self.data, self.tracker, self._dt
+        state = rec = None
+        for _ in range(n):
+            _move_gripper(  # self._move_mocap(), inline: this runs every step
+                self._mocap_pos, self._mocap_quat, self.target_pos, self.target_quat, self.max_speed * dt,
+                self.max_angular_speed * dt,
+            )
             mujoco.mj_step(m, d)
             self.step_index += 1
-            rec = self.record(check=True)
-            if tracker is not None and k < n - 1:
-                tracker.update(rec)
-        if tracker is not None:
-            object.__setattr__(rec, "state", tracker.update(rec))
+            rec, poses = self._record(True)
+            if tracker is not None:  # tracker.update(rec) of what the record's kernel made already
+                ca = rec.contact_arrays
+                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses)
+        if state is not None:
+            object.__setattr__(rec, "state", state)
+        assert rec is not None, "step(n) needs n >= 1"
         return rec
 
     def _diverged(self, code: int, index: int, value: float) -> SimulationDiverged:
@@ -364,6 +365,11 @@ class Simulator:
         SimulationDiverged): the warnings counted since the last reset, NaN/inf in the state or the
         cable points, a segment stretched beyond ``max_stretch``. One kernel call
         (:func:`dlovr.sim.kernels.step_record`) reads MuJoCo's arrays once."""
+        return self._record(check)[0]
+
+    def _record(self, check: bool) -> tuple[StepRecord, tuple[Any, Any, Any]]:
+        """:meth:`record`, and the gripper's position, quaternion and force as tuples of floats (what
+        the tracker's state keeps)."""
         d, views = self.data, self._views
         ncon = d.ncon
         ne = d.ne  # equality constraint rows come first, in a fixed layout while ne is unchanged
@@ -376,10 +382,12 @@ class Simulator:
         pts = empty(self._pts_shape)
         table = empty((ncon, _T_WIDTH))
         grip, torque = empty(3), empty(3)
-        arena = views.contacts() if ncon else views.arena
-        code, index, value, rows, nself = _step_record(
-            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_quat, pts,
-            table, grip, torque,
+        arena = views.arena
+        if ncon and not len(arena):  # the contact structs' view, taken at the first contact
+            arena = views.contacts()
+        code, index, value, rows, nself, poses = _step_record(
+            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_pos,
+            self._mocap_quat, pts, table, grip, torque,
         )
         if check and code:
             raise self._diverged(code, index, value)
@@ -387,18 +395,20 @@ class Simulator:
         if nself:
             pairs = empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
-        return StepRecord._of(
+        tp, tq = self.target_pos, self.target_quat  # shared when read-only (set_target's), else copied
+        rec = StepRecord._of(
             self.step_index,
             d.time,
             pts,
             self._mocap_pos.copy(),
             self._mocap_quat.copy(),
-            self.target_pos.copy(),
-            self.target_quat.copy(),
+            tp.copy() if tp.flags.writeable else tp,
+            tq.copy() if tq.flags.writeable else tq,
             ContactArrays._of(table if rows == ncon else table[:rows], pairs, self._names),
             grip,
             torque,
         )
+        return rec, poses
 
     def gripper_force(self) -> np.ndarray:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces
@@ -443,5 +453,5 @@ class Simulator:
         mujoco.mj_forward(m, d)
         self._reset_warnings()
         self.step_index = state.step
-        self.target_pos = state.target_pos.copy()
-        self.target_quat = state.target_quat.copy()
+        self.target_pos = _frozen(state.target_pos.copy())
+        self.target_quat = _frozen(state.target_quat.copy())

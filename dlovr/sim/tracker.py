@@ -279,7 +279,7 @@ class ContactTracker:
             self._alloc(n1, max(nc, 2 * self._cap_c), self._cap_h)
         pm = self._piece_map
         if has and (pm is None or pm[0] is not arrays.names[0]):
-            pm = self._piece_map = (arrays.names[0], self._piece_table(arrays.names[0]))
+            pm = self._piece_map = (arrays.names[0], _piece_table(self.geometry.pieces, arrays.names[0]))
         pmap = pm[1] if has and pm is not None else _NO_MAP
         while True:
             out, changed, bad, self._edge_turned = _track_step(
@@ -347,16 +347,6 @@ class ContactTracker:
         self._n1, self._cap_c, self._cap_h = n1, cap_c, cap_h
         self._views = tk.work_views(self._work_i, self._work_f)
 
-    def _piece_table(self, objs: Any) -> np.ndarray:
-        """Piece ids (positions in ``geometry.pieces``) by (object index in ``objs``, piece index)."""
-        pieces = self.geometry.pieces
-        table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
-        row = {o: i for i, o in enumerate(objs)}
-        for k, p in enumerate(pieces):
-            if p.obj in row:
-                table[row[p.obj], p.index] = k
-        return table
-
     def update(self, record: Any) -> ContactState:
         """Process one :class:`dlovr.sim.StepRecord` (or anything with ``step``, ``time``, ``points``,
         ``gripper_z`` and optionally ``contact_arrays``); return the step's contact state."""
@@ -367,6 +357,16 @@ class ContactTracker:
         table = None if arrays is None else getattr(arrays, "table", None)
         if arrays is not None and table is None:
             table = _table_of(arrays)
+        poses = tuple(_tuple(getattr(record, k, v)) for k, v in _POSES)
+        return self._state(record, int(record.step), float(record.time), pts, table, arrays, poses)
+
+    def _state(
+        self, record: Any, step: int, t: float, pts: np.ndarray, table: np.ndarray | None, arrays: Any,
+        poses: tuple[Any, Any, Any],
+    ) -> ContactState:
+        """:meth:`update` of ``record`` given as its step, time, points (float64, C order), contact
+        rows and arrays, and gripper position, quaternion and force as tuples of floats (what
+        :class:`dlovr.sim.Simulator` has made of its record already)."""
         self._label_step(pts, table, arrays)
         prev = self.current
         topo = self.classify(pts, record)
@@ -383,12 +383,8 @@ class ContactTracker:
             forces = tuple(self._views.forces[: len(topo.contacts)].tolist())
         else:
             forces = self._forces(topo, table)
-        state = ContactState._of(
-            int(record.step), float(record.time), topo, disc, forces,
-            _tuple(getattr(record, "gripper_pos", _ORIGIN)),
-            _tuple(getattr(record, "gripper_quat", _IDENTITY)),
-            _tuple(getattr(record, "gripper_force", _ORIGIN)),
-        )
+        gripper_pos, gripper_quat, gripper_force = poses
+        state = ContactState._of(step, t, topo, disc, forces, gripper_pos, gripper_quat, gripper_force)
         if new:
             self.changes.append(state)
         self.current = state
@@ -430,6 +426,8 @@ class ContactTracker:
 _ORIGIN = (0.0, 0.0, 0.0)
 _T = TypeVar("_T")
 _IDENTITY = (1.0, 0.0, 0.0, 0.0)
+#: The gripper's pose and force that a state keeps: a record's attribute, and its default without one.
+_POSES = (("gripper_pos", _ORIGIN), ("gripper_quat", _IDENTITY), ("gripper_force", _ORIGIN))
 
 
 def _tuple(v: Any) -> Any:
@@ -437,6 +435,16 @@ def _tuple(v: Any) -> Any:
     if type(v) is np.ndarray and v.dtype is _F64:
         return tuple(v.tolist())
     return tuple(float(x) for x in v)
+
+
+def _piece_table(pieces: Sequence[Any], objs: Any) -> np.ndarray:
+    """Piece ids (positions in ``pieces``, the geometry's) by (object index in ``objs``, piece index)."""
+    table = np.full((max(len(objs), 1), max((p.index for p in pieces), default=0) + 1), -1, np.int64)
+    row = {o: i for i, o in enumerate(objs)}
+    for k, p in enumerate(pieces):
+        if p.obj in row:
+            table[row[p.obj], p.index] = k
+    return table
 
 
 def _structure(

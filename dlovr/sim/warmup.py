@@ -59,6 +59,8 @@ def _run_every_kernel() -> None:
     tracker.update(replace(rec, points=moved))
     tracker.update(replace(rec, contact_arrays=None))  # no contact arrays: every pair
     kernels.self_pairs(0, np.zeros(0), sim._views.cfg, np.zeros((0, 2), np.int64))
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    kernels.move_gripper(np.zeros(3), q.copy(), np.zeros(3), q, 0.0, 0.0)  # a target assigned, writeable
     geom: SceneGeometry = tracker.geometry
     pts = np.array([[0.0, 0.0, geom.radius], [0.3, 0.2, 0.1]])
     geom.classify_points(pts)

@@ -142,3 +142,49 @@ def test_the_trackers_work_sections_tile_their_arrays():
     assert wi2[tk.W_TOUCH_N] == 3 and w2.touching[:3].tolist() == [7, 8, 9] and (w2.group[:2] == 5).all()
     lab_i, _ = tk.no_labels()
     assert lab_i[tk.L_K] < 0  # no labels
+
+
+def _move_in_python(pos: Any, quat: Any, target_pos: Any, target_quat: Any, vmax: float, wmax: float):
+    """The gripper's motion as the simulator ran it in Python floats before
+    :func:`dlovr.sim.kernels.move_gripper` (the reference of its bits)."""
+    import math
+
+    from dlovr.transforms import dot, norm, slerp
+
+    p, t = pos.tolist(), target_pos.tolist()
+    if p != t:
+        d0, d1, d2 = t[0] - p[0], t[1] - p[1], t[2] - p[2]
+        dist = norm([d0, d1, d2])
+        if dist <= vmax:
+            pos[:] = target_pos
+        else:
+            f = vmax / dist
+            pos[:] = [p[0] + d0 * f, p[1] + d1 * f, p[2] + d2 * f]
+    q, tq = quat.tolist(), target_quat.tolist()
+    if q != tq:
+        c = dot(q, tq)
+        angle = 2.0 * math.acos(min(1.0, abs(c)))
+        quat[:] = target_quat if angle <= wmax else slerp(q, tq, wmax / angle)
+
+
+def test_the_gripper_motion_kernel_rounds_as_python_floats():
+    """Bit for bit the Python floats' motion, over random poses and targets: far and near (within
+    the step's bounds), turns small and large, quaternions of either sign, not quite unit."""
+    from dlovr.sim.kernels import move_gripper
+
+    rng = np.random.default_rng(1)
+    vmax, wmax = 0.25 * 0.002, 2.0 * 0.002
+    for k in range(20000):
+        pos = rng.normal(size=3) * 0.3
+        scale = 10.0 ** rng.uniform(-6, 0)
+        tpos = pos + rng.normal(size=3) * scale if k % 7 else pos.copy()
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat) * (1.0 + rng.normal() * 1e-12)
+        tquat = quat + rng.normal(size=4) * 10.0 ** rng.uniform(-7, 0.3) if k % 5 else quat.copy()
+        tquat *= (-1.0 if k % 3 == 0 else 1.0) / np.linalg.norm(tquat)
+        want = pos.copy(), quat.copy()
+        _move_in_python(*want, tpos, tquat, vmax, wmax)
+        got = pos.copy(), quat.copy()
+        move_gripper(*got, tpos, tquat, vmax, wmax)
+        for w, g in zip(want, got, strict=True):
+            assert w.tobytes() == g.tobytes(), (k, pos, quat, tpos, tquat)
