@@ -85,14 +85,14 @@ def test_a_scene_path_in_a_script_resolves_against_the_script_folder(tmp_path):
 def test_a_diverged_run_says_so_once_and_its_recording_compiles_with_a_warning(tmp_path, monkeypatch):
     from dlovr.sim import SimulationDiverged, simulator
 
-    record = simulator.Simulator.record
+    record = simulator.Simulator._record  # what Simulator.step and Simulator.record call
 
-    def diverge_at_step_300(self, *, check=False):
+    def diverge_at_step_300(self, check):
         if check and self.step_index == 300:  # the step's divergence checks fail
             raise SimulationDiverged(self.step_index, self.data.time, "NaN/inf in the state")
-        return record(self, check=check)
+        return record(self, check)
 
-    monkeypatch.setattr(simulator.Simulator, "record", diverge_at_step_300)
+    monkeypatch.setattr(simulator.Simulator, "_record", diverge_at_step_300)
     out = tmp_path / "run.mcap"
     r = cli("record", "--script", TOUCH, "-o", out)
     assert r.exit_code == 1
