@@ -272,3 +272,25 @@ def test_the_first_touch_takes_back_the_detectors_own_latency(peg):
     assert abs(ses.tool[2]) < 2e-4, ses.tool  # no tip offset (before: +1.2 mm)
     k = int(np.searchsorted(track.t, first.t))
     assert abs(float(sim.target_pos[2]) - float(track.pos[k, 2])) < 2e-4  # back at the demonstrated touch
+
+
+def test_a_shared_geometry_makes_the_same_tracker_and_run(touch):
+    """A trial's program and open-loop replay share the scene's geometry (built once,
+    ``fresh_simulator(..., geometry)``): the tracker is configured as ``Simulator(scene, track=True)``
+    configures its own, and the replay reaches the same steps and end as with a geometry of its own."""
+    from dataclasses import fields
+
+    from dlovr.execution.run import fresh_simulator, scene_geometry
+    from dlovr.sim.tracker import ContactTracker
+
+    program, scene, track, pieces = touch
+    geometry = scene_geometry(scene, pieces)
+    own, _ = fresh_simulator(scene, pieces)
+    shared, _ = fresh_simulator(scene, pieces, geometry)
+    assert own is not None and shared is not None and shared.tracker.geometry is geometry
+    for f in fields(ContactTracker):
+        if f.name != "geometry":
+            assert getattr(shared.tracker, f.name) == getattr(own.tracker, f.name), f.name
+    a = run_openloop(program, scene, track, pieces=pieces, settle=0.1)
+    b = run_openloop(program, scene, track, pieces=pieces, settle=0.1, geometry=geometry)
+    assert (a.final_situation, a.sim_time, a.goal_reached) == (b.final_situation, b.sim_time, b.goal_reached)
