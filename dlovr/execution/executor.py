@@ -413,6 +413,16 @@ _NO_TORQUE = np.zeros(3)
 _NO_TORQUE.flags.writeable = False
 
 
+def _pose_bytes(pos: Any, quat: Any) -> bytes | None:
+    """A commanded pose's float64 values as bytes (exact: signed zeros and NaNs told apart), or None
+    when either is not a float64 array of 3 and 4 values."""
+    if type(pos) is not np.ndarray or type(quat) is not np.ndarray:
+        return None
+    if pos.dtype != np.float64 or quat.dtype != np.float64 or pos.shape != (3,) or quat.shape != (4,):
+        return None
+    return pos.tobytes() + quat.tobytes()
+
+
 class Session:
     """One execution in progress: the simulator, the sensor chain, the event log and the guard of the
     macro running (whose detector signal the browser shows)."""
@@ -450,6 +460,8 @@ class Session:
         #: smoothing when it starts (kept only for a noisy sensor)
         self.recent: deque[tuple[float, np.ndarray]] = deque(maxlen=max(1, round(HISTORY_S / self.dt)))
         self._noisy = opts.assumed_noise > 0.0  # (kept only for a noisy sensor)
+        #: the last pose commanded through :meth:`step` (its bytes) and the target arrays it made
+        self._commanded: tuple[bytes, Any, Any] | None = None
 
     @property
     def signal(self) -> float:
@@ -474,9 +486,19 @@ class Session:
 
     def step(self, pos: np.ndarray, quat: np.ndarray) -> Any:
         """Command the gripper pose and advance one step; the sensed (noisy, filtered) wrench is
-        then in ``self.f`` (N) and ``self.tq`` (N m), world frame."""
-        self.sim.set_target(pos, quat)
-        r = self.sim.step()
+        then in ``self.f`` (N) and ``self.tq`` (N m), world frame.
+
+        The same pose (bit for bit, float64 arrays) as the last one commanded here, whose target
+        arrays the simulator still has (no one commanded another since), is not commanded again:
+        ``set_target`` would make the same targets (a hold, a stop, a still stretch of the track)."""
+        sim = self.sim
+        key = _pose_bytes(pos, quat)
+        last = self._commanded
+        if key is None or last is None or key != last[0] or sim.target_pos is not last[1] \
+                or sim.target_quat is not last[2]:
+            sim.set_target(pos, quat)
+            self._commanded = None if key is None else (key, sim.target_pos, sim.target_quat)
+        r = sim.step()
         self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", _NO_TORQUE), self.dt)
         if self._noisy:
             self.recent.append((float(r.time), self.f))
