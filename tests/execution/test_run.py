@@ -331,3 +331,37 @@ def test_a_session_commands_a_repeated_pose_once(touch):
     moved[0] = -0.0 if moved[0] == 0.0 else moved[0] + 1e-6
     ses.step(moved, quat)
     assert len(calls) == 4 and sim.target_pos.tobytes() == moved.tobytes()
+
+
+def test_the_demonstrations_detection_lag_is_measured_once_per_track(peg):
+    """Trials in one process ask for the same macros' lags on the same track: the second asks
+    the kept result (the same value), another seed too; another track measures again."""
+    from dataclasses import replace as dc_replace
+
+    import dlovr.execution.executor as ex
+
+    program, _, track = peg
+    first = program.classed[0]
+    opts = ExecOptions()
+    period = ex.macro_period(first, opts, track)
+    args = (period, 500.0, first.t - period)
+    measured = []
+    real = ex.measured_demo_lag
+
+    def counted(*a):
+        measured.append(1)
+        return real(*a)
+
+    ex.measured_demo_lag = counted
+    ex._DEMO_LAGS.clear()  # (another test may have asked for this one)
+    try:
+        lag = ex.demo_detection_lag(first, opts, track, *args)
+        assert ex.demo_detection_lag(first, dc_replace(opts, seed=7), track, *args) == lag
+        assert len(measured) == 1
+        other = dc_replace(track)
+        assert ex.demo_detection_lag(first, opts, other, *args) == lag and len(measured) == 2
+        later = dc_replace(opts, blank=opts.blank + 0.01)
+        assert ex.demo_detection_lag(first, later, other, *args) is not None
+        assert len(measured) == 3
+    finally:
+        ex.measured_demo_lag = real
