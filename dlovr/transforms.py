@@ -58,7 +58,7 @@ def units(v: np.ndarray) -> np.ndarray:
     return v / np.where(n == 0.0, 1.0, n)
 
 
-def angle_deg(a: np.ndarray, b: np.ndarray, tol: float = 1e-12) -> float:
+def angle_deg(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray, tol: float = 1e-12) -> float:
     """Angle between ``a`` and ``b`` in degrees (0..180); 180 when either is shorter than ``tol``
     (the zero-vector rule: no direction agrees with it). Lengths and the dot product as :func:`norm`
     and :func:`dot` round them."""

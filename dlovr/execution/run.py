@@ -121,15 +121,34 @@ def demo_track(program: Program, recording: str | Path | None = None) -> DemoTra
     return None if path is None else load_track(path)
 
 
-def fresh_simulator(scene: Any, pieces: Any = None) -> tuple[Any, str | None]:
+def fresh_simulator(scene: Any, pieces: Any = None, geometry: Any = None) -> tuple[Any, str | None]:
     """A ``dlovr.sim.Simulator`` of ``scene`` at its start pose with the contact tracker (``pieces``:
-    its convex decomposition, if known), or None and why it cannot start."""
+    its convex decomposition, if known), or None and why it cannot start.
+
+    ``geometry``: the scene's :class:`dlovr.geometry.SceneGeometry` made before
+    (:func:`scene_geometry`; it only reads it), so that two runs in one scene (a trial's program and
+    its open-loop replay) build it once: the tracker is the one ``Simulator(scene, track=True)``
+    makes, on that geometry."""
     from dlovr.sim import SimulationDiverged, Simulator
 
     try:
-        return Simulator(scene, track=True, pieces=pieces), None
+        if geometry is None:
+            return Simulator(scene, track=True, pieces=pieces), None
+        from dlovr.sim.tracker import ContactTracker
+
+        sim = Simulator(scene, pieces=pieces)
+        sim.tracker = ContactTracker(geometry, scene.params)
+        return sim, None
     except (ValueError, SimulationDiverged) as e:
         return None, f"cannot start: {e}"
+
+
+def scene_geometry(scene: Any, pieces: Any = None) -> Any:
+    """``scene``'s :class:`dlovr.geometry.SceneGeometry` as ``Simulator(scene, track=True,
+    pieces=pieces)`` makes it for its tracker (for :func:`fresh_simulator`'s ``geometry``)."""
+    from dlovr.geometry import SceneGeometry, scene_pieces
+
+    return SceneGeometry.from_scene(scene, pieces=scene_pieces(scene) if pieces is None else pieces)
 
 
 @overload
@@ -144,6 +163,7 @@ def run_program(
     on_step: Any = None,
     on_event: Any = None,
     recovery: Recovery | None = None,
+    geometry: Any = None,
 ) -> RunResult: ...
 
 
@@ -159,6 +179,7 @@ def run_program(
     on_step: Any = None,
     on_event: Any = None,
     recovery: Recovery | None = None,
+    geometry: Any = None,
 ) -> NetworkRunResult: ...
 
 
@@ -173,12 +194,14 @@ def run_program(
     on_step: Any = None,
     on_event: Any = None,
     recovery: Recovery | None = None,
+    geometry: Any = None,
 ) -> RunResult | NetworkRunResult:
     """Execute ``program`` (compiled or network) in a fresh simulation of ``scene`` and judge it
     (:class:`dlovr.execution.engine.Engine`; ``recovery``: a compiled program that misses its goal
-    plans again through that network); a run that cannot start is a failed result."""
+    plans again through that network); a run that cannot start is a failed result. ``geometry``:
+    the scene's geometry made before (:func:`fresh_simulator`)."""
     opts = opts if opts is not None else ExecOptions()
-    sim, why = fresh_simulator(scene, pieces)
+    sim, why = fresh_simulator(scene, pieces, geometry)
     if sim is None:
         return not_started(program, scene, opts, str(why))
     eng = Engine(
@@ -200,6 +223,15 @@ def not_started(program: Runnable, scene: Any, opts: ExecOptions, why: str) -> R
     )
 
 
+def repeated_rows(pos: np.ndarray, quat: np.ndarray) -> list[bool]:
+    """Per row of ``pos`` (k, 3) and ``quat`` (k, 4): whether it is bit for bit the row before (the
+    first row: False)."""
+    p = np.ascontiguousarray(pos, dtype=np.float64).view(np.int64)
+    q = np.ascontiguousarray(quat, dtype=np.float64).view(np.int64)
+    same = (p[1:] == p[:-1]).all(axis=1) & (q[1:] == q[:-1]).all(axis=1)
+    return [False, *same.tolist()] if len(p) else []
+
+
 @dataclass(frozen=True)
 class OpenLoopResult:
     """The demonstration's gripper commands replayed open loop: whether its end situation has the
@@ -219,22 +251,26 @@ class OpenLoopResult:
 
 
 def run_openloop(
-    program: Program, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = FINAL_SETTLE_S
+    program: Program, scene: Any, track: DemoTrack, *, pieces: Any = None, settle: float = FINAL_SETTLE_S,
+    geometry: Any = None,
 ) -> OpenLoopResult:
     """Replay ``track`` (every step's commanded gripper pose) in a fresh simulation of ``scene``, then
     hold the last command ``settle`` s more (as long as a program holds its last pose), and judge the
-    last debounced situation against ``program``'s goal."""
+    last debounced situation against ``program``'s goal. ``geometry``: the scene's geometry made
+    before (:func:`fresh_simulator`)."""
     from dlovr.sim import SimulationDiverged
 
     wall0 = time.perf_counter()
-    sim, why = fresh_simulator(scene, pieces)
+    sim, why = fresh_simulator(scene, pieces, geometry)
     if sim is None:
         return OpenLoopResult(False, "", (), str(why), 0.0, 0.0)
     sim.tracker.restart(sim.record())
     reason = ""
+    again = repeated_rows(track.pos, track.quat)
     try:
         for i in range(len(track.t)):
-            sim.set_target(track.pos[i], track.quat[i])
+            if not again[i]:  # a command the same as the last one makes the same targets
+                sim.set_target(track.pos[i], track.quat[i])
             sim.step()
         for _ in range(round(settle / float(sim.model.opt.timestep))):
             sim.step()

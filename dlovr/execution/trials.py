@@ -28,7 +28,7 @@ from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.recovery import Recovery
-from dlovr.execution.run import run_openloop, run_program
+from dlovr.execution.run import run_openloop, run_program, scene_geometry
 from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, object_shifts, object_turns, perturb
 from dlovr.model.planning import NetworkProgram
@@ -92,6 +92,9 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         opts = replace(opts, object_shifts=object_shifts(setup.scene, scene),
                        object_turns=object_turns(setup.scene, scene))
     track = setup.track if setup.use_track else None
+    baseline = setup.baseline and setup.track is not None and isinstance(setup.program, Program)
+    # the program's run and the open-loop replay track contacts in the same scene: its geometry once
+    geometry = scene_geometry(scene, setup.pieces) if baseline and setup.record_dir is None else None
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
 
@@ -104,11 +107,14 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         )
     else:
         res = run_program(
-            setup.program, scene, opts, track=track, pieces=setup.pieces, recovery=setup.recovery
+            setup.program, scene, opts, track=track, pieces=setup.pieces, recovery=setup.recovery,
+            geometry=geometry,
         )
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, **_trial_result(res)}
-    if setup.baseline and setup.track is not None and isinstance(setup.program, Program):
-        out["openloop"] = run_openloop(setup.program, scene, setup.track, pieces=setup.pieces).to_json()
+    if baseline and isinstance(setup.program, Program) and setup.track is not None:
+        out["openloop"] = run_openloop(
+            setup.program, scene, setup.track, pieces=setup.pieces, geometry=geometry
+        ).to_json()
     out["wall_time"] = time.perf_counter() - t0
     return out
 

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dlovr.transforms import angle_deg, norm, unit
+from dlovr.transforms import angle_deg, dot, norm, unit
 
 #: Default parameters per class (forces N, angles degrees, times s, rates Hz).
 DEFAULTS: dict[str, dict[str, float]] = {
@@ -215,7 +215,11 @@ class Detector:
     With ``smooth_s`` > 0 (:func:`for_sensor`: a noisy sensor) the detector low-passes the force it
     is given once more (first order, that time constant) before measuring its change; ``start`` then
     takes the samples before the first (``history``: (time s, force N) pairs, oldest first) to
-    settle that filter, so that its reference is no single noisy sample."""
+    settle that filter, so that its reference is no single noisy sample.
+
+    Every sample's arithmetic runs on the force's three components as Python floats (lists), with
+    numpy's roundings: element by element, and a sum of products ``(a * b).sum()`` as :func:`dot`
+    (from 0.0, left to right), so that the detectors cost no small arrays per step."""
 
     cls = "?"
 
@@ -224,28 +228,29 @@ class Detector:
         self.expect = expect
         self.fired_at: float | None = None
         self.signal = 0.0
-        self._f0 = np.zeros(3)
+        self._f0 = [0.0, 0.0, 0.0]
         self.lag = float(self.params.get("ref_lag_s", 0.0))
         self.smooth = float(self.params.get("smooth_s", 0.0))
-        self._hist: list[tuple[float, np.ndarray]] = []
-        self._ema: tuple[float, np.ndarray] | None = None
+        self._hist: list[tuple[float, list[float]]] = []
+        self._ema: tuple[float, list[float]] | None = None
 
     def smoothing_lag(self) -> float:
         """How much later (s) the detector's own smoothing makes it fire than without it: its time
         constant ``smooth_s`` (the delay of a first-order low-pass on a ramp; 0 without smoothing)."""
         return self.smooth
 
-    def _smoothed(self, t: float, f: np.ndarray) -> np.ndarray:
+    def _smoothed(self, t: float, f: list[float]) -> list[float]:
         """``f`` through the detector's own low-pass filter (``f`` itself without one)."""
         if self.smooth <= 0.0:
             return f
         if self._ema is None:
-            self._ema = (t, f.copy())
+            self._ema = (t, list(f))
         else:
             t_last, y = self._ema
             dt = max(t - t_last, 0.0)
-            self._ema = (t, y + (f - y) * (dt / (self.smooth + dt)))
-        return self._ema[1].copy()
+            k = dt / (self.smooth + dt)  # y + (f - y) * k, element by element
+            self._ema = (t, [a + (b - a) * k for a, b in zip(y, f, strict=True)])
+        return list(self._ema[1])
 
     def start(
         self, t: float, force: np.ndarray, torque: np.ndarray,
@@ -255,19 +260,19 @@ class Detector:
         if self.smooth > 0.0:
             for th, fh in history:
                 if th < t:
-                    self._smoothed(float(th), np.asarray(fh, float))
-        self._f0 = self._smoothed(t, np.asarray(force, dtype=float).copy())
-        self._hist = [(t, self._f0.copy())]
+                    self._smoothed(float(th), _floats(fh))
+        self._f0 = self._smoothed(t, _floats(force))
+        self._hist = [(t, list(self._f0))]
         self.fired_at = None
         self.signal = 0.0
 
-    def _reference(self, t: float, f: np.ndarray) -> np.ndarray:
+    def _reference(self, t: float, f: list[float]) -> list[float]:
         """The force the change is measured from: the first sample, or with ``ref_lag_s`` the latest
         sample at least that long ago (the first one until then)."""
         if self.lag <= 0.0:
             return self._f0
         h = self._hist
-        h.append((t, f.copy()))
+        h.append((t, f))
         while len(h) > 1 and h[1][0] <= t - self.lag + 1e-12:
             h.pop(0)
         return h[0][1]
@@ -275,14 +280,21 @@ class Detector:
     def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
         if self.fired_at is not None:
             return True
-        f = self._smoothed(t, np.asarray(force, float))
-        self.signal = self._signal(t, f - self._reference(t, f))
+        f = self._smoothed(t, _floats(force))
+        r = self._reference(t, f)
+        self.signal = self._signal(t, [f[0] - r[0], f[1] - r[1], f[2] - r[2]])
         if self.signal >= 1.0:
             self.fired_at = t
         return self.fired_at is not None
 
-    def _signal(self, t: float, df: np.ndarray) -> float:  # pragma: no cover - abstract
+    def _signal(self, t: float, df: list[float]) -> float:  # pragma: no cover - abstract
+        """How far the criterion is met by the change of force ``df`` (N, world, Python floats)."""
         raise NotImplementedError
+
+
+def _floats(v: np.ndarray | Sequence[float]) -> list[float]:
+    """A force sample's components as a new list of Python floats (numpy's float64 values)."""
+    return np.asarray(v, dtype=float).tolist()
 
 
 class EDetector(Detector):
@@ -302,25 +314,28 @@ class EDetector(Detector):
         dirs += [np.asarray(v, float) for v in expect.released if v is not None]
         dirs += [s * np.asarray(a, float) for a in expect.axes for s in (1.0, -1.0)]  # a pinch: either sign
         self.dirs = [u for d in dirs if (u := unit(d, _NO_DIRECTION)) is not None]
-        self._low: list[np.ndarray] = []
+        self._dirs = [u.tolist() for u in self.dirs]
+        self._low: list[list[float]] = []
 
     def start(
         self, t: float, force: np.ndarray, torque: np.ndarray,
         history: Sequence[tuple[float, np.ndarray]] = (),
     ) -> None:
         super().start(t, force, torque, history)
-        self._low = [np.zeros(3) for _ in self.dirs]  # per direction: the change where it was lowest
+        self._low = [[0.0, 0.0, 0.0] for _ in self.dirs]  # per direction: the change where it was lowest
 
-    def _signal(self, t: float, df: np.ndarray) -> float:
+    def _signal(self, t: float, df: list[float]) -> float:
         thr, cone = self.params["force_threshold_n"], self.params["max_angle_deg"]
-        if not self.dirs:  # no vector known: any change of that size
+        if not self._dirs:  # no vector known: any change of that size
             return norm(df) / thr
         best = 0.0
-        for k, u in enumerate(self.dirs):
-            if self.lag <= 0.0 and float((df * u).sum()) < float((self._low[k] * u).sum()):
-                self._low[k] = df.copy()  # (a sliding reference follows the force by itself)
-            rise = df - self._low[k]
-            along = float((rise * u).sum())
+        lows = self._low
+        for k, u in enumerate(self._dirs):
+            if self.lag <= 0.0 and dot(df, u) < dot(lows[k], u):
+                lows[k] = df  # (a sliding reference follows the force by itself; df is a new list)
+            low = lows[k]
+            rise = [df[0] - low[0], df[1] - low[1], df[2] - low[2]]
+            along = dot(rise, u)
             if along > 0 and angle_deg(rise, u) <= cone:
                 best = max(best, along / thr)
         return best
@@ -343,6 +358,7 @@ class CDetector(Detector):
         self.dir = unit(turn, _NO_DIRECTION)
         if self.dir is None:
             self.dir = _step_dir(self.params)
+        self._dir = None if self.dir is None else self.dir.tolist()
         self._scale = 0.0
 
     def start(
@@ -357,12 +373,13 @@ class CDetector(Detector):
             return self.params["force_threshold_n"]
         return max(self.params["min_turn_fraction"] * max(self.turn, 0.1) * self._scale, 1e-3)
 
-    def _signal(self, t: float, df: np.ndarray) -> float:
+    def _signal(self, t: float, df: list[float]) -> float:
         thr = self.threshold()
-        if self.dir is None:
+        u = self._dir
+        if u is None:
             return norm(df) / thr
-        along = float((df * self.dir).sum())
-        if along <= 0 or angle_deg(df, self.dir) > self.params["max_angle_deg"]:
+        along = dot(df, u)
+        if along <= 0 or angle_deg(df, u) > self.params["max_angle_deg"]:
             return 0.0
         return along / thr
 
@@ -378,18 +395,18 @@ class TDetector(Detector):
         history: Sequence[tuple[float, np.ndarray]] = (),
     ) -> None:
         super().start(t, force, torque, history)
-        self._peak: np.ndarray | None = None
+        self._peak: list[float] | None = None
 
-    def _signal(self, t: float, df: np.ndarray) -> float:
+    def _signal(self, t: float, df: list[float]) -> float:
         rise = self.params["rise_n"]
         mag = norm(df)
         if self._peak is None:
             if mag >= rise:
-                self._peak = df.copy()
+                self._peak = df  # (a new list each sample)
             return 0.5 * min(mag / rise, 1.0)
         pk = norm(self._peak)
         if mag > pk and angle_deg(df, self._peak) < 0.5 * self.params["max_angle_deg"]:
-            self._peak = df.copy()  # still rising the same way
+            self._peak = df  # still rising the same way
             return 0.5
         turned = angle_deg(df, self._peak) / self.params["max_angle_deg"]
         fell = (pk - mag) / (0.5 * pk) if pk > 0 else 0.0
@@ -407,13 +424,14 @@ class IDetector(Detector):
         self.dirs = [u for u in dirs if u is not None]
         if not self.dirs and (d := _step_dir(self.params)) is not None:
             self.dirs = [d]
+        self._dirs = [u.tolist() for u in self.dirs]
 
-    def _signal(self, t: float, df: np.ndarray) -> float:
+    def _signal(self, t: float, df: list[float]) -> float:
         mag = norm(df)
         size = min(mag / self.params["min_force_n"], 1.0)
-        if not self.dirs:  # no vector known: a change of that size
+        if not self._dirs:  # no vector known: a change of that size
             return size
-        if min(angle_deg(df, u) for u in self.dirs) > self.params["max_angle_deg"]:
+        if min(angle_deg(df, u) for u in self._dirs) > self.params["max_angle_deg"]:
             return 0.0
         return size
 
@@ -429,30 +447,30 @@ class SDetector(Detector):
             raise ValueError(
                 f"force_jump needs {self.params['min_rate_hz']:g} Hz of force samples, got {rate_hz:g} Hz"
             )
-        self._hist: list[tuple[float, np.ndarray]] = []
+        self._hist: list[tuple[float, list[float]]] = []
 
     def start(
         self, t: float, force: np.ndarray, torque: np.ndarray,
         history: Sequence[tuple[float, np.ndarray]] = (),
     ) -> None:
         super().start(t, force, torque, history)
-        self._hist = [(t, np.asarray(force, float).copy())]
+        self._hist = [(t, _floats(force))]
 
     def update(self, t: float, force: np.ndarray, torque: np.ndarray) -> bool:
         if self.fired_at is not None:
             return True
-        f = np.asarray(force, float)
+        f = _floats(force)
         w = self.params["window_s"]
-        self._hist.append((t, f.copy()))
+        self._hist.append((t, f))
         while len(self._hist) > 2 and self._hist[1][0] <= t - w - 1e-12:
             self._hist.pop(0)
-        d = f - self._hist[0][1]
-        self.signal = norm(d) / self.params["jump_n"]
+        f0 = self._hist[0][1]
+        self.signal = norm([f[0] - f0[0], f[1] - f0[1], f[2] - f0[2]]) / self.params["jump_n"]
         if self.signal >= 1.0:
             self.fired_at = t
         return self.fired_at is not None
 
-    def _signal(self, t: float, df: np.ndarray) -> float:  # pragma: no cover - update overrides
+    def _signal(self, t: float, df: list[float]) -> float:  # pragma: no cover - update overrides
         return 0.0
 
 

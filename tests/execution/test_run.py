@@ -272,3 +272,96 @@ def test_the_first_touch_takes_back_the_detectors_own_latency(peg):
     assert abs(ses.tool[2]) < 2e-4, ses.tool  # no tip offset (before: +1.2 mm)
     k = int(np.searchsorted(track.t, first.t))
     assert abs(float(sim.target_pos[2]) - float(track.pos[k, 2])) < 2e-4  # back at the demonstrated touch
+
+
+def test_a_shared_geometry_makes_the_same_tracker_and_run(touch):
+    """A trial's program and open-loop replay share the scene's geometry (built once,
+    ``fresh_simulator(..., geometry)``): the tracker is configured as ``Simulator(scene, track=True)``
+    configures its own, and the replay reaches the same steps and end as with a geometry of its own."""
+    from dataclasses import fields
+
+    from dlovr.execution.run import fresh_simulator, scene_geometry
+    from dlovr.sim.tracker import ContactTracker
+
+    program, scene, track, pieces = touch
+    geometry = scene_geometry(scene, pieces)
+    own, _ = fresh_simulator(scene, pieces)
+    shared, _ = fresh_simulator(scene, pieces, geometry)
+    assert own is not None and shared is not None and shared.tracker.geometry is geometry
+    for f in fields(ContactTracker):
+        if f.name != "geometry":
+            assert getattr(shared.tracker, f.name) == getattr(own.tracker, f.name), f.name
+    a = run_openloop(program, scene, track, pieces=pieces, settle=0.1)
+    b = run_openloop(program, scene, track, pieces=pieces, settle=0.1, geometry=geometry)
+    assert (a.final_situation, a.sim_time, a.goal_reached) == (b.final_situation, b.sim_time, b.goal_reached)
+
+
+def test_repeated_rows_are_told_bit_for_bit():
+    from dlovr.execution.run import repeated_rows
+
+    pos = np.array([[0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [-0.0, 1.0, 2.0]])
+    quat = np.ones((4, 4))
+    quat[3, 0] = np.nan
+    assert repeated_rows(pos, quat) == [False, True, False, False]  # -0.0 is not 0.0
+    assert repeated_rows(pos[:0], quat[:0]) == []
+
+
+def test_a_session_commands_a_repeated_pose_once(touch):
+    """``Session.step`` skips ``set_target`` for the pose it commanded last (bit for bit) while the
+    simulator keeps the targets that made; a pose commanded in between (``_detected`` stops the
+    gripper with ``sim.set_target``) or a signed zero makes it command again."""
+    from dlovr.execution.executor import Session
+    from dlovr.execution.run import fresh_simulator
+
+    _, scene, _, pieces = touch
+    sim, _ = fresh_simulator(scene, pieces)
+    assert sim is not None
+    calls = []
+    real = sim.set_target
+    sim.set_target = lambda p, q=None: (calls.append(1), real(p, q))
+    ses = Session(sim, ExecOptions())
+    pos, quat = sim.target_pos.copy(), sim.target_quat.copy()
+    for _ in range(3):
+        ses.step(pos.copy(), quat.copy())
+    assert len(calls) == 1
+    sim.set_target(pos, quat)  # someone else commands: new target arrays
+    ses.step(pos, quat)
+    assert len(calls) == 3
+    moved = pos.copy()
+    moved[0] = -0.0 if moved[0] == 0.0 else moved[0] + 1e-6
+    ses.step(moved, quat)
+    assert len(calls) == 4 and sim.target_pos.tobytes() == moved.tobytes()
+
+
+def test_the_demonstrations_detection_lag_is_measured_once_per_track(peg):
+    """Trials in one process ask for the same macros' lags on the same track: the second asks
+    the kept result (the same value), another seed too; another track measures again."""
+    from dataclasses import replace as dc_replace
+
+    import dlovr.execution.executor as ex
+
+    program, _, track = peg
+    first = program.classed[0]
+    opts = ExecOptions()
+    period = ex.macro_period(first, opts, track)
+    args = (period, 500.0, first.t - period)
+    measured = []
+    real = ex.measured_demo_lag
+
+    def counted(*a):
+        measured.append(1)
+        return real(*a)
+
+    ex.measured_demo_lag = counted
+    ex._DEMO_LAGS.clear()  # (another test may have asked for this one)
+    try:
+        lag = ex.demo_detection_lag(first, opts, track, *args)
+        assert ex.demo_detection_lag(first, dc_replace(opts, seed=7), track, *args) == lag
+        assert len(measured) == 1
+        other = dc_replace(track)
+        assert ex.demo_detection_lag(first, opts, other, *args) == lag and len(measured) == 2
+        later = dc_replace(opts, blank=opts.blank + 0.01)
+        assert ex.demo_detection_lag(first, later, other, *args) is not None
+        assert len(measured) == 3
+    finally:
+        ex.measured_demo_lag = real
