@@ -127,18 +127,11 @@ def fresh_simulator(scene: Any, pieces: Any = None, geometry: Any = None) -> tup
 
     ``geometry``: the scene's :class:`dlovr.geometry.SceneGeometry` made before
     (:func:`scene_geometry`; it only reads it), so that two runs in one scene (a trial's program and
-    its open-loop replay) build it once: the tracker is the one ``Simulator(scene, track=True)``
-    makes, on that geometry."""
+    its open-loop replay) build it once."""
     from dlovr.sim import SimulationDiverged, Simulator
 
     try:
-        if geometry is None:
-            return Simulator(scene, track=True, pieces=pieces), None
-        from dlovr.sim.tracker import ContactTracker
-
-        sim = Simulator(scene, pieces=pieces)
-        sim.tracker = ContactTracker(geometry, scene.params)
-        return sim, None
+        return Simulator(scene, track=True, pieces=pieces, geometry=geometry), None
     except (ValueError, SimulationDiverged) as e:
         return None, f"cannot start: {e}"
 

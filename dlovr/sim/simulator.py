@@ -168,7 +168,9 @@ class Simulator:
     ``pieces`` fixes the obstacles' convex decomposition (``dlovr.geometry.scene_pieces``; computed
     when not given; kept as ``sim.pieces``). ``track=True`` (scene needed) also extracts the contact
     states every step: ``sim.tracker`` is a :class:`dlovr.sim.tracker.ContactTracker` and each record
-    carries its ``state`` (``.situation``, ``.discrete``).
+    carries its ``state`` (``.situation``, ``.discrete``); ``geometry``: the scene's
+    :class:`dlovr.geometry.SceneGeometry` for the tracker, when made before (it is only read, so two
+    simulators of one scene, e.g. a trial's program run and its open-loop replay, may share it).
     """
 
     def __init__(
@@ -181,6 +183,7 @@ class Simulator:
         max_stretch: float = DEFAULT_MAX_STRETCH,
         track: bool = False,
         pieces: dict[str, tuple[list[np.ndarray], bool]] | None = None,
+        geometry: Any = None,
     ):
         self.pieces = pieces
         if built is None:
@@ -199,7 +202,8 @@ class Simulator:
             from dlovr.geometry import SceneGeometry
             from dlovr.sim.tracker import ContactTracker
 
-            geometry = SceneGeometry.from_scene(scene, pieces=self.pieces)
+            if geometry is None:
+                geometry = SceneGeometry.from_scene(scene, pieces=self.pieces)
             self.tracker = ContactTracker(geometry, scene.params)
         self.built = built
         self.max_stretch = max_stretch
