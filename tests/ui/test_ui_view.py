@@ -281,8 +281,12 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
 
     # hovering the first situation of the timeline (the cable hanging free) shows its faces: none
     first = page.locator('.dlovr-timeline > div[data-situation="0"]')
-    hover_until(page, first, lambda: faces.shown == {}, "the hovered free situation's faces (none)")
-    wait_for(lambda: green_fraction(page) < 0.01, timeout=10, what="the highlight gone while hovering")
+    # the live axis grows and the page redraws the bar every second, so a still mouse may lose its band:
+    # the highlight must be gone while the band is hovered, a fresh hover each try (as below)
+    hover_until(
+        page, first, lambda: faces.shown == {} and green_fraction(page) < 0.01,
+        "the hovered free situation's faces (none) and the highlight gone", timeout=30,
+    )
     shot(page, "faces-hovering-the-free-situation")
     # the live timeline is drawn again every second (its end time): the element under the mouse is
     # replaced and never sees the mouse leave; leaving must still give the live faces back
