@@ -41,7 +41,6 @@ from dlovr.execution.motion import (
     eased,
     last_start,
     local_twist,
-    pose_bytes,
 )
 from dlovr.model.derivation import (
     FREE_WINDOW_S,
@@ -451,8 +450,6 @@ class Session:
         #: smoothing when it starts (kept only for a noisy sensor)
         self.recent: deque[tuple[float, np.ndarray]] = deque(maxlen=max(1, round(HISTORY_S / self.dt)))
         self._noisy = opts.assumed_noise > 0.0  # (kept only for a noisy sensor)
-        #: the last pose commanded through :meth:`step` (its bytes) and the target arrays it made
-        self._commanded: tuple[bytes, Any, Any] | None = None
 
     @property
     def signal(self) -> float:
@@ -477,17 +474,10 @@ class Session:
 
     def step(self, pos: np.ndarray, quat: np.ndarray) -> Any:
         """Command the gripper pose and advance one step; the sensed (noisy, filtered) wrench is
-        then in ``self.f`` (N) and ``self.tq`` (N m), world frame.
-
-        The pose commanded last here (bit for bit), while the simulator still has the targets it
-        made, is not commanded again: ``set_target`` would make the same (a hold, a still track)."""
+        then in ``self.f`` (N) and ``self.tq`` (N m), world frame (a pose repeated bit for bit costs
+        ``set_target`` nothing)."""
         sim = self.sim
-        key = pose_bytes(pos, quat)
-        last = self._commanded
-        if key is None or last is None or key != last[0] or sim.target_pos is not last[1] \
-                or sim.target_quat is not last[2]:
-            sim.set_target(pos, quat)
-            self._commanded = None if key is None else (key, sim.target_pos, sim.target_quat)
+        sim.set_target(pos, quat)
         r = sim.step()
         self.f, self.tq = self.cond(r.gripper_force, getattr(r, "gripper_torque", _NO_TORQUE), self.dt)
         if self._noisy:

@@ -206,16 +206,6 @@ def _between(t: float, times: list[float], pos: list[list[float]], quat: list[li
     return out, slerp(qa, qb, w)
 
 
-def pose_bytes(pos: Any, quat: Any) -> bytes | None:
-    """A commanded pose's float64 values as bytes (exact: signed zeros and NaNs told apart), or None
-    when either is not a float64 array of 3 and 4 values."""
-    if type(pos) is not np.ndarray or type(quat) is not np.ndarray:
-        return None
-    if pos.dtype != np.float64 or quat.dtype != np.float64 or pos.shape != (3,) or quat.shape != (4,):
-        return None
-    return pos.tobytes() + quat.tobytes()
-
-
 @dataclass(frozen=True)
 class TrackPath:
     """Gripper poses along the demonstration's own recorded trajectory between two of its times, from

@@ -216,15 +216,6 @@ def not_started(program: Runnable, scene: Any, opts: ExecOptions, why: str) -> R
     )
 
 
-def repeated_rows(pos: np.ndarray, quat: np.ndarray) -> list[bool]:
-    """Per row of ``pos`` (k, 3) and ``quat`` (k, 4): whether it is bit for bit the row before (the
-    first row: False)."""
-    p = np.ascontiguousarray(pos, dtype=np.float64).view(np.int64)
-    q = np.ascontiguousarray(quat, dtype=np.float64).view(np.int64)
-    same = (p[1:] == p[:-1]).all(axis=1) & (q[1:] == q[:-1]).all(axis=1)
-    return [False, *same.tolist()] if len(p) else []
-
-
 @dataclass(frozen=True)
 class OpenLoopResult:
     """The demonstration's gripper commands replayed open loop: whether its end situation has the
@@ -259,11 +250,10 @@ def run_openloop(
         return OpenLoopResult(False, "", (), str(why), 0.0, 0.0)
     sim.tracker.restart(sim.record())
     reason = ""
-    again = repeated_rows(track.pos, track.quat)
+    pos, quat = np.ascontiguousarray(track.pos, dtype=float), np.ascontiguousarray(track.quat, dtype=float)
     try:
         for i in range(len(track.t)):
-            if not again[i]:  # a command the same as the last one makes the same targets
-                sim.set_target(track.pos[i], track.quat[i])
+            sim.set_target(pos[i], quat[i])  # a row repeated bit for bit costs nothing
             sim.step()
         for _ in range(round(settle / float(sim.model.opt.timestep))):
             sim.step()

@@ -133,6 +133,18 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _pose_key(pos: Any, quat: Any) -> bytes | None:
+    """A commanded pose's float64 values as bytes (exact: signed zeros and NaNs told apart; a ``None``
+    quaternion gives fewer bytes), or None when either is not a float64 array of 3 and 4 values."""
+    if type(pos) is not np.ndarray or pos.dtype != np.float64 or pos.shape != (3,):
+        return None
+    if quat is None:
+        return pos.tobytes()
+    if type(quat) is not np.ndarray or quat.dtype != np.float64 or quat.shape != (4,):
+        return None
+    return pos.tobytes() + quat.tobytes()
+
+
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
     """Obstacles of a ``dlovr.scene.Scene`` from its convex decomposition
     (``dlovr.geometry.scene_pieces``): MuJoCo piece ``k`` (geom ``"<obj>.P<k>"``) is geometry's
@@ -239,6 +251,8 @@ class Simulator:
         self._reset_warnings()
         self.target_pos = _frozen(self._mocap_pos.copy())
         self.target_quat = _frozen(self._mocap_quat.copy())
+        # set_target's last float64 input as bytes, and the targets it made (see set_target)
+        self._last_command: tuple[bytes, np.ndarray, np.ndarray] | None = None
         deep = [c for c in self.contacts() if c.dist < -0.5 * float(m.flex_radius[built.flex_id])]
         if deep:
             c = min(deep, key=lambda c: c.dist)
@@ -264,7 +278,16 @@ class Simulator:
         quaternion is divided by its :func:`dlovr.transforms.norm` computed once (the same bits as
         ``quat_normalize``). The target arrays are private copies made read-only, so that the steps'
         records share them instead of copying them (a target assigned directly is copied by each
-        record while it is writeable)."""
+        record while it is writeable).
+
+        A pose given as float64 arrays bit for bit equal to the last one (signed zeros and NaNs told
+        apart), while the targets are still those it made, returns at once: it would make the same
+        targets (a hold, a still stretch of a track)."""
+        key = _pose_key(pos, quat)
+        last = self._last_command
+        if key is not None and last is not None and key == last[0] and self.target_pos is last[1] \
+                and self.target_quat is last[2]:
+            return
         p = np.array(pos, dtype=float)  # a private copy
         if p.shape != (3,) or not all(map(math.isfinite, p.tolist())):
             raise ValueError(f"gripper target position must be 3 finite numbers, got {pos!r}")
@@ -276,6 +299,7 @@ class Simulator:
             if w is None or n < 1e-9:
                 raise ValueError(f"gripper target quaternion must be 4 finite numbers, not all 0: {quat!r}")
             self.target_quat = _frozen(np.array([x / n for x in w]))  # q / n, element by element
+        self._last_command = None if key is None else (key, self.target_pos, self.target_quat)
 
     def _move_mocap(self) -> None:
         """The gripper one step toward its target at bounded speed (:func:`dlovr.sim.kernels.move_gripper`,

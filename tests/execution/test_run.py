@@ -296,43 +296,6 @@ def test_a_shared_geometry_makes_the_same_tracker_and_run(touch):
     assert (a.final_situation, a.sim_time, a.goal_reached) == (b.final_situation, b.sim_time, b.goal_reached)
 
 
-def test_repeated_rows_are_told_bit_for_bit():
-    from dlovr.execution.run import repeated_rows
-
-    pos = np.array([[0.0, 1.0, 2.0], [0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [-0.0, 1.0, 2.0]])
-    quat = np.ones((4, 4))
-    quat[3, 0] = np.nan
-    assert repeated_rows(pos, quat) == [False, True, False, False]  # -0.0 is not 0.0
-    assert repeated_rows(pos[:0], quat[:0]) == []
-
-
-def test_a_session_commands_a_repeated_pose_once(touch):
-    """``Session.step`` skips ``set_target`` for the pose it commanded last (bit for bit) while the
-    simulator keeps the targets that made; a pose commanded in between (``_detected`` stops the
-    gripper with ``sim.set_target``) or a signed zero makes it command again."""
-    from dlovr.execution.executor import Session
-    from dlovr.execution.run import fresh_simulator
-
-    _, scene, _, pieces = touch
-    sim, _ = fresh_simulator(scene, pieces)
-    assert sim is not None
-    calls = []
-    real = sim.set_target
-    sim.set_target = lambda p, q=None: (calls.append(1), real(p, q))
-    ses = Session(sim, ExecOptions())
-    pos, quat = sim.target_pos.copy(), sim.target_quat.copy()
-    for _ in range(3):
-        ses.step(pos.copy(), quat.copy())
-    assert len(calls) == 1
-    sim.set_target(pos, quat)  # someone else commands: new target arrays
-    ses.step(pos, quat)
-    assert len(calls) == 3
-    moved = pos.copy()
-    moved[0] = -0.0 if moved[0] == 0.0 else moved[0] + 1e-6
-    ses.step(moved, quat)
-    assert len(calls) == 4 and sim.target_pos.tobytes() == moved.tobytes()
-
-
 def test_the_demonstrations_detection_lag_is_measured_once_per_track(peg):
     """Trials in one process ask for the same macros' lags on the same track: the second asks
     the kept result (the same value), another seed too; another track measures again."""

@@ -233,6 +233,42 @@ def test_bad_target_rejected() -> None:
         sim.set_target((0, 0, 1), (0, 0, 0, 0))
 
 
+def test_a_pose_repeated_bit_for_bit_is_not_commanded_again() -> None:
+    """``set_target`` with float64 arrays bit for bit equal to its last input keeps the targets it
+    made (the same arrays); targets set in between (by assignment, ``set_state``), a signed zero, a
+    ``None`` quaternion or input that is not float64 arrays make new ones, as they would be made."""
+    sim = on_table()
+    pos, quat = sim.target_pos + np.array([0.01, 0.0, 0.0]), np.array([1.0, 0.0, 0.0, 0.0])
+    sim.set_target(pos, quat)
+    made = sim.target_pos, sim.target_quat
+    sim.set_target(pos.copy(), quat.copy())
+    assert sim.target_pos is made[0] and sim.target_quat is made[1]
+    sim.target_pos = np.array(sim.target_pos)  # assigned directly: the next command makes new targets
+    sim.set_target(pos, quat)
+    assert sim.target_pos is not made[0] and sim.target_pos.tobytes() == pos.tobytes()
+    made = sim.target_pos, sim.target_quat
+    moved = pos.copy()
+    moved[1] = -0.0 if moved[1] == 0.0 else -moved[1]
+    sim.set_target(moved, quat)
+    assert sim.target_pos is not made[0] and sim.target_pos.tobytes() == moved.tobytes()
+    made = sim.target_pos, sim.target_quat
+    sim.set_target(moved)  # the same position without a quaternion: a different command
+    assert sim.target_pos is not made[0] and sim.target_quat is made[1]
+    kept = sim.target_pos
+    sim.set_target(moved)
+    assert sim.target_pos is kept
+    sim.set_target(moved.tolist(), quat.tolist())  # not arrays: always commanded
+    listed = sim.target_pos
+    sim.set_target(moved.tolist(), quat.tolist())
+    assert sim.target_pos is not listed and sim.target_pos.tobytes() == listed.tobytes()
+    sim.set_target(moved, quat)
+    state = sim.get_state()
+    sim.set_state(state)  # restored targets are new arrays: commanded again
+    restored = sim.target_pos
+    sim.set_target(moved, quat)
+    assert sim.target_pos is not restored
+
+
 def test_export_xml_loads_in_plain_mujoco(tmp_path) -> None:
     import mujoco
 
