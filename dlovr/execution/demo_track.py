@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
@@ -37,6 +37,11 @@ class DemoTrack:
     #: the track is a trembling hand's, smoothed (``dlovr.execution.engine.smoothed``): beyond a
     #: stretch the gripper goes on with the stretch's net motion, not with the hand's last 0.1 s
     by_hand: bool = False
+    #: what the program's detectors were measured to do on this track's wrench, kept for the next runs
+    #: that ask the same (``dlovr.execution.executor.demo_detection_lag``; made empty per track, a
+    #: copy by ``dataclasses.replace`` included)
+    lags: dict[tuple[Any, ...], tuple[Any, float | None]] = field(
+        init=False, repr=False, compare=False, default_factory=dict)
 
 
 def load_track(path: str | Path) -> DemoTrack:

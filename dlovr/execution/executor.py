@@ -909,20 +909,15 @@ def detection_lag(m: Macro, ses: Session, track: DemoTrack | None, period: float
     return demo if demo is not None and demo <= MAX_DEMO_LAG_S else guard.lag()
 
 
-#: :func:`demo_detection_lag`'s results on one track (kept alive, as the macros: their ids name them)
-_DEMO_LAGS: list[tuple[DemoTrack, dict[tuple[Any, ...], tuple[Macro, float | None]]]] = []
-
-
 def demo_detection_lag(
     m: Macro, opts: ExecOptions, track: DemoTrack | None, period: float, rate_hz: float, t0: float
 ) -> float | None:
-    """:func:`measured_demo_lag`, kept per track for the next runs that ask the same (a pure function;
-    the options' ``seed`` draws only the run's sensor noise, which it does not use)."""
+    """:func:`measured_demo_lag`, kept in the track (``DemoTrack.lags``, with the macro: its id names
+    it) for the next runs that ask the same (a pure function; the options' ``seed`` draws only the
+    run's sensor noise, which it does not use)."""
     if track is None or track.wrench is None:
         return measured_demo_lag(m, opts, track, period, rate_hz, t0)
-    if not _DEMO_LAGS or _DEMO_LAGS[0][0] is not track or len(_DEMO_LAGS[0][1]) >= 256:
-        _DEMO_LAGS[:] = [(track, {})]
-    known = _DEMO_LAGS[0][1]
+    known = track.lags
     key = (id(m), replace(opts, seed=0), period, rate_hz, t0)
     got = known.get(key)
     if got is None or got[0] is not m:
