@@ -126,22 +126,14 @@ def fresh_simulator(scene: Any, pieces: Any = None, geometry: Any = None) -> tup
     its convex decomposition, if known), or None and why it cannot start.
 
     ``geometry``: the scene's :class:`dlovr.geometry.SceneGeometry` made before
-    (:func:`scene_geometry`; it only reads it), so that two runs in one scene (a trial's program and
-    its open-loop replay) build it once."""
+    (``SceneGeometry.from_scene(scene, pieces=pieces)``; it only reads it), so that two runs in one
+    scene (a trial's program and its open-loop replay) build it once."""
     from dlovr.sim import SimulationDiverged, Simulator
 
     try:
         return Simulator(scene, track=True, pieces=pieces, geometry=geometry), None
     except (ValueError, SimulationDiverged) as e:
         return None, f"cannot start: {e}"
-
-
-def scene_geometry(scene: Any, pieces: Any = None) -> Any:
-    """``scene``'s :class:`dlovr.geometry.SceneGeometry` as ``Simulator(scene, track=True,
-    pieces=pieces)`` makes it for its tracker (for :func:`fresh_simulator`'s ``geometry``)."""
-    from dlovr.geometry import SceneGeometry, scene_pieces
-
-    return SceneGeometry.from_scene(scene, pieces=scene_pieces(scene) if pieces is None else pieces)
 
 
 @overload

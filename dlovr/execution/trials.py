@@ -28,7 +28,7 @@ from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.recovery import Recovery
-from dlovr.execution.run import run_openloop, run_program, scene_geometry
+from dlovr.execution.run import run_openloop, run_program
 from dlovr.execution.scoring import RunResult
 from dlovr.execution.variation import Variation, object_shifts, object_turns, perturb
 from dlovr.model.planning import NetworkProgram
@@ -94,7 +94,11 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
     track = setup.track if setup.use_track else None
     baseline = setup.baseline and setup.track is not None and isinstance(setup.program, Program)
     # the program's run and the open-loop replay track contacts in the same scene: its geometry once
-    geometry = scene_geometry(scene, setup.pieces) if baseline and setup.record_dir is None else None
+    geometry = None
+    if baseline and setup.record_dir is None:
+        from dlovr.geometry import SceneGeometry
+
+        geometry = SceneGeometry.from_scene(scene, pieces=setup.pieces)  # as Simulator(track=True) makes it
     if setup.record_dir is not None:
         from dlovr.execution.recorded import record_run
 

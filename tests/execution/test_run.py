@@ -280,11 +280,12 @@ def test_a_shared_geometry_makes_the_same_tracker_and_run(touch):
     configures its own, and the replay reaches the same steps and end as with a geometry of its own."""
     from dataclasses import fields
 
-    from dlovr.execution.run import fresh_simulator, scene_geometry
+    from dlovr.execution.run import fresh_simulator
+    from dlovr.geometry import SceneGeometry
     from dlovr.sim.tracker import ContactTracker
 
     program, scene, track, pieces = touch
-    geometry = scene_geometry(scene, pieces)
+    geometry = SceneGeometry.from_scene(scene, pieces=pieces)
     own, _ = fresh_simulator(scene, pieces)
     shared, _ = fresh_simulator(scene, pieces, geometry)
     assert own is not None and shared is not None and shared.tracker.geometry is geometry
