@@ -94,11 +94,19 @@ def test_the_macro_list_of_a_long_program_fits_the_panel_with_its_risk_column(de
 def test_the_network_of_peg_in_hole_is_readable_zoomable_and_opens_full_size(demo: DemoServer, page):
     if demo.session.scene.name != "peg_in_hole":
         fresh(demo, "peg_in_hole")
+    # the panel follows the scene at its next tick, and the page then shows the new network: until
+    # both, the last scene's network is on the page (a loaded machine's test read the table's)
+    wait_for(lambda: (n := demo.network_panel.net) is not None and n.scene_name == "peg_in_hole",
+             timeout=60, what="peg-in-hole's network in the panel")
+    assert demo.network_panel.net is not None and len(demo.network_panel.net.nodes) >= 10
     net = page.locator("div.dlovr-network")
     net.wait_for(state="attached", timeout=30_000)
     page.get_by_role("button", name="Transition network").first.click() if not net.is_visible() else None
     net.wait_for(timeout=10_000)
-    assert demo.network_panel.net is not None and len(demo.network_panel.net.nodes) >= 10
+    page.wait_for_function(
+        "(n) => document.querySelectorAll('div.dlovr-network text.nlabel').length >= n",
+        arg=len(demo.network_panel.net.nodes), timeout=30_000,
+    )
     net.scroll_into_view_if_needed()
     heights = page.evaluate(
         "() => [...document.querySelectorAll('div.dlovr-network text.nlabel')]"
@@ -254,7 +262,7 @@ def test_a_scene_switch_and_an_opened_recording_leave_nothing_of_the_last_scene(
 
     demo.load("l_block")
     wait_for(lambda: demo.run_panel.choice.value == "sample: l_block", timeout=5, what="l_block's program")
-    page.get_by_text("Program l_block").first.wait_for(timeout=10_000)
+    page.get_by_text("Program l_block").first.wait_for(timeout=30_000)  # (10 s: missed on a loaded machine)
     wait_for(lambda: path.name not in page.locator("body").inner_text(), timeout=5, what="the old notes gone")
     body = page.locator("body").inner_text()
     assert "run stopped" not in body
