@@ -329,7 +329,7 @@ class Simulator:
             rec, poses = self._record(True)
             if tracker is not None:  # tracker.update(rec) of what the record's kernel made already
                 ca = rec.contact_arrays
-                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses)
+                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses, True)
         if state is not None:
             object.__setattr__(rec, "state", state)
         assert rec is not None, "step(n) needs n >= 1"
