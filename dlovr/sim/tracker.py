@@ -282,8 +282,10 @@ class ContactTracker:
         if has and (pm is None or pm[0] is not arrays.names[0]):
             pm = self._piece_map = (arrays.names[0], _piece_table(self.geometry.pieces, arrays.names[0]))
         pmap = pm[1] if has and pm is not None else _NO_MAP
-        while True:
-            out, changed, bad, self._edge_turned = _track_step(
+        skip = nc == 0 and self._quiet and has and self.reuse and not len(self._edge_pairs)  # track_step's
+        out, changed, bad, self._edge_turned = _KEPT, False, -1, False  # what it would return then
+        while not skip:
+            out, changed, bad, self._edge_turned, self._quiet = _track_step(
                 pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse,
                 self._gf, self._gi, self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
             )
@@ -339,7 +341,7 @@ class ContactTracker:
         cap_c, cap_h = max(nc, 16), max(cap_h, 16)
         self._work_i, self._work_f = tk.new_work(n1, self._width, self._n_pieces, cap_c, cap_h, old)
         if old is None:
-            self._lab_i, self._lab_f = tk.no_labels()
+            self._lab_i, self._lab_f, self._quiet = *tk.no_labels(), False
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
             self._env_codes = [0] * n1  # the numbers (_codes) of the points' primitives

@@ -439,3 +439,35 @@ def test_the_record_reads_mujocos_struct_as_the_bindings_do():
         assert np.array_equal(rec.gripper_quat, d.mocap_quat[0])
         seen.add(d.ncon > 0)
     assert seen == {False, True}
+
+
+def test_a_quiet_step_skips_the_trackers_kernel_with_the_same_states(monkeypatch):
+    """A step without contacts after one where nothing touched and no pair was labelled does not
+    call the tracker's kernel (it would keep everything): the states are those of calling it."""
+    from itertools import islice
+    from pathlib import Path
+
+    import dlovr.sim.tracker as tracker_module
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+
+    scene = load_scene("table")
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "table.script.toml")
+    real, calls = tracker_module._track_step, [0]
+
+    def counted(*args):
+        calls[0] += 1
+        return real(*args)
+
+    def states():
+        calls[0] = 0
+        sim = Simulator(scene, track=True)
+        got = [(r.state.topological, r.state.discrete, r.state.forces) for r in islice(sim.run(script), 3000)]
+        return got, calls[0], sim.tracker.labellings
+
+    monkeypatch.setattr(tracker_module, "_track_step", counted)
+    skipping = states()
+    monkeypatch.setattr(tracker_module, "_track_step", lambda *args: (*counted(*args)[:4], False))
+    calling = states()
+    assert skipping[0] == calling[0] and skipping[2] == calling[2]
+    assert skipping[1] < calling[1] - 100 and calling[1] >= 3000  # some hundred steps skipped
