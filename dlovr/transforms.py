@@ -112,15 +112,19 @@ def quat_mul(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -
 
 def quat_rotate(q: Sequence[float] | np.ndarray, v: Sequence[float] | np.ndarray) -> np.ndarray:
     """Rotate vector ``v`` by unit quaternion ``q`` (wxyz)."""
-    w, x, y, z = _f64(q) or (float(c) for c in q)
-    vx, vy, vz = _f64(v) or (float(c) for c in v)
+    return np.array(rotate_floats(_f64(q) or [float(c) for c in q], _f64(v) or [float(c) for c in v]))
+
+
+def rotate_floats(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`quat_rotate` on Python floats (``q`` wxyz), as a tuple: the same operations, the same
+    bits, without the arrays (the contact tracker takes the gripper's z axis so on many steps)."""
+    w, x, y, z = q
+    vx, vy, vz = v
     tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return np.array(
-        [
-            vx + w * tx + (y * tz - z * ty),
-            vy + w * ty + (z * tx - x * tz),
-            vz + w * tz + (x * ty - y * tx),
-        ]
+    return (
+        vx + w * tx + (y * tz - z * ty),
+        vy + w * ty + (z * tx - x * tz),
+        vz + w * tz + (x * ty - y * tx),
     )
 
 

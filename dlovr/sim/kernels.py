@@ -29,14 +29,20 @@ L_COUNT = 11
 # the simulator's configuration (cfg, int64): header (the contact structs' layout at its end), then
 # the sections of Config (:func:`pack_config`)
 C_WARN_BASE, C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM, C_NHOLD = 0, 1, 2, 3, 4, 5
-C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT, C_LAYOUT = 6, 7, 8, 9, 10, 11, 12
+C_XPOS, C_QPOS, C_NQ, C_QVEL, C_NV, C_NVERT, C_MOCAP_POS, C_MOCAP_QUAT = 6, 7, 8, 9, 10, 11, 12, 13
+# where mjData's fields lie in its struct (``mem``): ncon, ne, nefc (int32 units), time (float64), the
+# arena and efc_force pointers (int64)
+C_S_NCON, C_S_NE, C_S_NEFC, C_S_TIME, C_S_ARENA, C_S_EFC, C_S_END = 14, 15, 16, 17, 18, 19, 20
+C_LAYOUT = C_S_END
 C_HEAD = C_LAYOUT + L_COUNT
+# the record's small arrays in one (``out``): gripper force, torque, position, quaternion
+O_FORCE, O_TORQUE, O_POS, O_QUAT, O_WIDTH = 0, 3, 6, 9, 13
 
 
 class Config(NamedTuple):
     """The sections of the simulator's configuration after its header (views)."""
 
-    fatal: np.ndarray  # the fatal warnings' indices (in int32 units of the warning structs)
+    fatal: np.ndarray  # the fatal warnings' counts (in int32 units of the mjData struct)
     piece_of_geom: np.ndarray  # the obstacle piece of each geom (-1 for none)
     obj_of_geom: np.ndarray  # the object of each geom
     hold_rows: np.ndarray  # the holding constraints' rows (3 per constraint)
@@ -72,38 +78,44 @@ def _config(cfg: np.ndarray) -> Config:
 @njit
 def step_record(
     mj: np.ndarray,
-    warn: np.ndarray,
+    mem: np.ndarray,
     arena: np.ndarray,
-    efc_force: np.ndarray,
     cfg: np.ndarray,
     bounds: np.ndarray,
     ncon: int,
-    pos: np.ndarray,
-    quat: np.ndarray,
     pts: np.ndarray,
     table: np.ndarray,
-    grip: np.ndarray,
-    torque: np.ndarray,
+    out: np.ndarray,
 ):
     """The step's record arrays, and the divergence checks.
 
-    ``mj``: MuJoCo's float arrays in place (qpos, qvel and the cable points at the offsets in
-    ``cfg``); ``warn``: its warning structs as int32; ``arena``: its contact structs (the first
-    ``ncon``); ``cfg``: the configuration (``C_*``; see :class:`dlovr.sim.contacts.MjViews`);
-    ``bounds``: squared segment length bounds (lo, hi), the segment length and the largest relative
-    stretch. Fills ``pts`` (the cable points), the rows of ``table`` (one per rod-obstacle contact, in
-    MuJoCo's order), ``grip`` (the force of the holding constraints' rows of ``efc_force``, summed
-    per axis) and ``torque`` (:func:`hold_torque`; ``pos`` and ``quat`` are the gripper's, wxyz).
+    ``mj``: MuJoCo's float arrays in place (qpos, qvel, the cable points and the gripper's mocap pose
+    at the offsets in ``cfg``); ``mem``: the ``mjData`` struct (int64; its warning structs, counts,
+    time and pointers at the offsets in ``cfg``); ``arena``: MuJoCo's arena, its contact structs
+    (the first ``ncon``) and this step's ``efc_force``; ``cfg``: the configuration (``C_*``; see
+    :class:`dlovr.sim.contacts.MjViews`); ``bounds``: squared segment length bounds (lo, hi), the
+    segment length and the largest relative stretch. Fills ``pts`` (the cable points), the rows of
+    ``table`` (one per rod-obstacle contact, in MuJoCo's order) and ``out`` (``O_*``): the gripper
+    force (the holding constraints' rows of ``efc_force``, summed per axis), its torque
+    (:func:`hold_torque`), the gripper's position and quaternion (wxyz).
 
-    Returns (code, index, value, rows, self pairs, (gripper position, quaternion, force)): code 0,
-    or the first failed check: 1 the count of the fatal warnings differs from the baseline, 2
-    NaN/inf in qpos or qvel, 3 in the cable points, 4 segment ``index`` stretched by ``value``
-    (relative) beyond the largest stretch; the gripper's pose and force as tuples of floats
-    (``pos``, ``quat`` and ``grip``'s values: what the tracker's states hold).
+    Returns (code, index, value, rows, self pairs, ne, time, (gripper position, quaternion,
+    force)): code 0, or the first failed check: 1 the count of the fatal warnings differs from the
+    baseline, 2 NaN/inf in qpos or qvel, 3 in the cable points, 4 segment ``index`` stretched by
+    ``value`` (relative) beyond the largest stretch; MuJoCo's ``ne`` (the holding constraints'
+    rows in ``cfg`` are those of this count: call again with the rows of another) and ``time``; the
+    gripper's pose and force as tuples of floats (what the tracker's states hold).
     """
     conf = _config(cfg)
     fatal, piece_of_geom, obj_of_geom = conf.fatal, conf.piece_of_geom, conf.obj_of_geom
     hold_rows, layout, n_hold = conf.hold_rows, conf.layout, cfg[C_NHOLD]
+    warn = mem.view(np.int32)
+    ne, nefc, time = warn[cfg[C_S_NE]], warn[cfg[C_S_NEFC]], mem.view(np.float64)[cfg[C_S_TIME]]
+    e0 = (mem[cfg[C_S_EFC]] - mem[cfg[C_S_ARENA]]) // 8
+    if e0 < 0 or e0 + nefc > arena.shape[0]:
+        raise RuntimeError("efc_force outside MuJoCo's arena")
+    efc_force = arena[e0 : e0 + nefc]
+    mp, mq = cfg[C_MOCAP_POS], cfg[C_MOCAP_QUAT]
     code, index, value = 0, -1, 0.0
     count = 0
     for w in fatal:
@@ -126,12 +138,12 @@ def step_record(
                 code = 3
     if code == 0:
         lo, hi, seg, max_stretch = bounds[0], bounds[1], bounds[2], bounds[3]
-        out = False
+        beyond = False
         for i in range(n1 - 1):
             dx, dy, dz = pts[i + 1, 0] - pts[i, 0], pts[i + 1, 1] - pts[i, 1], pts[i + 1, 2] - pts[i, 2]
             d2 = dot3(dx, dy, dz, dx, dy, dz)
-            out = out or d2 < lo or d2 > hi
-        if out:  # rare: the exact test, naming the segment
+            beyond = beyond or d2 < lo or d2 > hi
+        if beyond:  # rare: the exact test, naming the segment
             for i in range(n1 - 1):
                 dx, dy, dz = pts[i + 1, 0] - pts[i, 0], pts[i + 1, 1] - pts[i, 1], pts[i + 1, 2] - pts[i, 2]
                 dev = abs(np.sqrt(dot3(dx, dy, dz, dx, dy, dz)) / seg - 1.0)
@@ -143,8 +155,11 @@ def step_record(
         s = 0.0
         for r in range(c, n_hold, 3):
             s += efc_force[hold_rows[r]]
-        grip[c] = 0.0 + s
-    hold_torque(efc_force, hold_rows, quat, bounds[2], torque)
+        out[O_FORCE + c] = 0.0 + s
+        out[O_POS + c] = mj[mp + c]
+    for c in range(4):
+        out[O_QUAT + c] = mj[mq + c]
+    hold_torque(efc_force, hold_rows, out[O_QUAT : O_QUAT + 4], bounds[2], out[O_TORQUE : O_TORQUE + 3])
     rows, nself = 0, 0
     flex, pyramidal = cfg[C_FLEX], cfg[C_PYRAMIDAL] != 0
     cf, ci = arena, arena.view(np.int32)
@@ -187,8 +202,9 @@ def step_record(
         t[T_FORCE] = force
         t[T_ACTIVE] = 1.0 if adr >= 0 else 0.0
         rows += 1
-    poses = (pos[0], pos[1], pos[2]), (quat[0], quat[1], quat[2], quat[3]), (grip[0], grip[1], grip[2])
-    return code, index, value, rows, nself, poses
+    pos, quat, grip = (out[O_POS], out[O_POS + 1], out[O_POS + 2]), (out[O_QUAT], out[O_QUAT + 1],
+                       out[O_QUAT + 2], out[O_QUAT + 3]), (out[O_FORCE], out[O_FORCE + 1], out[O_FORCE + 2])
+    return code, index, value, rows, nself, ne, time, (pos, quat, grip)
 
 
 @njit

@@ -123,6 +123,8 @@ class SimState:
 
 _NO_PAIRS = np.zeros((0, 2), np.int64)
 _T_WIDTH = kernels.T_WIDTH
+_NO_ROWS = np.zeros((0, _T_WIDTH))  # the contact rows of every step without any (nothing to write)
+_O_WIDTH, _O_TORQUE, _O_POS, _O_QUAT = kernels.O_WIDTH, kernels.O_TORQUE, kernels.O_POS, kernels.O_QUAT
 _step_record = kernels.step_record
 _move_gripper = kernels.move_gripper
 
@@ -241,13 +243,14 @@ class Simulator:
             self._obj_of_geom[g] = objs.index(o)
             self._piece_of_geom[g] = k
         self._names = (objs, self._geom_names)
-        self._views = MjViews(
-            m, d, self._xpos, b.flex_id, self._fatal, self._piece_of_geom, self._obj_of_geom
-        )
         eq = mujoco.mjtObj.mjOBJ_EQUALITY
         self._hold_rows: tuple[int, np.ndarray] = (-1, np.zeros(0, np.int64))
         self._hold_ids = np.array([mujoco.mj_name2id(m, eq, f"hold_{i}") for i in range(2)], dtype=np.int32)
         mujoco.mj_forward(m, self.data)
+        self._views = MjViews(  # after mj_forward: its efc_force allocated
+            m, d, self._xpos, (self._mocap_pos, self._mocap_quat), b.flex_id, self._fatal,
+            self._piece_of_geom, self._obj_of_geom,
+        )
         self._reset_warnings()
         self.target_pos = _frozen(self._mocap_pos.copy())
         self.target_quat = _frozen(self._mocap_quat.copy())
@@ -353,7 +356,7 @@ class Simulator:
             rec, poses = self._record(True)
             if tracker is not None:  # tracker.update(rec) of what the record's kernel made already
                 ca = rec.contact_arrays
-                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses)
+                state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses, True)
         if state is not None:
             object.__setattr__(rec, "state", state)
         assert rec is not None, "step(n) needs n >= 1"
@@ -397,46 +400,49 @@ class Simulator:
 
     def _record(self, check: bool) -> tuple[StepRecord, tuple[Any, Any, Any]]:
         """:meth:`record`, and the gripper's position, quaternion and force as tuples of floats (what
-        the tracker's state keeps)."""
-        d, views = self.data, self._views
-        ncon = d.ncon
-        ne = d.ne  # equality constraint rows come first, in a fixed layout while ne is unchanged
-        if self._hold_rows[0] != ne:
-            ids = d.efc_id[:ne]
-            rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
-            self._hold_rows = (ne, rows)
-            views.set_hold_rows(rows)
+        the tracker's state keeps). The record's gripper force, torque, position and quaternion are
+        parts of one array (:data:`dlovr.sim.kernels.O_WIDTH`) that the kernel fills."""
+        views = self._views
+        ncon = self.data.ncon
         empty = np.empty
-        pts = empty(self._pts_shape)
-        table = empty((ncon, _T_WIDTH))
-        grip, torque = empty(3), empty(3)
+        pts, out = empty(self._pts_shape), empty(_O_WIDTH)
+        table = empty((ncon, _T_WIDTH)) if ncon else _NO_ROWS
+        if ncon and not views._has_layout:  # the contact structs' layout, taken at the first contact
+            views.contacts()
         arena = views.arena
-        if ncon and not len(arena):  # the contact structs' view, taken at the first contact
-            arena = views.contacts()
-        code, index, value, rows, nself, poses = _step_record(
-            views.mj, views.warn, arena, d.efc_force, views.cfg, self._bounds, ncon, self._mocap_pos,
-            self._mocap_quat, pts, table, grip, torque,
-        )
+        args = views.mj, views.mem, arena, views.cfg, self._bounds, ncon, pts, table, out
+        code, index, value, rows, nself, ne, time, poses = _step_record(*args)
+        if ne != self._hold_rows[0]:  # the holding constraints' rows for this count, and again
+            self._set_hold_rows(ne)
+            code, index, value, rows, nself, ne, time, poses = _step_record(*args[:3], views.cfg, *args[4:])
         if check and code:
             raise self._diverged(code, index, value)
         pairs = _NO_PAIRS
         if nself:
             pairs = empty((nself, 2), np.int64)
             kernels.self_pairs(ncon, arena, views.cfg, pairs)
-        tp, tq = self.target_pos, self.target_quat  # shared when read-only (set_target's), else copied
+        tp, tq, names = self.target_pos, self.target_quat, self._names  # targets shared when read-only
         rec = StepRecord._of(
             self.step_index,
-            d.time,
+            time,
             pts,
-            self._mocap_pos.copy(),
-            self._mocap_quat.copy(),
+            out[_O_POS:_O_QUAT],
+            out[_O_QUAT:],
             tp.copy() if tp.flags.writeable else tp,
             tq.copy() if tq.flags.writeable else tq,
-            ContactArrays._of(table if rows == ncon else table[:rows], pairs, self._names),
-            grip,
-            torque,
+            ContactArrays._of(table if rows == ncon else table[:rows] if rows else _NO_ROWS, pairs, names),
+            out[:_O_TORQUE],
+            out[_O_TORQUE:_O_POS],
         )
         return rec, poses
+
+    def _set_hold_rows(self, ne: int) -> None:
+        """The holding constraints' rows among MuJoCo's ``ne`` equality constraint rows (which come
+        first, in a fixed layout while ``ne`` is unchanged)."""
+        ids = self.data.efc_id[:ne]
+        rows = np.nonzero((ids == self._hold_ids[0]) | (ids == self._hold_ids[1]))[0]
+        self._hold_rows = (ne, rows)
+        self._views.set_hold_rows(rows)
 
     def gripper_force(self) -> np.ndarray:
         """Force (N, world frame) the cable exerts on the gripper: the two holding constraints' forces

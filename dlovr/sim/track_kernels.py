@@ -182,11 +182,14 @@ def track_step(
     spliced in. Then the hits are made with hysteresis (:func:`update_hits`) and the forces summed,
     and ``edges`` are checked against ``edge_ref`` (:func:`turned`).
 
-    Returns (outcome, whether the kept hits changed, bad row, whether an edge turned):
+    Returns (outcome, whether the kept hits changed, bad row, whether an edge turned, quiet):
     ``KEPT``/``PARTIAL``/``FULL``,
     ``GROW`` (the labels or the work arrays need the room in the work header's ``W_NEED_*``: grow
     them, keeping their contents, and call again; nothing was changed) or ``BAD_PIECE`` (row
-    ``bad row`` of the table names a piece that ``piece_map`` lacks).
+    ``bad row`` of the table names a piece that ``piece_map`` lacks). ``quiet``: nothing touches,
+    nothing is kept and the labels hold no pair, for these points: a next step with contact arrays
+    but no contact, with ``reuse`` and no ``edges``, would keep it all (``KEPT``, nothing changed,
+    no edge turned, only its unread forces set to 0), so the tracker skips the call then.
     """
     w = _work(work_i, work_f)
     touching, pairs, owner, point_of, again, qpts = w.touching, w.pairs, w.owner, w.point_of, w.again, w.qpts
@@ -211,7 +214,7 @@ def track_step(
         for i in range(nc):
             obj, piece = int(table[i, T_OBJ]), int(table[i, T_PIECE])
             if not (0 <= obj < piece_map.shape[0] and 0 <= piece < width_map) or piece_map[obj, piece] < 0:
-                return BAD_PIECE, False, i, False
+                return BAD_PIECE, False, i, False, False
             point, seg = int(table[i, T_POINT]), int(table[i, T_SEGMENT])
             if point < 0 and seg >= 0:  # on a segment: the contact projected onto it
                 ax, ay, az = pts[seg, 0], pts[seg, 1], pts[seg, 2]
@@ -244,10 +247,11 @@ def track_step(
     outcome = _outcome(reuse, k, nq, lab_i, lab_f, work_i, pairs, qpts, again)
     if outcome == FULL or outcome == PARTIAL:
         if not _relabel(outcome == FULL, k, nq, n_pieces, gf, gi, params, lab_i, lab_f, work_i, work_f):
-            return GROW, False, -1, False
+            return GROW, False, -1, False, False
     changed = update_hits(_labels(lab_i, lab_f, width).hits, work_i, work_f)
     span_forces(spans, point_of, table, w.forces)
-    return outcome, changed, -1, turned(pts, edges, edge_ref, params[P_COS2_TURN])
+    quiet = work_i[W_TOUCH_N] == 0 and work_i[W_KEPT_N] == 0 and lab_i[L_K] == 0 and lab_i[L_N] == n1
+    return outcome, changed, -1, turned(pts, edges, edge_ref, params[P_COS2_TURN]), quiet
 
 
 @njit(inner=True)

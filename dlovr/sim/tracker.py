@@ -42,6 +42,7 @@ from dlovr.model.transitions import (
 )
 from dlovr.sim import track_kernels as tk
 from dlovr.sim.kernels import T_FORCE, T_OBJ, T_PIECE, T_POINT, T_POS, T_SEGMENT, T_WIDTH
+from dlovr.transforms import rotate_floats
 
 
 @dataclass(frozen=True)
@@ -196,10 +197,10 @@ class ContactTracker:
     def kept(self) -> list[Kept[DiscreteSituation]]:
         return self._debouncer.kept
 
-    def classify(self, pts: np.ndarray, record: Any) -> Situation:
+    def classify(self, pts: np.ndarray, record: Any, quat: Sequence[float] | None = None) -> Situation:
         """Topological situation of the cable polyline ``pts`` from this step's touching hits (see
         :meth:`_label_step`) and the end-vertex rule; ``record.gripper_z`` (read only when the
-        situation is made again) is the gripper's z axis.
+        situation is made again) is the gripper's z axis, or ``quat``'s (floats, wxyz) when given.
 
         The situation is made again whenever the kept hits or the tip's decision change (which also
         refreshes its DLO vectors and the gripper's z), and whenever the DLO vector of one of its E
@@ -227,7 +228,7 @@ class ContactTracker:
         last = self._signature
         if signature == last and self._situation is not None and not self._edge_turned:
             return self._situation
-        z = self._z = _gripper_z(record, self._z)
+        z = self._z = _gripper_z(record, self._z, quat)
         if (
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
@@ -281,8 +282,10 @@ class ContactTracker:
         if has and (pm is None or pm[0] is not arrays.names[0]):
             pm = self._piece_map = (arrays.names[0], _piece_table(self.geometry.pieces, arrays.names[0]))
         pmap = pm[1] if has and pm is not None else _NO_MAP
-        while True:
-            out, changed, bad, self._edge_turned = _track_step(
+        skip = nc == 0 and self._quiet and has and self.reuse and not len(self._edge_pairs)  # track_step's
+        out, changed, bad, self._edge_turned = _KEPT, False, -1, False  # what it would return then
+        while not skip:
+            out, changed, bad, self._edge_turned, self._quiet = _track_step(
                 pts, table, has, pmap, self._spans[1], self._edge_pairs, self._edge_ref, self.reuse,
                 self._gf, self._gi, self._params(), self._lab_i, self._lab_f, self._work_i, self._work_f,
             )
@@ -338,7 +341,7 @@ class ContactTracker:
         cap_c, cap_h = max(nc, 16), max(cap_h, 16)
         self._work_i, self._work_f = tk.new_work(n1, self._width, self._n_pieces, cap_c, cap_h, old)
         if old is None:
-            self._lab_i, self._lab_f = tk.no_labels()
+            self._lab_i, self._lab_f, self._quiet = *tk.no_labels(), False
             self._env: list[list[Any]] = [[] for _ in range(n1)]
             self._point_faces: list[list[tuple[str, ...]]] = [[] for _ in range(n1)]
             self._env_codes = [0] * n1  # the numbers (_codes) of the points' primitives
@@ -362,14 +365,15 @@ class ContactTracker:
 
     def _state(
         self, record: Any, step: int, t: float, pts: np.ndarray, table: np.ndarray | None, arrays: Any,
-        poses: tuple[Any, Any, Any],
+        poses: tuple[Any, Any, Any], z_of_quat: bool = False,
     ) -> ContactState:
         """:meth:`update` of ``record`` given as its step, time, points (float64, C order), contact
         rows and arrays, and gripper position, quaternion and force as tuples of floats (what
-        :class:`dlovr.sim.Simulator` has made of its record already)."""
+        :class:`dlovr.sim.Simulator` has made of its record already); ``z_of_quat``: the record's
+        ``gripper_z`` is the quaternion's z axis (a :class:`dlovr.sim.StepRecord`'s), taken from it."""
         self._label_step(pts, table, arrays)
         prev = self.current
-        topo = self.classify(pts, record)
+        topo = self.classify(pts, record, poses[1] if z_of_quat else None)
         if prev is not None and prev.topological is topo:  # the cached situation: discretize is pure
             disc, same, new = prev.discrete, True, False
         elif prev is not None and prev.topological == topo and _vector_independent(topo):
@@ -424,6 +428,7 @@ class ContactTracker:
 
 
 _ORIGIN = (0.0, 0.0, 0.0)
+_Z = (0.0, 0.0, 1.0)
 _T = TypeVar("_T")
 _IDENTITY = (1.0, 0.0, 0.0, 0.0)
 #: The gripper's pose and force that a state keeps: a record's attribute, and its default without one.
@@ -572,12 +577,16 @@ def _discretized(
     return disc, same, not same or cast(ContactState, prev).topological != topo
 
 
-def _gripper_z(record: Any, last: Vec3 | None) -> Vec3:
-    """``record.gripper_z`` as a tuple of Python floats (``(0, 0, 1)`` without one): ``last`` itself
-    when it holds the same bits (so that the gripper primitives made of it are kept, see
-    :func:`_refreshed`)."""
-    gripper_z = getattr(record, "gripper_z", None)
-    z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
+def _gripper_z(record: Any, last: Vec3 | None, quat: Sequence[float] | None = None) -> Vec3:
+    """``record.gripper_z`` as a tuple of Python floats (``(0, 0, 1)`` without one), or the z axis
+    of ``quat`` (wxyz floats) when given (the same bits as a record's ``quat_rotate`` of its
+    quaternion, without its arrays): ``last`` itself when it holds the same bits (so that the gripper
+    primitives made of it are kept, see :func:`_refreshed`)."""
+    if quat is not None:
+        z = rotate_floats(quat, _Z)
+    else:
+        gripper_z = getattr(record, "gripper_z", None)
+        z = cast(Vec3, tuple(float(x) for x in gripper_z)) if gripper_z is not None else (0.0, 0.0, 1.0)
     return last if last is not None and z == last and _same_bits(z, last) else z
 
 

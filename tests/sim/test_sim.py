@@ -440,3 +440,70 @@ def test_gripper_torque_is_the_moment_of_the_held_cables_weight():
     moment = np.cross(rec.points - rec.gripper_pos, weight).sum(axis=0)
     assert moment[1] > 0.05  # the cable sticks out along +x: a real moment about y
     np.testing.assert_allclose(rec.gripper_torque, moment, atol=1e-6)
+
+
+def test_the_record_reads_mujocos_struct_as_the_bindings_do():
+    """The record's kernel reads ``ncon``, ``ne``, ``nefc``, ``time`` and this step's ``efc_force``
+    from the mjData struct (fields found by their values, MjViews): the same as the bindings give,
+    on steps with and without contacts, and the gripper's force and pose in the record are theirs."""
+    from pathlib import Path
+
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+    from dlovr.sim import kernels
+
+    scene = load_scene("table")
+    sim = Simulator(scene)
+    d, views = sim.data, sim._views
+    cfg, mem = views.cfg, views.mem
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "table.script.toml")
+    seen = set()
+    for k, rec in enumerate(sim.run(script)):
+        if k % 97:
+            continue
+        ints = mem.view(np.int32)
+        assert (ints[cfg[kernels.C_S_NCON]], ints[cfg[kernels.C_S_NE]], ints[cfg[kernels.C_S_NEFC]]) == (
+            d.ncon, d.ne, d.nefc
+        )
+        assert rec.time == d.time == mem.view(np.float64)[cfg[kernels.C_S_TIME]]
+        e0 = (mem[cfg[kernels.C_S_EFC]] - mem[cfg[kernels.C_S_ARENA]]) // 8
+        assert np.array_equal(views.arena[e0 : e0 + d.nefc], d.efc_force)
+        rows = sim._hold_rows[1]
+        grip = [0.0 + sum(d.efc_force[rows[c::3]].tolist()) for c in range(3)]
+        assert rec.gripper_force.tolist() == grip
+        assert np.array_equal(rec.gripper_pos, d.mocap_pos[0])
+        assert np.array_equal(rec.gripper_quat, d.mocap_quat[0])
+        seen.add(d.ncon > 0)
+    assert seen == {False, True}
+
+
+def test_a_quiet_step_skips_the_trackers_kernel_with_the_same_states(monkeypatch):
+    """A step without contacts after one where nothing touched and no pair was labelled does not
+    call the tracker's kernel (it would keep everything): the states are those of calling it."""
+    from itertools import islice
+    from pathlib import Path
+
+    import dlovr.sim.tracker as tracker_module
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+
+    scene = load_scene("table")
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "table.script.toml")
+    real, calls = tracker_module._track_step, [0]
+
+    def counted(*args):
+        calls[0] += 1
+        return real(*args)
+
+    def states():
+        calls[0] = 0
+        sim = Simulator(scene, track=True)
+        got = [(r.state.topological, r.state.discrete, r.state.forces) for r in islice(sim.run(script), 3000)]
+        return got, calls[0], sim.tracker.labellings
+
+    monkeypatch.setattr(tracker_module, "_track_step", counted)
+    skipping = states()
+    monkeypatch.setattr(tracker_module, "_track_step", lambda *args: (*counted(*args)[:4], False))
+    calling = states()
+    assert skipping[0] == calling[0] and skipping[2] == calling[2]
+    assert skipping[1] < calling[1] - 100 and calling[1] >= 3000  # some hundred steps skipped
