@@ -147,6 +147,18 @@ def _pose_key(pos: Any, quat: Any) -> bytes | None:
     return pos.tobytes() + quat.tobytes()
 
 
+def _check_start(contacts: Sequence[RodContact], radius: float) -> None:
+    """Raise ValueError when the cable's start pose penetrates an obstacle by more than half its
+    ``radius`` (m)."""
+    deep = [c for c in contacts if c.dist < -0.5 * radius]
+    if deep:
+        c = min(deep, key=lambda c: c.dist)
+        raise ValueError(
+            f"the cable's start pose (straight along -G_z from the gripper) penetrates {c.geom} "
+            f"by {-c.dist * 1000:.1f} mm at segment {c.segment}: change the gripper pose"
+        )
+
+
 def obstacles_from_scene(scene: Any, pieces: dict[str, tuple[list[np.ndarray], bool]]) -> list[Obstacle]:
     """Obstacles of a ``dlovr.scene.Scene`` from its convex decomposition
     (``dlovr.geometry.scene_pieces``): MuJoCo piece ``k`` (geom ``"<obj>.P<k>"``) is geometry's
@@ -256,13 +268,7 @@ class Simulator:
         self.target_quat = _frozen(self._mocap_quat.copy())
         # set_target's last float64 input as bytes, and the targets it made (see set_target)
         self._last_command: tuple[bytes, np.ndarray, np.ndarray] | None = None
-        deep = [c for c in self.contacts() if c.dist < -0.5 * float(m.flex_radius[built.flex_id])]
-        if deep:
-            c = min(deep, key=lambda c: c.dist)
-            raise ValueError(
-                f"the cable's start pose (straight along -G_z from the gripper) penetrates {c.geom} "
-                f"by {-c.dist * 1000:.1f} mm at segment {c.segment}: change the gripper pose"
-            )
+        _check_start(self.contacts(), float(m.flex_radius[built.flex_id]))
 
     @classmethod
     def from_parts(cls, obstacles: Sequence[Obstacle], dlo: Any, gripper: Any, **kw: Any) -> Simulator:
