@@ -92,10 +92,12 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
         opts = replace(opts, object_shifts=object_shifts(setup.scene, scene),
                        object_turns=object_turns(setup.scene, scene))
     track = setup.track if setup.use_track else None
-    baseline = setup.baseline and setup.track is not None and isinstance(setup.program, Program)
+    # the compiled program and the track its open-loop replay follows, when the trial runs one
+    replayed = (setup.program, setup.track) if (
+        setup.baseline and setup.track is not None and isinstance(setup.program, Program)) else None
     # the program's run and the open-loop replay track contacts in the same scene: its geometry once
     geometry = None
-    if baseline and setup.record_dir is None:
+    if replayed is not None and setup.record_dir is None:
         from dlovr.geometry import SceneGeometry
 
         geometry = SceneGeometry.from_scene(scene, pieces=setup.pieces)  # as Simulator(track=True) makes it
@@ -115,10 +117,9 @@ def run_trial(setup: TrialSetup, trial: int) -> dict[str, Any]:
             geometry=geometry,
         )
     out: dict[str, Any] = {"trial": trial, "seed": setup.seed, "values": values, **_trial_result(res)}
-    if baseline and isinstance(setup.program, Program) and setup.track is not None:
-        out["openloop"] = run_openloop(
-            setup.program, scene, setup.track, pieces=setup.pieces, geometry=geometry
-        ).to_json()
+    if replayed is not None:
+        program, demo = replayed
+        out["openloop"] = run_openloop(program, scene, demo, pieces=setup.pieces, geometry=geometry).to_json()
     out["wall_time"] = time.perf_counter() - t0
     return out
 

@@ -190,7 +190,7 @@ class MjViews:
         self.arena = np.ctypeslib.as_array((ctypes.c_double * (int(data.narena) // 8)).from_address(arena))
         number = data.warning.number  # every other int32 of the warning structs
         self._data = data
-        self._has_layout = False
+        self.layout_known = False  # the contact structs' layout taken (contacts())
         q, v, x, mp, mq = ((p - lo) // 8 for p in ptrs)
         self._head = np.zeros(C_HEAD, np.int64)
         self._head[[C_FLEX, C_PYRAMIDAL, C_NFATAL, C_NGEOM]] = (
@@ -223,7 +223,7 @@ class MjViews:
     def contacts(self) -> np.ndarray:
         """The contact structs (call when the step has contacts): the arena, the contact structs'
         layout taken from the bindings at the first call."""
-        if not self._has_layout:
+        if not self.layout_known:
             c = self._data.contact
             base = _address(c.dist)
             stride = c.dist.strides[0]
@@ -241,7 +241,7 @@ class MjViews:
                 off(c.geom, 4), off(c.flex, 4), off(c.elem, 4), off(c.vert, 4), off(c.efc_address, 4),
             )
             self.cfg[C_LAYOUT:C_HEAD] = self._head[C_LAYOUT:C_HEAD]
-            self._has_layout = True
+            self.layout_known = True
         return self.arena
 
 

@@ -413,7 +413,7 @@ class Simulator:
         empty = np.empty
         pts, out = empty(self._pts_shape), empty(_O_WIDTH)
         table = empty((ncon, _T_WIDTH)) if ncon else _NO_ROWS
-        if ncon and not views._has_layout:  # the contact structs' layout, taken at the first contact
+        if ncon and not views.layout_known:  # the contact structs' layout, taken at the first contact
             views.contacts()
         arena = views.arena
         args = views.mj, views.mem, arena, views.cfg, self._bounds, ncon, pts, table, out
