@@ -555,6 +555,11 @@ class Debouncer(Generic[S]):
     flight: float = DEFAULT_FLIGHT_S
     lands: Callable[[S, S, S], bool] = _LANDS_DISCRETE
     kept: list[Kept[S]] = field(default_factory=list)
+    #: ``transient``'s answers by the situation's identity (the situation kept beside its answer):
+    #: a stream's situations are often the same objects again (a simulation's flicker between a few)
+    _transient_of: dict[int, tuple[S, bool]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         if self.hold < 0:
@@ -582,7 +587,7 @@ class Debouncer(Generic[S]):
         flies = self._flies(t, situation)
         if not flies and len(k) >= 2:
             b = k[-1]
-            if b.duration < self.hold and not self.transient(b.situation):  # brief stable noise
+            if b.duration < self.hold and not self._is_transient(b.situation):  # brief stable noise
                 k.pop()
                 if not b.through_free:  # after a flight the one before keeps its end (when it was left)
                     k[-1].end = b.end
@@ -597,6 +602,16 @@ class Debouncer(Generic[S]):
         """The situation pushed last holds at ``t`` too: what :meth:`push` does with one equal to it,
         for a caller that knows so already (the tracker compared it with the last step's)."""
         self.kept[-1].end = t
+
+    def _is_transient(self, situation: S) -> bool:
+        """``self.transient(situation)``, kept by the situation's identity (at most 256, then none)."""
+        memo = self._transient_of
+        got = memo.get(id(situation))
+        if got is None or got[0] is not situation:
+            if len(memo) >= 256:
+                memo.clear()
+            got = memo[id(situation)] = (situation, self.transient(situation))
+        return got[1]
 
     def _flies(self, t: float, situation: S) -> bool:
         """Does ``situation`` end a flight that began with the last kept situation?"""

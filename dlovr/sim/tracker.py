@@ -156,7 +156,7 @@ class ContactTracker:
         self._structures: dict[tuple[Any, ...], tuple[Situation, _Plan]] = {}
         self._g_envs: dict[int, tuple[Any, Vec3, tuple[EnvPrimitive, ...]]] = {}  # see _refreshed
         # the situation's plan (_refreshed) and its edge contacts (_edges_of)
-        self._plan: _Plan = ([], ([], _NO_PAIRS), [])
+        self._plan: _Plan = ([], ([], _NO_PAIRS), [], [None, None, None])
         self._env_version = 0  # changes when a point's primitives change (not on every new labelling)
         self._forget()
         self.labellings = 0
@@ -412,10 +412,9 @@ class ContactTracker:
         if table is None or len(table) == 0:
             return tuple(0.0 for _ in topo.contacts)
         if self._spans[0] is not topo:
-            spans = _force_spans(topo)
-            self._spans = (topo, np.array(spans, dtype=np.int64).reshape(-1, 2))
+            self._spans = spans = (topo, _spans_of(topo, self._plan[3]))
             views = self._views
-            if len(spans) > len(views.forces):
+            if len(spans[1]) > len(views.forces):
                 raise RuntimeError("more contacts than the cable has points")
             tk.span_forces(self._spans[1], views.point_of, table, views.forces)
         return tuple(self._views.forces[: len(topo.contacts)].tolist())
@@ -472,7 +471,8 @@ def _structure(
         made.clear()
     items = _plan(sit, len(pts) - 1)
     edges = _edges_of(sit, items)
-    plan = (items, edges, sorted({*edges[0], *(k for k, it in enumerate(items) if it[6])}))
+    redo = sorted({*edges[0], *(k for k, it in enumerate(items) if it[6])})
+    plan = (items, edges, redo, [None, None, None])
     made[key] = (sit, plan)
     return sit, plan
 
@@ -526,10 +526,12 @@ _NO_PAIRS, _NO_REF = np.zeros((0, 2), np.int64), np.zeros((0, 3))
 _PlanItem = tuple[str, int, "tuple[int, int] | None", tuple[EnvPrimitive, ...], int, int, bool]
 
 
-#: A situation's :func:`_plan`, its :func:`_edges_of` and the places of the contacts whose discrete
+#: A situation's :func:`_plan`, its :func:`_edges_of`, the places of the contacts whose discrete
 #: contact can follow its annotations (:meth:`dlovr.model.discrete.Discretizer.again`): the E contacts
-#: on edges (their DLO vectors) and those with the gripper (its ``z``).
-_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray], list[int]]
+#: on edges (their DLO vectors) and those with the gripper (its ``z``), and what is kept of the
+#: situations made from it: the discretizer and the discrete situation it made last of one
+#: (:func:`_discretized`), and the contacts' force spans (:func:`_spans_of`), all None until made.
+_Plan = tuple[list[_PlanItem], tuple[list[int], np.ndarray], list[int], list[Any]]
 
 
 def _plan(sit: Situation, n: int) -> list[_PlanItem]:
@@ -567,12 +569,16 @@ def _discretized(
     state's (``prev``) and whether the state is a change. ``made``: the plan and discretizer that
     made ``prev``'s discrete situation (None: not so made); when they are these, ``topo`` equals
     ``prev``'s situation but for the annotations, and only its contacts at the plan's redo places
-    are made again (:meth:`dlovr.model.discrete.Discretizer.again`)."""
+    are made again (:meth:`dlovr.model.discrete.Discretizer.again`). So they are from the discrete
+    situation ``d`` made last of a situation of this plan (kept in the plan) when there is one: a
+    cable sliding over edges comes back to the same few plans, each step another of them."""
+    memo = plan[3]
     if prev is not None and made is not None and made[0] is plan and made[1] is d:
-        disc = d.again(prev.discrete, topo, plan[2])
+        disc = memo[1] = d.again(prev.discrete, topo, plan[2])
         same = disc is prev.discrete or prev.discrete == disc
         return disc, same, not same
-    disc = d(topo)
+    disc = d.again(memo[1], topo, plan[2]) if memo[0] is d else d(topo)
+    memo[0], memo[1] = d, disc
     same = prev is not None and prev.discrete == disc
     return disc, same, not same or cast(ContactState, prev).topological != topo
 
@@ -610,6 +616,15 @@ def _on_edge(contact: Contact) -> bool:
         if e.kind == "faces" and len(e.faces) == 2:  # an edge: EnvPrimitive.type "E"
             return True
     return False
+
+
+def _spans_of(topo: Situation, memo: list[Any]) -> np.ndarray:
+    """:func:`_force_spans` of ``topo`` as a (k, 2) array, kept in ``memo`` (its plan's: the spans
+    follow from the contacts' structure alone, which the plan fixes)."""
+    got = memo[2]
+    if got is None:
+        got = memo[2] = np.array(_force_spans(topo), dtype=np.int64).reshape(-1, 2)
+    return got
 
 
 def _force_spans(topo: Situation) -> list[tuple[int, int]]:

@@ -488,3 +488,27 @@ def test_extend_is_push_of_the_situation_pushed_last():
             else:
                 b.push(t, sit)
     assert a.kept == b.kept and [k.situation for k in a.kept] == [RIDGE, LANDED]
+
+
+def test_the_debouncer_asks_transient_once_per_situation_object():
+    """``transient`` is asked once of a situation object however often a flicker brings it back
+    (kept by identity); equal but other objects are asked again; the kept situations are the same."""
+    from dlovr.model.transitions import Debouncer
+
+    def run(fresh: bool) -> tuple[list[object], list[object]]:
+        asked: list[object] = []
+
+        def transient(s: object) -> bool:
+            asked.append(s)
+            return s == ("T",)
+
+        deb = Debouncer(0.05, transient, flight=0.0, lands=lambda *_: False)
+        shared = {name: (name,) for name in "ABCT"}
+        for k, name in enumerate("ABCTABCTBCTB" * 3 + "A"):  # brief ones, transient or not
+            deb.push(0.02 * k, tuple([name]) if fresh else shared[name])  # tuple([...]): a new object
+        return [(k.situation, k.start, k.end) for k in deb.kept], asked
+
+    kept, asked = run(fresh=False)
+    kept_fresh, asked_fresh = run(fresh=True)
+    assert kept == kept_fresh and len(kept) > 3
+    assert len(asked) == len({id(s) for s in asked}) <= 4 < len(asked_fresh)

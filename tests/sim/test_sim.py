@@ -507,3 +507,44 @@ def test_a_quiet_step_skips_the_trackers_kernel_with_the_same_states(monkeypatch
     calling = states()
     assert skipping[0] == calling[0] and skipping[2] == calling[2]
     assert skipping[1] < calling[1] - 100 and calling[1] >= 3000  # some hundred steps skipped
+
+
+def test_a_plan_met_again_gives_the_states_of_discretizing_afresh(monkeypatch):
+    """A cable sliding over edges comes back to situations of the same few structures (plans): the
+    discrete situation and the force spans kept with a plan from its last situation give the states
+    that discretizing the situation and finding its spans afresh give, on steps where they are used,
+    with the annotations that equality leaves out (contact vectors, spans, axes)."""
+    from itertools import islice
+    from pathlib import Path
+
+    import dlovr.sim.tracker as tracker_module
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+
+    scene = load_scene("edges")  # turned over a convex and a concave edge, held by the gripper
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "edges.script.toml")
+    real, used = tracker_module._discretized, [0]
+
+    def counted(d, prev, topo, plan, made):
+        if plan[3][0] is d and not (made is not None and made[0] is plan):
+            used[0] += 1
+        return real(d, prev, topo, plan, made)
+
+    def afresh(d, prev, topo, plan, made):
+        plan[3][:] = [None, None, None]  # nothing kept: discretized and its spans found again
+        return real(d, prev, topo, plan, made)
+
+    def states():
+        sim = Simulator(scene, track=True)
+        got = [
+            (r.state.discrete, [(c.vector, c.span, c.axis) for c in r.state.discrete.contacts],
+             r.state.forces)
+            for r in islice(sim.run(script), 2400)
+        ]
+        return got, [(k.situation, k.start, k.end) for k in sim.tracker.kept]
+
+    monkeypatch.setattr(tracker_module, "_discretized", counted)
+    kept = states()
+    monkeypatch.setattr(tracker_module, "_discretized", afresh)
+    assert kept == states()
+    assert used[0] >= 1  # a plan's discrete situation was used (at step 2272, its gripper's z another)
