@@ -152,12 +152,13 @@ def _watch(m: Macro, log: RunLog, state: dict[str, Any], ses: list[Session]) -> 
 
 
 def calibration_run(
-    program: Program, scene: Any, label: str, target: int, track: DemoTrack | None,
+    program: Program, scene: Any, label: str, target: int, path: DemoTrack | None,
     pieces: Any = None, opts: ExecOptions | None = None,
 ) -> RunLog:
     """Run ``program`` in ``scene`` as a run runs it up to its macro ``target`` (an index), that one
     ended by the tracker (the oracle: ground truth), then hold :data:`AFTER_S`; the wrench and what
-    the tracker saw (:class:`RunLog`)."""
+    the tracker saw (:class:`RunLog`). ``path``: the track the program follows, its demonstration's
+    smoothed as compiled (:func:`dlovr.execution.engine.smoothed`; made once for all the runs)."""
     from dlovr.execution.run import fresh_simulator
     from dlovr.sim import SimulationDiverged
 
@@ -172,7 +173,6 @@ def calibration_run(
     held: list[Session] = []
     ses = Session(sim, opts, on_step=_watch(m_target, log, state, held))
     held.append(ses)
-    path = smoothed(program, track)
     skip = bounces(program.classed, opts.bounce)
     try:
         _drain(to_start(program.start.start_pos, program.start.start_quat, ses))
@@ -355,7 +355,7 @@ def calibrate(
     notes = []
     for k in targets:
         m = next(x for x in program.macros if x.index == k)
-        logs = [calibration_run(program, sc, label, k, track, pieces, opts) for label, sc in runs]
+        logs = [calibration_run(program, sc, label, k, path, pieces, opts) for label, sc in runs]
         new, note = calibrated_macro(m, logs, opts, path, desc)
         notes.append(f"macro {k} {m.label}: {note}")
         if new is not None:
