@@ -35,6 +35,12 @@ this script printed before (measuring nothing), so a long run can be done in par
 (``mj_step``, the record, the tracker's kernel call, situation, discrete situation, forces and
 debouncer, and the garbage collector's pauses), in µs per step.
 
+``--tracker-alone`` then times the contact tracker alone, per case: the records of one untracked
+pass fed to fresh trackers (``ContactTracker`` as ``Simulator.step`` calls it), ``--repeat`` rounds,
+thread CPU, the collector frozen; in µs per step, median and range. Without ``mj_step`` between its
+steps it measures the tracker's own work with far less spread than the ratios (a change of 10 µs
+shows there), though not the caches that ``mj_step`` leaves it in the loop.
+
 ``--gc freeze`` freezes the objects made before each round (``gc.freeze``, as the commands do after
 their setup: ``dlovr.cli.common.freeze_setup``); ``--gc both`` plays each round's sim+extract once
 more frozen and prints its ratios beside the default's after the table; with either, ``--parts``
@@ -332,6 +338,35 @@ def print_parts(case: str, segments: int | None, max_stretch: float) -> None:
         print(f"  {label:<58} {us:8.1f}")
 
 
+def tracker_alone(case: str, segments: int | None, max_stretch: float, rounds: int) -> list[float]:
+    """µs per step of the contact tracker alone over the records of one untracked pass along the
+    case's commands, per round (a fresh tracker each, thread CPU, ``gc.freeze()`` before each)."""
+    import gc
+
+    scene, script = case_scene(case, segments)
+    targets, _ = _commands(scene, script, max_stretch)
+    sim = Simulator(scene, max_stretch=max_stretch)
+    rows = []
+    for pos, quat in targets:
+        sim.target_pos, sim.target_quat = pos, quat
+        r = sim.step()
+        poses = tuple(tuple(getattr(r, k).tolist()) for k in ("gripper_pos", "gripper_quat", "gripper_force"))
+        rows.append((r, r.step, r.time, r.points, r.contact_arrays.table, r.contact_arrays, poses, True))
+    out = []
+    for _ in range(rounds + 1):  # the first round warms the kernels and caches, not counted
+        tracker = Simulator(scene, max_stretch=max_stretch, track=True).tracker
+        assert tracker is not None
+        state = tracker._state  # what Simulator.step calls with the record it made
+        gc.collect()
+        gc.freeze()
+        t0 = time.thread_time()
+        for row in rows:
+            state(*row)
+        out.append((time.thread_time() - t0) / len(rows) * 1e6)
+        gc.unfreeze()
+    return out[1:]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "bench_sim").splitlines()[0])
     ap.add_argument("--case", nargs="+", default=list(CASES), help=f"default: {' '.join(CASES)}")
@@ -353,6 +388,8 @@ def main() -> None:
                          "both: each round's pipeline also once frozen, printed after the table")
     ap.add_argument("--parts", action="store_true",
                     help="after the table, one pass per case timing the pipeline's parts")
+    ap.add_argument("--tracker-alone", action="store_true",
+                    help="after the table, the contact tracker alone over recorded steps, per case")
     args = ap.parse_args()
     if args.logs:
         if args.plot is None:
@@ -401,6 +438,11 @@ def main() -> None:
             gc.freeze()
         for case in args.case:
             print_parts(case, segments[0], args.max_stretch)
+    if args.tracker_alone:
+        for case in args.case:
+            us = tracker_alone(case, segments[0], args.max_stretch, repeat)
+            print(f"{case}: the tracker alone, {statistics.median(us):.1f} µs per step (rounds "
+                  f"{', '.join(f'{x:.1f}' for x in us)}; thread CPU, records of an untracked pass)")
 
 
 if __name__ == "__main__":
