@@ -382,7 +382,7 @@ def _point_or_line(
     In Python floats (:func:`dlovr.transforms.dot`, summed left to right: the same on every machine,
     and a few µs where numpy's calls on 3-vectors took some 30): a simulation makes it for every
     E contact on an edge whenever its situation is made again."""
-    v = list(dlo_vector) if type(dlo_vector) is tuple else np.asarray(dlo_vector, dtype=float).tolist()
+    v = dlo_vector if type(dlo_vector) is tuple else np.asarray(dlo_vector, dtype=float).tolist()
     if len(v) == 3 and len(crease) == 3:  # dot and norm written out, summed in the same order
         x0, x1, x2 = v
         n = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
@@ -664,7 +664,7 @@ class Discretizer:
             st = _state_of(parts, contact, self.params, self.line_band_deg if key in self._lines else 0.0)
             if self._now is not None and st.env == "E^L":
                 self._now.add(key)
-            if last is not None and last.state == st:
+            if last is not None and (last.state is st or last.state == st):  # `is`: the states are shared
                 return last  # what _from_parts would make, without making it
         made = got[1]
         if len(made) >= _SPANS_KEPT:
