@@ -620,12 +620,12 @@ class Discretizer:
     def again(self, last: DiscreteSituation, situation: Situation, redo: Sequence[int]) -> DiscreteSituation:
         """``self(situation)`` for a situation whose contacts are, but for the annotations at ``redo``,
         those of a situation that this discretizer made ``last`` from (at the last call or before):
-        the same DLO kinds, spans and environment tuples, the same parameters. Only the contacts at ``redo`` are made again (those
-        whose state or vector can follow an annotation: the E contacts on edges, from their DLO
-        vector; the gripper's, from its ``z``); each other one is ``last``'s, which is what the call
-        would give (its state and vector come from the facts alone, by its topology and span).
-        ``last`` itself when every contact made again is the one it had. The point-or-line decisions
-        are remembered as by a call."""
+        the same DLO kinds, spans and environment tuples, the same parameters. Only the contacts at
+        ``redo`` are made again (those whose state or vector can follow an annotation: the E contacts
+        on edges, from their DLO vector; the gripper's, from its ``z``); each other one is ``last``'s,
+        which is what the call would give (its state and vector come from the facts alone, by its
+        topology and span). ``last`` itself when every contact made again is the one it had. The
+        point-or-line decisions are remembered as by a call."""
         self._now = set()
         try:
             contact, cs = self.contact, situation.contacts
