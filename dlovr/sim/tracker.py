@@ -566,19 +566,18 @@ def _discretized(
     made: tuple[_Plan, Discretizer] | None,
 ) -> tuple[DiscreteSituation, bool, bool]:
     """The discrete situation of ``topo`` (made from ``plan``) by ``d``, whether it equals the last
-    state's (``prev``) and whether the state is a change. ``made``: the plan and discretizer that
-    made ``prev``'s discrete situation (None: not so made); when they are these, ``topo`` equals
-    ``prev``'s situation but for the annotations, and only its contacts at the plan's redo places
-    are made again (:meth:`dlovr.model.discrete.Discretizer.again`). So they are from the discrete
-    situation ``d`` made last of a situation of this plan (kept in the plan) when there is one: a
-    cable sliding over edges comes back to the same few plans, each step another of them."""
+    state's (``prev``) and whether the state is a change. When ``d`` made a discrete situation of
+    this plan before (kept in the plan), only ``topo``'s contacts at the plan's redo places are made
+    again from it (:meth:`dlovr.model.discrete.Discretizer.again`): a cable sliding over edges comes
+    back to the same few plans, each step another of them. ``made``: the plan and discretizer that
+    made ``prev``'s discrete situation (None: not so made; when they are these, the kept one is
+    ``prev``'s and ``topo`` equals ``prev``'s situation but for the annotations)."""
     memo = plan[3]
-    if prev is not None and made is not None and made[0] is plan and made[1] is d:
-        disc = memo[1] = d.again(prev.discrete, topo, plan[2])
-        same = disc is prev.discrete or prev.discrete == disc
-        return disc, same, not same
     disc = d.again(memo[1], topo, plan[2]) if memo[0] is d else d(topo)
     memo[0], memo[1] = d, disc
+    if prev is not None and made is not None and made[0] is plan and made[1] is d:
+        same = disc is prev.discrete or prev.discrete == disc
+        return disc, same, not same
     same = prev is not None and prev.discrete == disc
     return disc, same, not same or cast(ContactState, prev).topological != topo
 
