@@ -339,17 +339,13 @@ def print_parts(case: str, segments: int | None, max_stretch: float) -> None:
 
 
 def tracker_alone(case: str, segments: int | None, max_stretch: float, rounds: int) -> list[float]:
-    """µs per step of the contact tracker alone over the records of one untracked pass along the
-    case's commands, per round (a fresh tracker each, thread CPU, ``gc.freeze()`` before each)."""
+    """µs per step of the contact tracker alone over the records of one untracked pass of the case's
+    script, per round (a fresh tracker each, thread CPU, ``gc.freeze()`` before each)."""
     import gc
 
     scene, script = case_scene(case, segments)
-    targets, _ = _commands(scene, script, max_stretch)
-    sim = Simulator(scene, max_stretch=max_stretch)
     rows = []
-    for pos, quat in targets:
-        sim.target_pos, sim.target_quat = pos, quat
-        r = sim.step()
+    for r in Simulator(scene, max_stretch=max_stretch).run(script):
         poses = tuple(tuple(getattr(r, k).tolist()) for k in ("gripper_pos", "gripper_quat", "gripper_force"))
         rows.append((r, r.step, r.time, r.points, r.contact_arrays.table, r.contact_arrays, poses, True))
     out = []
