@@ -233,13 +233,14 @@ class ContactTracker:
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            sit = _refreshed(self._situation, pts, z, self._plan[0], self._g_envs)
-            if self._spans[0] is self._situation:  # the same spans: the kernel's sums hold for it
+            self._from = old = self._situation  # what the new one equals (_equal)
+            sit = _refreshed(old, pts, z, self._plan[0], self._g_envs)
+            if self._spans[0] is old:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
         else:  # made again, or made from the same primitives before (_structure)
             key = (len(pts), tip, *self._env_codes)
             made = self._structures, key, self._env, pts, self._normal, angle, z, self._g_envs
-            sit, self._plan = _structure(*made)
+            (sit, self._plan), self._from = _structure(*made), None
         self._signature, self._situation, self._situation_env = signature, sit, self._env_version
         ks, pairs = self._plan[1]  # the vectors are those of these points (the kernel's check)
         self._edge_pairs, self._edge_ref = (pairs, pts.copy()) if ks else (_NO_PAIRS, _NO_REF)
@@ -376,7 +377,7 @@ class ContactTracker:
         topo = self.classify(pts, record, poses[1] if z_of_quat else None)
         if prev is not None and prev.topological is topo:  # the cached situation: discretize is pure
             disc, same, new = prev.discrete, True, False
-        elif prev is not None and prev.topological == topo and _vector_independent(topo):
+        elif prev is not None and not self._plan[1][0] and _equal(prev.topological, topo, self._from):
             disc, same, new = prev.discrete, True, False
             self._disc_plan = None  # its spans may differ from the plan's
         else:
@@ -601,10 +602,12 @@ def _same_bits(a: Any, b: Any) -> bool:
     return 0.0 not in a or all(x != 0.0 or sign(1.0, x) == sign(1.0, y) for x, y in zip(a, b, strict=True))
 
 
-def _vector_independent(topo: Situation) -> bool:
-    """Discrete states depend on DLO vectors only through point/line decisions of E contacts on
-    edges: without such contacts the discrete situation of an unchanged topology can be reused."""
-    return not any(_on_edge(c) for c in topo.contacts)
+def _equal(last: Situation, topo: Situation, refreshed_from: Situation | None) -> bool:
+    """``last == topo``, known without comparing when ``topo`` was refreshed from ``last``
+    (:func:`_refreshed` keeps all that equality compares). The tracker asks it of a situation without
+    E contacts on edges (its plan's :func:`_edges_of`): discrete states depend on DLO vectors only
+    through their point-or-line decisions, so an equal one has the last discrete situation."""
+    return refreshed_from is last or last == topo
 
 
 def _on_edge(contact: Contact) -> bool:

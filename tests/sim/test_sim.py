@@ -548,3 +548,36 @@ def test_a_plan_met_again_gives_the_states_of_discretizing_afresh(monkeypatch):
     monkeypatch.setattr(tracker_module, "_discretized", afresh)
     assert kept == states()
     assert used[0] >= 1  # a plan's discrete situation was used (at step 2272, its gripper's z another)
+
+
+def test_a_refreshed_situation_is_known_equal_to_the_one_it_was_refreshed_from(monkeypatch):
+    """A situation refreshed from the last one (its DLO vectors and the gripper's z made again) equals
+    it: the tracker keeps the last discrete situation for one without E contacts on edges without
+    comparing the two, and its states are those of comparing them."""
+    from itertools import islice
+    from pathlib import Path
+
+    import dlovr.sim.tracker as tracker_module
+    from dlovr.scene import load_scene
+    from dlovr.script import load_script
+
+    scene = load_scene("table")  # laid down on the table, dragged, lifted: faces, no edges
+    script = load_script(Path(__file__).resolve().parents[2] / "scenes" / "table.script.toml")
+    real, known = tracker_module._equal, [0]
+
+    def counted(last, topo, refreshed_from):
+        if refreshed_from is last:
+            known[0] += 1
+            assert last == topo
+        return real(last, topo, refreshed_from)
+
+    def states():
+        sim = Simulator(scene, track=True)
+        got = [(r.state.topological, r.state.discrete, r.state.forces) for r in islice(sim.run(script), 2400)]
+        return got, [(k.situation, k.start, k.end) for k in sim.tracker.kept]
+
+    monkeypatch.setattr(tracker_module, "_equal", counted)
+    kept = states()
+    monkeypatch.setattr(tracker_module, "_equal", lambda last, topo, _refreshed_from: last == topo)
+    assert kept == states()
+    assert known[0] >= 100  # 351 of these steps: the comparison left out
