@@ -95,6 +95,10 @@ _VARY_HELP = (
 )
 @click.option("--settle", "settle_raw", metavar="S", help="Hold the start pose S seconds first (default 0).")
 @click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
+@click.option(
+    "--give-way", "give_way_raw", metavar="M",
+    help="Slide along a face into a new contact M metres away from it (default 0; docs/programs.md).",
+)
 @click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
 @click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
 @click.option("--vary", "varies", multiple=True, metavar="KEY=SPEC", help=_VARY_HELP)
@@ -223,6 +227,7 @@ class RunArgs:
     frame: str
     settle_raw: str | None
     allowance_raw: str | None
+    give_way_raw: str | None
     trials_raw: str | None
     seed_raw: str
     varies: tuple[str, ...]
@@ -237,12 +242,13 @@ class RunArgs:
 
 @dataclass(frozen=True)
 class Numbers:
-    """The numeric options, checked: noise (N), allowance (x demonstrated), settle (s), trials,
-    seed, workers."""
+    """The numeric options, checked: noise (N), allowance (x demonstrated), give-way (m), settle (s),
+    trials, seed, workers."""
 
     noise: float
     sensor_noise: float | None
     allowance: float
+    give_way: float
     settle: float
     trials: int | None
     seed: int
@@ -270,6 +276,7 @@ def _numbers(a: RunArgs) -> Numbers:
         noise=_number("--noise", a.noise_raw, minimum=0.0) or 0.0,
         sensor_noise=_number("--sensor-noise", a.sensor_noise_raw, minimum=0.0),
         allowance=_number("--allowance", a.allowance_raw, minimum=1.0) or 1.5,
+        give_way=_number("--give-way", a.give_way_raw, minimum=0.0) or 0.0,
         settle=_number("--settle", a.settle_raw, minimum=0.0) or 0.0,
         trials=_number("--trials", a.trials_raw, integer=True, minimum=1),
         seed=_number("--seed", a.seed_raw, integer=True, minimum=0),
@@ -312,7 +319,7 @@ def _exec_options(a: RunArgs, n: Numbers) -> Any:
     try:
         return ExecOptions(
             detect=a.detect, noise=n.noise, allowance=n.allowance, frame=a.frame, start_settle=n.settle,
-            sensor_noise=n.sensor_noise,
+            sensor_noise=n.sensor_noise, give_way=n.give_way,
         )
     except ValueError as e:  # options the executor refuses
         raise UserError(str(e)) from None
@@ -386,7 +393,10 @@ def _network(nprog: Any, a: RunArgs, n: Numbers) -> None:
 
     try:
         scene = network_scene(nprog, a.scene_ref)
-        opts = ExecOptions(detect=a.detect, noise=n.noise, allowance=n.allowance, sensor_noise=n.sensor_noise)
+        opts = ExecOptions(
+            detect=a.detect, noise=n.noise, allowance=n.allowance, sensor_noise=n.sensor_noise,
+            give_way=n.give_way,
+        )
     except ValueError as e:  # a ProgramError, a SceneError, or options the executor refuses
         raise UserError(str(e)) from None
     if n.trials is not None:

@@ -39,6 +39,7 @@ from dlovr.execution.motion import (
     TurnedPath,
     Vec,
     eased,
+    given_way,
     last_start,
     local_twist,
 )
@@ -118,6 +119,10 @@ class ExecOptions:
     macro by motion, as one whose threshold is not below its step does. ``sensor_noise`` (N): the
     white noise the detectors assume of the sensor (:func:`dlovr.model.detection.for_sensor`: their
     smoothing and threshold floors); ``None``: the simulated ``noise`` (a robot knows its sensor).
+    ``give_way`` (m): an ``E`` transition that slides the cable along a face into its new contact
+    moves this far away from that face over its motion (:func:`dlovr.execution.motion.given_way`;
+    blind, a face a few mm nearer than demonstrated presses the sliding cable, which sticks, bends and
+    shakes the wrench like the transition); 0: as demonstrated.
     ``object_shifts``: (object name, shift m world) pairs, where the objects really are against the
     demonstration (a registered run, ``dlovr run --registered``; empty: blind): each macro moves in
     the frame of the object its principal contacts name (:mod:`dlovr.execution.motion`, "Frames of
@@ -147,6 +152,7 @@ class ExecOptions:
     phase_blank: float = 0.15
     min_snr: float = MIN_SNR
     sensor_noise: float | None = None
+    give_way: float = 0.0
     object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
     object_turns: tuple[tuple[str, tuple[float, float, float, float]], ...] = ()
 
@@ -154,7 +160,7 @@ class ExecOptions:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
         names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold", "blank",
-                 "arm", "bounce", "phase_blank", "min_snr")
+                 "arm", "bounce", "phase_blank", "min_snr", "give_way")
         for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -779,7 +785,7 @@ def run_macro(
     from dlovr.sim import SimulationDiverged
 
     sim, opts = ses.sim, ses.opts
-    path = _path(m, sim, opts, track, t_from, ses.tool)
+    path = given_way(_path(m, sim, opts, track, t_from, ses.tool), m, opts.give_way)
     path, shift = _in_object_frame(path, m, ses)
     period = macro_period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle

@@ -329,6 +329,38 @@ class ShiftedPath:
         return np.array([float(pos[i]) + k * self.shift[i] for i in range(3)]), quat
 
 
+def slid_face_normal(m: Any) -> Vec | None:
+    """The outward normal (unit, world) of the face that macro ``m``'s cable slides along into its
+    new contact: an ``E`` transition whose from-situation has a principal contact on that face alone
+    (``E/F`` or ``V/F``, whose contact vector is minus the normal) and whose established contact
+    touches the same face (the tip sliding down a side face into the groove it makes with the block
+    below); None for any other macro."""
+    if tuple(m.classes) != ("E",):
+        return None
+    new_faces = {f for c in m.established for f in _faces(c.state)}
+    for c in m.from_contacts:
+        faces, v = _faces(c.state), c.vector
+        if c.state[2:4] == "F[" and len(faces) == 1 and faces[0] in new_faces and v is not None \
+                and any(x != 0.0 for x in v):
+            return (-float(v[0]), -float(v[1]), -float(v[2]))
+    return None
+
+
+def _faces(state: str) -> list[str]:
+    """The face names of a written discrete contact (``E/F[block.F3]``: ``["block.F3"]``)."""
+    return state[state.index("[") + 1 : state.rindex("]")].split(",") if "[" in state else []
+
+
+def given_way(path: Any, m: Any, distance: float) -> Any:
+    """``path`` moved ``distance`` (m) away from the face that ``m`` slides along
+    (:func:`slid_face_normal`), in proportion to its progress (:class:`ShiftedPath`); ``path`` itself
+    for another macro or at ``distance`` 0."""
+    n = slid_face_normal(m) if distance > 0.0 else None
+    if n is None:
+        return path
+    return ShiftedPath(path, (distance * n[0], distance * n[1], distance * n[2]))
+
+
 @dataclass(frozen=True)
 class TurnedPath:
     """A path (anything with ``at(s)``) that starts at ``pos``, ``quat`` (world), turned about that

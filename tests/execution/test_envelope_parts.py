@@ -19,7 +19,7 @@ from dlovr.execution.executor import (
     goal_check,
     macro_shift,
 )
-from dlovr.execution.motion import ScrewPath, ShiftedPath, eased
+from dlovr.execution.motion import ScrewPath, ShiftedPath, eased, given_way, slid_face_normal
 from dlovr.execution.scoring import MacroScore, first_deviation
 from dlovr.execution.variation import object_shifts, parse_varies, perturb
 from dlovr.model.program import Program
@@ -46,6 +46,22 @@ def test_shifted_path_adds_the_shift_along_the_motion():
     assert p.at(0.5)[0].tolist() == pytest.approx([0.05, 0.01, 0.5])
     assert p.at(1.5)[0].tolist() == pytest.approx([0.15, 0.02, 0.5])  # beyond: the whole shift
     assert eased((0.0, 0.0, 0.0), (1.0, 2.0, 0.0), 0.5) == pytest.approx((0.5, 1.0, 0.0))
+
+
+def test_a_slide_along_a_face_into_a_new_contact_gives_way_from_that_face():
+    """``give_way``: the ``E`` macro whose cable slides down block.F3 (contact vector -x) into the groove
+    it makes with holeblock.F2 moves that far along F3's outward normal (+x) over its motion; no other
+    macro of the program moves, and nothing at 0."""
+    groove = PEG.classed[4]  # E/F[block.F3] -> V/E^LS[block.F3,holeblock.F2]
+    assert slid_face_normal(groove) == pytest.approx((1.0, 0.0, 0.0))
+    assert [m.index for m in PEG.macros if slid_face_normal(m) is not None] == [groove.index]
+    base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, -0.1))
+    moved = given_way(base, groove, 0.01)
+    assert moved.at(0.0)[0].tolist() == pytest.approx([0.0, 0.0, 0.5])
+    assert moved.at(1.0)[0].tolist() == pytest.approx([0.01, 0.0, 0.4])
+    assert given_way(base, groove, 0.0) is base and given_way(base, PEG.classed[0], 0.01) is base
+    with pytest.raises(ValueError, match="give_way"):
+        ExecOptions(give_way=-0.01)
 
 
 def test_object_shifts_are_the_trials_true_object_positions():

@@ -221,6 +221,7 @@ def test_cli_runs_a_program_and_exits_by_the_result(touch):
         (["recordings/programs/table.program.json", "--trials", "2"], "needs -o DIR"),
         (["recordings/programs/table.program.json", "--vary", "dlo.length=10%"], "need --trials"),
         (["recordings/programs/table.program.json", "--allowance", "0.5"], "--allowance: must be >= 1"),
+        (["recordings/programs/table.program.json", "--give-way", "-0.01"], "--give-way: must be >= 0"),
         (["recordings/programs/table.program.json", "--scene", "atlantis"], "no built-in scene"),
         (["recordings/programs/table.program.json", "--detect", "psychic"], "--detect: 'psychic' is not"),
         (["recordings/programs/table.program.json", "--workers", "two"], "--workers: 'two' is not an"),
