@@ -1,7 +1,7 @@
 """Programs from person-like demonstrations against the scripted program and their own replays.
 
 Run: ``.venv/bin/python benchmarks/bench_people.py [--scripts peg_in_hole ...] [--demos 5] [--trials 20]
-[--person 1] [--seed 0] [--workers 1] [--out DIR] [--calibrate]``
+[--person 1] [--seed 0] [--workers 1] [--out DIR] [--calibrate] [--give-way M]``
 
 For each built-in script (``scenes/NAME.script.toml``): ``--demos`` demonstrations played by the
 person-like demonstrator (docs/people.md; ``--person 2``: twice the default drift and tremor), recorded
@@ -13,7 +13,8 @@ replay reach the goal under the standard variation (cable length +-10 %, stiffne
 script. The recordings stay in ``--out`` (default: a temporary folder). With ``--calibrate`` each
 program is compiled as ``dlovr compile --calibrate`` compiles it (its detections without force signal
 calibrated in simulation, docs/programs.md "Calibrated detection"; 2-4 min a demonstration), and
-``cal`` gives how many of its macros were calibrated of those without force signal.
+``cal`` gives how many of its macros were calibrated of those without force signal. ``--give-way M``
+runs the programs as ``dlovr run --give-way M`` does (the replays are unchanged).
 
 For peg-in-hole each row also gives ``corner``: how much of the drag along the groove (the gripper's
 travel along -y, mm) is left when the tip reaches the groove's corner (``V/VI``), as recorded and as
@@ -81,7 +82,8 @@ def success(program: Program, rec: Path, args: argparse.Namespace) -> tuple[floa
     """How often the program and its replay reach the goal in ``--trials`` standard-variation trials."""
     scene = resolve_scene(program, None, rec)
     setup = TrialSetup(program=program, scene=scene, pieces=scene_pieces(scene), track=load_track(rec),
-                       variations=parse_varies(VARY, scene), seed=0, opts=ExecOptions(), baseline=True)
+                       variations=parse_varies(VARY, scene), seed=0, opts=ExecOptions(give_way=args.give_way),
+                       baseline=True)
     trials = run_trials(setup, args.trials, workers=args.workers)
     prog = sum(bool(t["program"]["success"]) for t in trials) / len(trials)
     replay = sum(bool(t.get("openloop", {}).get("goal_reached")) for t in trials) / len(trials)
@@ -132,10 +134,13 @@ def main() -> None:
     ap.add_argument("--out", help="folder for the recordings (kept; reused when there)")
     ap.add_argument("--calibrate", action="store_true",
                     help="calibrate the programs (dlovr compile --calibrate)")
+    ap.add_argument("--give-way", type=float, default=0.0, metavar="M",
+                    help="run the programs with dlovr run --give-way M (m; default 0)")
     args = ap.parse_args()
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_people_"))
     print(f"{args.demos} demonstrations a script, demo.person={args.person:g}, seed {args.seed}, "
-          f"{args.trials} trials each (seed 0, {' '.join(VARY)}); recordings in {out}")
+          f"{args.trials} trials each (seed 0, {' '.join(VARY)}), give-way {args.give_way:g} m; "
+          f"recordings in {out}")
     print(f"{'script':<12} {'demo':>4} {'macros':>6} {'ratio':>5} {'edit':>4} {'same':>4} "
           f"{'program':>7} {'replay':>6} {'corner':>9} {'cal':>5}  classes")
     for name in args.scripts:
