@@ -52,6 +52,7 @@ def test_program_beats_open_loop_where_the_table_moved(touch, tmp_path):
     summary = summarize(trials, setup)
     assert summary["program_success_rate"] == 1.0 and summary["program_only"] >= 1
     assert summary["false_detections"] == 0 and summary["median_latency_s"] is not None
+    assert summary["give_way_m"] == 0.0  # the executor's options that move the program say so
     paths = write_outputs(tmp_path / "out", trials, summary)
     names = {p.name for p in paths}
     assert {"trial_000.json", "trial_002.json", "trials.csv", "summary.json", "plot.png"} <= names
