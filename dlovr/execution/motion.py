@@ -354,7 +354,8 @@ def _faces(state: str) -> list[str]:
 def given_way(path: Any, m: Any, distance: float) -> Any:
     """``path`` moved ``distance`` (m) away from the face that ``m`` slides along
     (:func:`slid_face_normal`), in proportion to its progress (:class:`ShiftedPath`); ``path`` itself
-    for another macro or at ``distance`` 0."""
+    for another macro or at ``distance`` 0. Held off the face, the cable often ends beside the new
+    contact rather than in it (docs/people.md, "Giving way from the face the cable slides on")."""
     n = slid_face_normal(m) if distance > 0.0 else None
     if n is None:
         return path
