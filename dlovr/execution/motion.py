@@ -38,6 +38,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from dlovr.model.discrete import parse_discrete_contact
 from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, quat_to_rotvec, rotvec_to_quat, slerp
 
 Vec = tuple[float, float, float]
@@ -337,18 +338,13 @@ def slid_face_normal(m: Any) -> Vec | None:
     below); None for any other macro."""
     if tuple(m.classes) != ("E",):
         return None
-    new_faces = {f for c in m.established for f in _faces(c.state)}
+    new_faces = {f for c in m.established for f in parse_discrete_contact(c.state).faces}
     for c in m.from_contacts:
-        faces, v = _faces(c.state), c.vector
-        if c.state[2:4] == "F[" and len(faces) == 1 and faces[0] in new_faces and v is not None \
+        dc, v = parse_discrete_contact(c.state), c.vector
+        if dc.state.env == "F" and len(dc.faces) == 1 and dc.faces[0] in new_faces and v is not None \
                 and any(x != 0.0 for x in v):
             return (-float(v[0]), -float(v[1]), -float(v[2]))
     return None
-
-
-def _faces(state: str) -> list[str]:
-    """The face names of a written discrete contact (``E/F[block.F3]``: ``["block.F3"]``)."""
-    return state[state.index("[") + 1 : state.rindex("]")].split(",") if "[" in state else []
 
 
 def given_way(path: Any, m: Any, distance: float) -> Any:
