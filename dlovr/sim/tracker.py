@@ -170,6 +170,7 @@ class ContactTracker:
         self._tip: tuple[int, list[list[float]]] | None = None
         self._signature: tuple[Any, ...] | None = None
         self._situation: Situation | None = None
+        self._from: Situation | None = None  # the one _situation was refreshed from (None: made; _equal)
         self._tip_held = False  # the tip's own contact at the last step (the rule's hysteresis)
         if self._disc is not None:
             self._disc.forget()  # and the point-or-line decisions of the last step
@@ -233,7 +234,7 @@ class ContactTracker:
             self._situation is not None and last is not None and last[0] == n and last[2] == tip
             and self._situation_env == self._env_version
         ):
-            self._from = old = self._situation  # what the new one equals (_equal)
+            self._from = old = self._situation
             sit = _refreshed(old, pts, z, self._plan[0], self._g_envs)
             if self._spans[0] is old:  # the same spans: the kernel's sums hold for it
                 self._spans = (sit, self._spans[1])
@@ -417,7 +418,7 @@ class ContactTracker:
             views = self._views
             if len(spans[1]) > len(views.forces):
                 raise RuntimeError("more contacts than the cable has points")
-            tk.span_forces(self._spans[1], views.point_of, table, views.forces)
+            tk.span_forces(spans[1], views.point_of, table, views.forces)
         return tuple(self._views.forces[: len(topo.contacts)].tolist())
 
     def transitions(self) -> list[tuple[Kept[DiscreteSituation], tuple[str, ...]]]:
