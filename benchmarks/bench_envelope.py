@@ -2,7 +2,7 @@
 variation and size, in one command (issue 28).
 
 Run: ``.venv/bin/python benchmarks/bench_envelope.py [--trials 50] [--seed 0] [--workers 2]
-[--rows standard,noise] [--network NET.program.json] [-o envelope/]``
+[--rows standard,noise] [--network NET.program.json] [--give-way M] [-o envelope/]``
 
 Rows (each ``--trials`` trials from ``--seed``, the same perturbed scenes for every column of a row):
 
@@ -26,7 +26,8 @@ how the sensed goal check judged the blind runs (missed goals it caught, reached
 ``-o DIR`` gets ``envelope.md`` (the table), ``envelope.json`` and ``envelope.png`` (success rate
 per row). ``--rows`` keeps the rows whose name contains one of the given words; ``--trials 5`` for a
 quick look; ``--no-replay``, ``--blind-only`` and ``--network-only`` (only the network program) leave
-columns out. The trials run through
+columns out; ``--give-way M`` runs the programs as ``dlovr run --give-way M`` does (the replay is
+unchanged). The trials run through
 :func:`dlovr.execution.trials.run_trials` on ``--workers`` local processes.
 """
 
@@ -103,7 +104,7 @@ def run_row(row: Row, base: dict[str, Any], args: argparse.Namespace) -> dict[st
     """The row's columns: blind program with the replay, registered program, network program."""
     scene = base["scene"]
     variations = parse_varies(row.vary, scene)
-    opts = ExecOptions(noise=row.noise)
+    opts = ExecOptions(noise=row.noise, give_way=args.give_way)
     common = dict(scene=scene, pieces=base["pieces"], variations=variations, seed=args.seed, opts=opts)
     out: dict[str, Any] = {"row": row.name, "vary": list(row.vary), "noise_n": row.noise,
                            "trials": args.trials, "seed": args.seed}
@@ -218,6 +219,8 @@ def main() -> None:
     ap.add_argument("--rows", help="comma-separated words: keep the rows whose name contains one")
     ap.add_argument("--no-replay", action="store_true", help="leave the open-loop replay out (faster)")
     ap.add_argument("--blind-only", action="store_true", help="leave the registered runs out (faster)")
+    ap.add_argument("--give-way", type=float, default=None, metavar="M",
+                    help="run the programs with dlovr run --give-way M (m; default: dlovr run's)")
     ap.add_argument("-o", "--output", default="envelope")
     args = ap.parse_args()
 

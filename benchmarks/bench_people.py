@@ -14,7 +14,8 @@ script. The recordings stay in ``--out`` (default: a temporary folder). With ``-
 program is compiled as ``dlovr compile --calibrate`` compiles it (its detections without force signal
 calibrated in simulation, docs/programs.md "Calibrated detection"; 2-4 min a demonstration), and
 ``cal`` gives how many of its macros were calibrated of those without force signal. ``--give-way M``
-runs the programs as ``dlovr run --give-way M`` does (the replays are unchanged).
+runs the programs as ``dlovr run --give-way M`` does (default: as ``dlovr run`` does, 5 mm for these
+programs of a hand's demonstrations; the replays are unchanged).
 
 For peg-in-hole each row also gives ``corner``: how much of the drag along the groove (the gripper's
 travel along -y, mm) is left when the tip reaches the groove's corner (``V/VI``), as recorded and as
@@ -35,6 +36,7 @@ from dlovr.execution.calibration import calibrate_recording, needs_calibration
 from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
 from dlovr.execution.demo_track import load_track
 from dlovr.execution.executor import ExecOptions
+from dlovr.execution.motion import HAND_GIVE_WAY_M
 from dlovr.execution.run import resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trials
 from dlovr.execution.variation import parse_varies
@@ -134,12 +136,13 @@ def main() -> None:
     ap.add_argument("--out", help="folder for the recordings (kept; reused when there)")
     ap.add_argument("--calibrate", action="store_true",
                     help="calibrate the programs (dlovr compile --calibrate)")
-    ap.add_argument("--give-way", type=float, default=0.0, metavar="M",
-                    help="run the programs with dlovr run --give-way M (m; default 0)")
+    ap.add_argument("--give-way", type=float, default=None, metavar="M",
+                    help="run the programs with dlovr run --give-way M (m; default: dlovr run's)")
     args = ap.parse_args()
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench_people_"))
+    way = f"{args.give_way:g} m" if args.give_way is not None else f"{HAND_GIVE_WAY_M:g} m (a hand's default)"
     print(f"{args.demos} demonstrations a script, demo.person={args.person:g}, seed {args.seed}, "
-          f"{args.trials} trials each (seed 0, {' '.join(VARY)}), give-way {args.give_way:g} m; "
+          f"{args.trials} trials each (seed 0, {' '.join(VARY)}), give-way {way}; "
           f"recordings in {out}")
     print(f"{'script':<12} {'demo':>4} {'macros':>6} {'ratio':>5} {'edit':>4} {'same':>4} "
           f"{'program':>7} {'replay':>6} {'corner':>9} {'cal':>5}  classes")

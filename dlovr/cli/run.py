@@ -97,7 +97,8 @@ _VARY_HELP = (
 @click.option("--allowance", "allowance_raw", metavar="X", help="Motion allowance, x demonstrated (1.5).")
 @click.option(
     "--give-way", "give_way_raw", metavar="M",
-    help="Slide along a face into a new contact M metres away from it (default 0; docs/programs.md).",
+    help="Slide along a face into a new contact M metres away from it (default: 0.005 following a "
+    "hand's demonstration, 0 a script's; docs/programs.md).",
 )
 @click.option("--trials", "trials_raw", metavar="N", help="Run N perturbed trials (needs -o DIR).")
 @click.option("--seed", "seed_raw", metavar="S", default="0", show_default=True, help="Seed of the trials.")
@@ -242,13 +243,13 @@ class RunArgs:
 
 @dataclass(frozen=True)
 class Numbers:
-    """The numeric options, checked: noise (N), allowance (x demonstrated), give-way (m), settle (s),
-    trials, seed, workers."""
+    """The numeric options, checked: noise (N), allowance (x demonstrated), give-way (m; None: by who
+    made the demonstration), settle (s), trials, seed, workers."""
 
     noise: float
     sensor_noise: float | None
     allowance: float
-    give_way: float
+    give_way: float | None
     settle: float
     trials: int | None
     seed: int
@@ -276,7 +277,7 @@ def _numbers(a: RunArgs) -> Numbers:
         noise=_number("--noise", a.noise_raw, minimum=0.0) or 0.0,
         sensor_noise=_number("--sensor-noise", a.sensor_noise_raw, minimum=0.0),
         allowance=_number("--allowance", a.allowance_raw, minimum=1.0) or 1.5,
-        give_way=_number("--give-way", a.give_way_raw, minimum=0.0) or 0.0,
+        give_way=_number("--give-way", a.give_way_raw, minimum=0.0),
         settle=_number("--settle", a.settle_raw, minimum=0.0) or 0.0,
         trials=_number("--trials", a.trials_raw, integer=True, minimum=1),
         seed=_number("--seed", a.seed_raw, integer=True, minimum=0),

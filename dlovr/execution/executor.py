@@ -39,6 +39,7 @@ from dlovr.execution.motion import (
     TurnedPath,
     Vec,
     eased,
+    give_way_m,
     given_way,
     last_start,
     local_twist,
@@ -122,7 +123,9 @@ class ExecOptions:
     ``give_way`` (m): an ``E`` transition that slides the cable along a face into its new contact
     moves this far away from that face over its motion (:func:`dlovr.execution.motion.given_way`;
     blind, a face a few mm nearer than demonstrated presses the sliding cable, which sticks, bends and
-    shakes the wrench like the transition); 0: as demonstrated.
+    shakes the wrench like the transition); 0: as demonstrated; ``None`` (default): by who made the
+    track followed (:func:`dlovr.execution.motion.give_way_m`: 5 mm for a hand's, whose drift may
+    have pressed the slide onto its face; 0 for a script's).
     ``object_shifts``: (object name, shift m world) pairs, where the objects really are against the
     demonstration (a registered run, ``dlovr run --registered``; empty: blind): each macro moves in
     the frame of the object its principal contacts name (:mod:`dlovr.execution.motion`, "Frames of
@@ -152,7 +155,7 @@ class ExecOptions:
     phase_blank: float = 0.15
     min_snr: float = MIN_SNR
     sensor_noise: float | None = None
-    give_way: float = 0.0
+    give_way: float | None = None
     object_shifts: tuple[tuple[str, tuple[float, float, float]], ...] = ()
     object_turns: tuple[tuple[str, tuple[float, float, float, float]], ...] = ()
 
@@ -160,7 +163,7 @@ class ExecOptions:
         if self.detect not in DETECT_MODES:
             raise ValueError(f"detect must be one of {', '.join(DETECT_MODES)}, got {self.detect!r}")
         names = ("noise", "filter_tau", "settle", "final_settle", "min_duration", "oracle_hold", "blank",
-                 "arm", "bounce", "phase_blank", "min_snr", "give_way")
+                 "arm", "bounce", "phase_blank", "min_snr")
         for name in (*names, "start_settle"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -173,9 +176,10 @@ class ExecOptions:
             raise ValueError(f"allowance must be >= 1 (times the demonstrated motion), got {self.allowance}")
         if self.frame not in ("world", "relative"):
             raise ValueError(f"frame must be 'world' or 'relative', got {self.frame!r}")
-        sn = self.sensor_noise
-        if sn is not None and not (isinstance(sn, int | float) and math.isfinite(sn) and sn >= 0):
-            raise ValueError(f"sensor_noise must be a number >= 0, got {sn!r}")
+        for name in ("sensor_noise", "give_way"):  # None: as the docstring says
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
 
     @property
     def registered(self) -> bool:
@@ -785,7 +789,8 @@ def run_macro(
     from dlovr.sim import SimulationDiverged
 
     sim, opts = ses.sim, ses.opts
-    path = given_way(_path(m, sim, opts, track, t_from, ses.tool), m, opts.give_way)
+    away = give_way_m(opts.give_way, track is not None and track.by_hand)
+    path = given_way(_path(m, sim, opts, track, t_from, ses.tool), m, away)
     path, shift = _in_object_frame(path, m, ses)
     period = macro_period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle

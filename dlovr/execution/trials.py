@@ -26,6 +26,7 @@ from typing import Any
 
 from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.executor import ExecOptions
+from dlovr.execution.motion import give_way_m
 from dlovr.execution.network_run import NetworkRunResult
 from dlovr.execution.recovery import Recovery
 from dlovr.execution.run import run_openloop, run_program
@@ -74,6 +75,13 @@ class TrialSetup:
     def name(self) -> str:
         """The program's name (a network program's may be empty: ``network``)."""
         return self.program.name if isinstance(self.program, Program) else self.program.name or "network"
+
+    @property
+    def give_way(self) -> float:
+        """The give-way (m) the program's runs apply (:func:`dlovr.execution.motion.give_way_m`): the
+        option, else by whether the track they follow is a hand's (a program compiled smoothed)."""
+        hand = self.use_track and self.track is not None and getattr(self.program, "smoothing_s", 0.0) > 0
+        return give_way_m(self.opts.give_way, hand)
 
     @property
     def goal(self) -> tuple[str, ...]:
@@ -286,7 +294,7 @@ def summarize(trials: Sequence[dict[str, Any]], setup: TrialSetup) -> dict[str, 
         "noise_n": setup.opts.noise,
         "sensor_noise_n": setup.opts.assumed_noise,
         "registered": setup.registered,
-        "give_way_m": setup.opts.give_way,
+        "give_way_m": setup.give_way,
         "path": "demo" if setup.use_track and setup.track is not None else "program",
         "program_success_rate": _rate(prog),
         "openloop_success_rate": _rate(ol) if has_ol else None,

@@ -19,7 +19,15 @@ from dlovr.execution.executor import (
     goal_check,
     macro_shift,
 )
-from dlovr.execution.motion import ScrewPath, ShiftedPath, eased, given_way, slid_face_normal
+from dlovr.execution.motion import (
+    HAND_GIVE_WAY_M,
+    ScrewPath,
+    ShiftedPath,
+    eased,
+    give_way_m,
+    given_way,
+    slid_face_normal,
+)
 from dlovr.execution.scoring import MacroScore, first_deviation
 from dlovr.execution.variation import object_shifts, parse_varies, perturb
 from dlovr.model.program import Program
@@ -62,6 +70,37 @@ def test_a_slide_along_a_face_into_a_new_contact_gives_way_from_that_face():
     assert given_way(base, groove, 0.0) is base and given_way(base, PEG.classed[0], 0.01) is base
     with pytest.raises(ValueError, match="give_way"):
         ExecOptions(give_way=-0.01)
+
+
+def test_a_hand_s_track_gives_way_by_default_a_script_s_does_not(monkeypatch):
+    """``give_way`` None (the default): 5 mm where the run follows a hand's track (a program compiled
+    smoothed), none where it follows a script's; a given value wins either way. The executor's
+    macros get it from the track they follow, and trials report the value applied."""
+    import dlovr.execution.executor as ex
+    from dlovr.execution.run import load_track
+    from dlovr.execution.trials import TrialSetup
+    from dlovr.sim import Simulator
+
+    assert ExecOptions().give_way is None and HAND_GIVE_WAY_M == 0.005
+    assert give_way_m(None, True) == 0.005 and give_way_m(None, False) == 0.0
+    assert give_way_m(0.0, True) == 0.0 and give_way_m(0.01, False) == 0.01
+    scene, track = load_scene("peg_in_hole"), load_track(ROOT / "recordings/peg_in_hole.mcap")
+    hand = replace(PEG, smoothing_s=0.1)
+    for program, opts, use_track, want in (
+        (hand, ExecOptions(), True, 0.005), (PEG, ExecOptions(), True, 0.0),
+        (hand, ExecOptions(), False, 0.0), (hand, ExecOptions(give_way=0.002), True, 0.002),
+    ):
+        setup = TrialSetup(program=program, scene=scene, pieces=None, track=track, variations=(), seed=0,
+                           opts=opts, use_track=use_track)
+        assert setup.give_way == want
+    seen: list[float] = []
+    real = ex.given_way
+    monkeypatch.setattr(ex, "given_way", lambda path, m, d: seen.append(d) or real(path, m, d))
+    sim = Simulator(scene, track=True)
+    for by_hand, option in ((True, None), (False, None), (True, 0.0), (False, 0.01)):
+        next(ex.run_macro(PEG.classed[4], ex.Session(sim, ExecOptions(give_way=option)),
+                          replace(track, by_hand=by_hand)))
+    assert seen == [0.005, 0.0, 0.0, 0.01]
 
 
 def test_object_shifts_are_the_trials_true_object_positions():
