@@ -97,10 +97,15 @@ def test_a_hand_s_track_gives_way_by_default_a_script_s_does_not(monkeypatch):
     real = ex.given_way
     monkeypatch.setattr(ex, "given_way", lambda path, m, d: seen.append(d) or real(path, m, d))
     sim = Simulator(scene, track=True)
+    said = []
     for by_hand, option in ((True, None), (False, None), (True, 0.0), (False, 0.01)):
-        next(ex.run_macro(PEG.classed[4], ex.Session(sim, ExecOptions(give_way=option)),
-                          replace(track, by_hand=by_hand)))
+        ses = ex.Session(sim, ExecOptions(give_way=option))
+        next(ex.run_macro(PEG.classed[4], ses, replace(track, by_hand=by_hand)))
+        said.append(ses.events[-1].text)
     assert seen == [0.005, 0.0, 0.0, 0.01]
+    # the macro's event says so (the browser's log, the run's recording)
+    assert said[0].endswith("(giving way 5 mm from the face it slides along)")
+    assert "giving way" not in said[1] + said[2] and "giving way 10 mm" in said[3]
 
 
 def test_object_shifts_are_the_trials_true_object_positions():
