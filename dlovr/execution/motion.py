@@ -348,9 +348,10 @@ def slid_face_normal(m: Any) -> Vec | None:
 
 
 #: The give-way (m) of a program that follows a hand's track (:func:`give_way_m`): a person's drift
-#: toward a face the cable slides on presses it there, and 5 mm took the person-like peg-in-hole
-#: programs from 82 % to 90 % under the standard variation, with the fewest demonstrated groove
-#: contacts lost of the sizes measured (docs/people.md, "Giving way from the face the cable slides on").
+#: toward a face the cable slides on presses it there. 5 mm took the person-like peg-in-hole programs
+#: from 82 % to 90 % of the benchmark's standard-variation trials (79 -> 87 % and 86 -> 88 % on
+#: held-out ones); 1 cm gained a point more, mostly by skipping the demonstrated groove contact
+#: (docs/people.md, "The give-way by default for a hand's track").
 HAND_GIVE_WAY_M = 0.005
 
 
