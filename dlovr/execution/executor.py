@@ -39,8 +39,7 @@ from dlovr.execution.motion import (
     TurnedPath,
     Vec,
     eased,
-    give_way_m,
-    given_way,
+    hand_path,
     last_start,
     local_twist,
 )
@@ -789,10 +788,7 @@ def run_macro(
     from dlovr.sim import SimulationDiverged
 
     sim, opts = ses.sim, ses.opts
-    base = _path(m, sim, opts, track, t_from, ses.tool)
-    away = give_way_m(opts.give_way, track is not None and track.by_hand)
-    path = given_way(base, m, away)
-    gave = "" if path is base else f" (giving way {away * 1000:g} mm from the face it slides along)"
+    path, said = hand_path(_path(m, sim, opts, track, t_from, ses.tool), m, opts.give_way, track, ses.tool)
     path, shift = _in_object_frame(path, m, ses)
     period = macro_period(m, opts, track, t_from)
     scale = m.motion.distance if m.motion.distance > 1e-9 else m.motion.angle
@@ -805,7 +801,7 @@ def run_macro(
     started = blank <= 0.0
     if started:
         guard.start(t0, ses.f, ses.tq, ses.recent)
-    ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}{gave}")
+    ses.emit("macro", m.index, f"macro {m.index} {m.label}: {m.expected}{said}")
     limit = opts.allowance * period + opts.settle
     s = 0.0
 

@@ -374,6 +374,68 @@ def given_way(path: Any, m: Any, distance: float) -> Any:
     return ShiftedPath(path, (distance * n[0], distance * n[1], distance * n[2]))
 
 
+#: How much further (m) a hand's ``I`` drag goes, per metre that the cable's tip was felt further
+#: from the gripper than demonstrated, less what the hand itself dragged on after the transition
+#: (:func:`dragged_on`): a longer cable's tip trails further behind a drag (along the groove to its
+#: corner in peg-in-hole, 6 mm for a tip 18 mm further), and a hand that stopped its drag as the tip
+#: reached the corner left no margin for it (docs/people.md, "A longer cable drags on").
+DRAG_PER_EXCESS = 0.4
+#: The least net motion (m) of an ``I`` macro that counts as a drag (:func:`dragged_on`).
+DRAG_MIN_M = 0.02
+#: How long after an ``I`` transition (s) the hand's drag on is looked for (:func:`drag_left`).
+DRAG_WINDOW_S = 1.0
+
+
+def drag_left(times: np.ndarray, pos: np.ndarray, t: float, u: Vec) -> float:
+    """How far (m) the recorded gripper (times s, positions m world) went on along the unit direction
+    ``u`` after time ``t``, at most, within :data:`DRAG_WINDOW_S`: the margin a hand's drag left."""
+    a = int(np.searchsorted(times, t))
+    b = int(np.searchsorted(times, t + DRAG_WINDOW_S, side="right"))
+    if a >= len(times) or b <= a:
+        return 0.0
+    along = (np.asarray(pos[a:b], dtype=float) - np.asarray(pos[a], dtype=float)) @ np.asarray(u, dtype=float)
+    return max(float(along.max()), 0.0)
+
+
+def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> Any:
+    """``path`` drawn on along its net displacement (unit ``u``) by :data:`DRAG_PER_EXCESS` times the
+    cable's excess, ``-tool[2]`` (m: how much further the tip is than demonstrated, the executor's
+    ``tool``, gripper frame), less the drag the demonstration's ``track`` went on with after ``m.t``
+    (:func:`drag_left`), for an ``I`` macro that drags (net motion at least :data:`DRAG_MIN_M`: a drag
+    that pulls the tip into an instability) where that is positive; ``path`` itself otherwise. Added in
+    proportion to progress (:class:`ShiftedPath`)."""
+    excess = -float(tool[2])
+    if tuple(m.classes) != ("I",) or excess <= 0.0:
+        return path
+    a, b = path.at(0.0)[0], path.at(1.0)[0]
+    d = [float(b[i]) - float(a[i]) for i in range(3)]
+    n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    if n < DRAG_MIN_M:
+        return path
+    u = (d[0] / n, d[1] / n, d[2] / n)
+    more = DRAG_PER_EXCESS * excess - drag_left(track.t, track.pos, m.t, u)
+    if more <= 0.0:
+        return path
+    return ShiftedPath(path, (more * u[0], more * u[1], more * u[2]))
+
+
+def hand_path(path: Any, m: Any, give_way: float | None, track: Any, tool: Vec) -> tuple[Any, str]:
+    """Macro ``m``'s ``path`` as the run adapts it: given way from the face it slides along
+    (:func:`given_way`, :func:`give_way_m` of the option ``give_way`` and whether ``track`` is a
+    hand's), and on a hand's track an ``I`` drawn on for a longer cable (:func:`dragged_on`); and
+    what the macro's event says of it (empty where ``path`` is unchanged)."""
+    by_hand = track is not None and track.by_hand
+    away = give_way_m(give_way, by_hand)
+    out = given_way(path, m, away)
+    said = "" if out is path else f" (giving way {away * 1000:g} mm from the face it slides along)"
+    drawn = dragged_on(out, m, tool, track) if by_hand else out
+    if drawn is not out:
+        more = math.sqrt(sum(float(x) ** 2 for x in drawn.shift))
+        said += (f" (dragging {more * 1000:.1f} mm further: the cable's tip is "
+                 f"{-float(tool[2]) * 1000:.1f} mm further than demonstrated)")
+    return drawn, said
+
+
 @dataclass(frozen=True)
 class TurnedPath:
     """A path (anything with ``at(s)``) that starts at ``pos``, ``quat`` (world), turned about that

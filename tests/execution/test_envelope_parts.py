@@ -93,9 +93,11 @@ def test_a_hand_s_track_gives_way_by_default_a_script_s_does_not(monkeypatch):
         setup = TrialSetup(program=program, scene=scene, pieces=None, track=track, variations=(), seed=0,
                            opts=opts, use_track=use_track)
         assert setup.give_way == want
+    import dlovr.execution.motion as motion
+
     seen: list[float] = []
-    real = ex.given_way
-    monkeypatch.setattr(ex, "given_way", lambda path, m, d: seen.append(d) or real(path, m, d))
+    real = motion.given_way
+    monkeypatch.setattr(motion, "given_way", lambda path, m, d: seen.append(d) or real(path, m, d))
     sim = Simulator(scene, track=True)
     said = []
     for by_hand, option in ((True, None), (False, None), (True, 0.0), (False, 0.01)):
@@ -106,6 +108,44 @@ def test_a_hand_s_track_gives_way_by_default_a_script_s_does_not(monkeypatch):
     # the macro's event says so (the browser's log, the run's recording)
     assert said[0].endswith("(giving way 5 mm from the face it slides along)")
     assert "giving way" not in said[1] + said[2] and "giving way 10 mm" in said[3]
+
+
+def test_a_hand_s_drag_into_an_instability_goes_on_for_a_longer_cable():
+    """``dragged_on``: an ``I`` macro that drags (peg-in-hole's drag along the groove into its corner)
+    goes on along its net displacement by DRAG_PER_EXCESS times how much further the tip was felt than
+    demonstrated, less what the hand dragged on after the transition; nothing for a shorter or the
+    demonstrated cable, a margin the hand left, a motion under DRAG_MIN_M or another class;
+    ``hand_path`` only on a hand's track, and the executor's event says so."""
+    import dlovr.execution.executor as ex
+    from dlovr.execution.motion import DRAG_MIN_M, DRAG_PER_EXCESS, drag_left, dragged_on, hand_path
+    from dlovr.execution.run import load_track
+    from dlovr.sim import Simulator
+
+    assert DRAG_PER_EXCESS == 0.4 and DRAG_MIN_M == 0.02
+    drag = replace(PEG.classed[5], t=1.0)  # I: V/E^LS[block.F3,holeblock.F2] -> V/VI[...], the corner
+    assert drag.classes == ("I",)
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (4, 1))
+    ys = [0.0, -0.06, -0.061, -0.061]  # the hand drags 1 mm on after the transition at 1 s
+    hand = DemoTrack(np.array([0.0, 1.0, 1.5, 3.0]), np.array([[0.0, y, 0.5] for y in ys]), q, by_hand=True)
+    assert drag_left(hand.t, hand.pos, 1.0, (0.0, -1.0, 0.0)) == pytest.approx(0.001)
+    base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.06, 0.0))
+    on = dragged_on(base, drag, (0.0, 0.0, -0.01), hand)  # the tip 10 mm further: 4 mm less the 1 mm
+    assert on.at(0.0)[0].tolist() == pytest.approx([0.0, 0.0, 0.5])
+    assert on.at(1.0)[0].tolist() == pytest.approx([0.0, -0.063, 0.5])
+    short = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.01, 0.0))
+    for path, tool, m in ((base, (0.0, 0.0, 0.01), drag), (base, (0.0, 0.0, 0.0), drag),
+                          (base, (0.0, 0.0, -0.002), drag), (short, (0.0, 0.0, -0.01), drag),
+                          (base, (0.0, 0.0, -0.01), replace(PEG.classed[4], t=1.0))):
+        assert dragged_on(path, m, tool, hand) is path
+    assert hand_path(base, drag, None, replace(hand, by_hand=False), (0.0, 0.0, -0.01)) == (base, "")
+    moved, said = hand_path(base, drag, None, hand, (0.0, 0.0, -0.01))
+    assert moved.at(1.0)[0][1] == pytest.approx(-0.063)
+    assert said == " (dragging 3.0 mm further: the cable's tip is 10.0 mm further than demonstrated)"
+    scene, track = load_scene("peg_in_hole"), load_track(ROOT / "recordings/peg_in_hole.mcap")
+    ses = ex.Session(Simulator(scene, track=True), ExecOptions())
+    ses.tool = (0.0, 0.0, -0.04)
+    next(ex.run_macro(PEG.classed[5], ses, replace(track, by_hand=True)))
+    assert "mm further: the cable's tip is 40.0 mm further than demonstrated)" in ses.events[-1].text
 
 
 def test_object_shifts_are_the_trials_true_object_positions():
