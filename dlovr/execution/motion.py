@@ -39,7 +39,15 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.model.discrete import parse_discrete_contact
-from dlovr.transforms import quat_mul, quat_normalize, quat_rotate, quat_to_rotvec, rotvec_to_quat, slerp
+from dlovr.transforms import (
+    norm,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+    quat_to_rotvec,
+    rotvec_to_quat,
+    slerp,
+)
 
 Vec = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -409,7 +417,7 @@ def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> Any:
         return path
     a, b = path.at(0.0)[0], path.at(1.0)[0]
     d = [float(b[i]) - float(a[i]) for i in range(3)]
-    n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    n = norm(d)
     if n < DRAG_MIN_M:
         return path
     u = (d[0] / n, d[1] / n, d[2] / n)
@@ -430,7 +438,7 @@ def hand_path(path: Any, m: Any, give_way: float | None, track: Any, tool: Vec) 
     said = "" if out is path else f" (giving way {away * 1000:g} mm from the face it slides along)"
     drawn = dragged_on(out, m, tool, track) if by_hand else out
     if drawn is not out:
-        more = math.sqrt(sum(float(x) ** 2 for x in drawn.shift))
+        more = norm(drawn.shift)
         said += (f" (dragging {more * 1000:.1f} mm further: the cable's tip is "
                  f"{-float(tool[2]) * 1000:.1f} mm further than demonstrated)")
     return drawn, said
