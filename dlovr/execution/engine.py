@@ -192,12 +192,18 @@ def execute(
     return eng.execution
 
 
+def follows_hand(program: Runnable, track: DemoTrack | None) -> bool:
+    """Whether ``program`` runs along a hand's track: ``track`` given and the program compiled
+    smoothed (``Program.smoothing_s``), so that :func:`smoothed` makes it ``by_hand``."""
+    return track is not None and bool(getattr(program, "smoothing_s", 0.0))
+
+
 def smoothed(program: Runnable, track: DemoTrack | None) -> DemoTrack | None:
     """The track a compiled program follows: its demonstration's, smoothed as the program was
     compiled (``Program.smoothing_s``: a trembling hand's track; :mod:`dlovr.model.smoothing`)."""
-    window = getattr(program, "smoothing_s", 0.0)
-    if track is None or not window:
+    if track is None or not follows_hand(program, track):
         return track
+    window = getattr(program, "smoothing_s", 0.0)
     from dlovr.model.smoothing import smooth_poses
 
     pos, quat = smooth_poses(track.t, track.pos, track.quat, window)

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from dlovr.execution.demo_track import DemoTrack
+from dlovr.execution.engine import follows_hand
 from dlovr.execution.executor import ExecOptions
 from dlovr.execution.motion import give_way_m
 from dlovr.execution.network_run import NetworkRunResult
@@ -80,8 +81,7 @@ class TrialSetup:
     def give_way(self) -> float:
         """The give-way (m) the program's runs apply (:func:`dlovr.execution.motion.give_way_m`): the
         option, else by whether the track they follow is a hand's (a program compiled smoothed)."""
-        hand = self.use_track and self.track is not None and getattr(self.program, "smoothing_s", 0.0) > 0
-        return give_way_m(self.opts.give_way, hand)
+        return give_way_m(self.opts.give_way, self.use_track and follows_hand(self.program, self.track))
 
     @property
     def goal(self) -> tuple[str, ...]:
