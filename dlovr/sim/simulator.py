@@ -222,6 +222,7 @@ class Simulator:
             built = build_model(obstacles_from_scene(scene, self.pieces), scene.dlo, scene.gripper)
         self.scene = scene
         self.tracker: Any = None
+        self.behind: Any = None  # a dlovr.sim.behind.TrackingThread: it tracks the steps instead
         if track:
             if scene is None:
                 raise ValueError("contact tracking needs the scene")
@@ -350,7 +351,7 @@ class Simulator:
 
     def step(self, n: int = 1) -> StepRecord:
         """Advance ``n`` time steps; return the record of the last one. Raises SimulationDiverged."""
-        m, d, tracker, dt = self.model, self.data, self.tracker, self._dt
+        m, d, tracker, dt, behind = self.model, self.data, self.tracker, self._dt, self.behind
         state = rec = None
         for _ in range(n):
             _move_gripper(  # self._move_mocap(), inline: this runs every step
@@ -360,7 +361,9 @@ class Simulator:
             mujoco.mj_step(m, d)
             self.step_index += 1
             rec, poses = self._record(True)
-            if tracker is not None:  # tracker.update(rec) of what the record's kernel made already
+            if behind is not None:  # tracked on its thread (dlovr.sim.behind.tracking_behind)
+                behind.push(rec, poses)
+            elif tracker is not None:  # tracker.update(rec) of what the record's kernel made already
                 ca = rec.contact_arrays
                 state = tracker._state(rec, rec.step, rec.time, rec.points, ca.table, ca, poses, True)
         if state is not None:
