@@ -8,7 +8,8 @@
 - :mod:`dlovr.sim.simulator`: :class:`Simulator`, stepping, bounded gripper motion, divergence checks,
   per-step records;
 - :mod:`dlovr.sim.tracker`: :class:`ContactTracker`, each step's contacts -> topological and discrete
-  situations -> debounced transitions.
+  situations -> debounced transitions; :mod:`dlovr.sim.behind`: the tracker on a thread of its own,
+  beside the simulation (a replay's).
 
 These are the only modules of dlovr that import :mod:`mujoco` (besides replay in
 :mod:`dlovr.recording`).

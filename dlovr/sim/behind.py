@@ -27,8 +27,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-#: Steps handed to the thread at a time: one hand-over (a wake-up of the thread) per batch, not per step.
-BATCH = 16
+#: Steps handed to the thread at a time: one hand-over (a wake-up of the thread) per batch, not per step
+#: (replaying peg-in-hole at 40 segments, 16, 64, 256 and 1,024 came within the rounds' noise of each
+#: other, 64 and up about 0.01 of bare ``mj_step``'s throughput above 16).
+BATCH = 64
 
 
 class TrackingThread:
