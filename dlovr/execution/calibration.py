@@ -53,7 +53,8 @@ from dlovr.execution.executor import (
     transition_seen,
 )
 from dlovr.model.derivation import DerivationRules, WrenchSeries, derive
-from dlovr.model.detection import THRESHOLD_PARAM, no_force_signal
+from dlovr.model.detection import THRESHOLD_PARAM
+from dlovr.model.margins import blind
 from dlovr.model.program import Detection, Macro, Program
 
 #: The cables calibration runs with (scene key, factor): the demonstration's cable 5 % shorter and
@@ -77,11 +78,9 @@ AFTER_S = 0.3
 
 
 def needs_calibration(m: Macro, min_snr: float) -> bool:
-    """Whether ``m`` ends by its motion for want of a force signal (every detection of it: no signal
-    or weak signal, :func:`dlovr.model.detection.no_force_signal`)."""
-    return not m.final and bool(m.detection) and all(
-        no_force_signal(d.cls, d.params, min_snr) for d in m.detection
-    )
+    """Whether ``m`` ends by its motion for want of a force signal (:func:`dlovr.model.margins.blind`:
+    every detection of it no signal or weak signal)."""
+    return blind(m, min_snr)
 
 
 @dataclass(frozen=True)

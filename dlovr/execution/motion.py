@@ -39,6 +39,7 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.model.discrete import parse_discrete_contact
+from dlovr.model.margins import DRAG_MIN_M, WINDOW_S, went_on
 from dlovr.transforms import (
     norm,
     quat_mul,
@@ -388,21 +389,15 @@ def given_way(path: Any, m: Any, distance: float) -> Any:
 #: corner in peg-in-hole, 6 mm for a tip 18 mm further), and a hand that stopped its drag as the tip
 #: reached the corner left no margin for it (docs/people.md, "A longer cable drags on").
 DRAG_PER_EXCESS = 0.4
-#: The least net motion (m) of an ``I`` macro that counts as a drag (:func:`dragged_on`).
-DRAG_MIN_M = 0.02
 #: How long after an ``I`` transition (s) the hand's drag on is looked for (:func:`drag_left`).
-DRAG_WINDOW_S = 1.0
+DRAG_WINDOW_S = WINDOW_S
 
 
 def drag_left(times: np.ndarray, pos: np.ndarray, t: float, u: Vec) -> float:
     """How far (m) the recorded gripper (times s, positions m world) went on along the unit direction
-    ``u`` after time ``t``, at most, within :data:`DRAG_WINDOW_S`: the margin a hand's drag left."""
-    a = int(np.searchsorted(times, t))
-    b = int(np.searchsorted(times, t + DRAG_WINDOW_S, side="right"))
-    if a >= len(times) or b <= a:
-        return 0.0
-    along = (np.asarray(pos[a:b], dtype=float) - np.asarray(pos[a], dtype=float)) @ np.asarray(u, dtype=float)
-    return max(float(along.max()), 0.0)
+    ``u`` after time ``t``, at most, within :data:`DRAG_WINDOW_S`: the margin a hand's drag left
+    (:func:`dlovr.model.margins.went_on`)."""
+    return went_on(times, pos, t, u, DRAG_WINDOW_S)
 
 
 def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> Any:

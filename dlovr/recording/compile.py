@@ -26,6 +26,12 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
 
 def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
     """The program of a recording, and why the recording ended early (its end marker says) or None."""
+    return _compiled(path, hold)[:2]
+
+
+def _compiled(path: str | Path, hold: float | None = None) -> tuple[Any, str | None, tuple[Any, Any]]:
+    """:func:`_compile`, and the track the program follows (times s, positions m world: the commanded
+    one, smoothed as the program is) for :func:`dlovr.model.margins.blind_margins`."""
     from dlovr.model.program import compile_program
 
     rec = Recording(path)
@@ -36,7 +42,13 @@ def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | No
     if smoothing:
         prog = _smoothed_program(prog, smoothing)
     prog = _with_goal_tolerance(prog, wrench)
-    return prog, payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+    ended = payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
+    if smoothing:  # the track the program follows: the smoothed one, else the commanded one
+        times, pos = track.t, track.pos
+    else:
+        steps, pos, _ = rec.commands()
+        times = np.asarray(steps, dtype=float) * rec.dt
+    return prog, ended, (times, pos)
 
 
 def _with_goal_tolerance(prog: Any, wrench: Any) -> Any:
@@ -129,7 +141,8 @@ CACHE_NAME = ".dlovr-compile-cache.json"
 @dataclass(frozen=True)
 class CompileResult:
     """Outcome for one recording: ``error`` is None on success; ``skipped`` when unchanged;
-    ``warning``: why the recording ended early (a diverged simulation), its program being partial."""
+    ``warning``: why the recording ended early (a diverged simulation), its program being partial, and
+    the macros no force shows that its demonstration went on too little past (docs/programs.md)."""
 
     path: str
     json_path: str | None
@@ -256,7 +269,11 @@ def compile_one(
 ) -> CompileResult:
     """Compile one recording to ``<stem>.program.json`` and ``.program.txt`` (a worker's job), its
     detections calibrated in simulation by ``calibrate`` when given (``dlovr compile --calibrate``),
-    then set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`)."""
+    then set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`). Its
+    ``warning`` says why the recording ended early, and which macros no force shows whose
+    demonstration went on too little past them (:func:`dlovr.model.margins.blind_margins`)."""
+    from dlovr.model.margins import blind_margins, margin_warning
+
     p = Path(path)
     if p.exists() and not p.is_file():  # a device (/dev/zero) or a pipe: hashing it would never end
         why = "not a regular file (a device or a pipe), not a recording"
@@ -284,7 +301,7 @@ def compile_one(
         why = "exists and is not the program compiled there before (edited since, or not compiled by dlovr)"
         return CompileResult(str(p), None, error=f"{kept}: {why}; give --force to overwrite it")
     try:
-        prog, ended = _compile(p)
+        prog, ended, followed = _compiled(p)
     except RecordingError as e:
         return CompileResult(str(p), None, error=str(e))
     if calibrate is not None:
@@ -296,7 +313,10 @@ def compile_one(
         write_output(tpath, prog.listing(), force=force or os.path.lexists(tpath))
     except OutputError as e:
         return CompileResult(str(p), None, error=str(e))
-    warning = f"{p}: the recording ends early ({ended}): its program is partial" if ended else None
+    notes = [f"the recording ends early ({ended}): its program is partial"] if ended else []
+    margins = margin_warning(blind_margins(prog, *followed))  # as it runs: calibrated, for the sensor
+    notes += [margins] if margins else []
+    warning = f"{p}: {'; '.join(notes)}" if notes else None
     return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"], warning=warning)
 
 

@@ -23,6 +23,20 @@ def test_there_are_samples_of_the_built_in_demonstrations():
         assert p.stat().st_size < 8_000_000, f"{p.name} is too large for a sample"
 
 
+def test_compile_warns_of_a_drag_that_stops_where_its_instability_comes(tmp_path, monkeypatch):
+    """dlovr compile (its compile_one) warns where no force shows the end of a drag of the tip into
+    an instability and the demonstration went on less than the objects' placement tolerance past it
+    (dlovr.model.margins): the peg-in-hole script drags 10.2 mm on past the groove's corner (macro 6),
+    enough for 5 mm, not for 2 cm."""
+    from dlovr.model import margins
+    from dlovr.recording.compile import compile_one
+
+    assert compile_one(str(ROOT / "peg_in_hole.mcap"), str(tmp_path)).warning is None
+    monkeypatch.setattr(margins, "PLACEMENT_M", 0.02)
+    got = compile_one(str(ROOT / "peg_in_hole.mcap"), str(tmp_path), force=True).warning
+    assert got is not None and "macro 6 (10.2 mm)" in got and "drag on" in got, got
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("path", SAMPLES, ids=[p.stem for p in SAMPLES])
 def test_sample_replays_bit_exact(path):
