@@ -14,7 +14,8 @@
 - :mod:`dlovr.recording.integrity`: whole-file checksums and a tolerant scan of damaged files;
 - :mod:`dlovr.recording.recovery`: :func:`recover`, rescuing a damaged file or one whose writer was
   killed;
-- :mod:`dlovr.recording.compile`: :func:`compile_recording` and batch compilation with a cache;
+- :mod:`dlovr.recording.compile`: :func:`compile_recording` (:func:`compile_noted`: with what it warns
+  of) and batch compilation with a cache;
 - :mod:`dlovr.recording.scripted`: :func:`~dlovr.recording.scripted.play_script`, a demonstration
   script played on a simulator and recorded (``dlovr demo``, ``dlovr record``);
 - :mod:`dlovr.recording.network_html`: a transition network as a self-contained HTML page.
@@ -24,6 +25,7 @@ from dlovr.recording.bundle import SceneBundle, pieces_from_json, pieces_to_json
 from dlovr.recording.compile import (
     CompileResult,
     check_unique_outputs,
+    compile_noted,
     compile_one,
     compile_recording,
     find_recordings,
@@ -63,6 +65,7 @@ __all__ = [
     "SceneBundle",
     "StopSignals",
     "check_unique_outputs",
+    "compile_noted",
     "compile_one",
     "compile_recording",
     "find_recordings",

@@ -24,6 +24,22 @@ def compile_recording(path: str | Path, hold: float | None = None) -> Any:
     return _compile(path, hold)[0]
 
 
+def compile_noted(path: str | Path) -> tuple[Any, str | None]:
+    """:func:`compile_recording`, and what ``dlovr compile`` warns of its program besides an early
+    end (:func:`margin_note`; None: nothing): what the browser shows a demonstrator."""
+    prog, _, followed = _compiled(path)
+    return prog, margin_note(prog, followed)
+
+
+def margin_note(prog: Any, followed: tuple[Any, Any]) -> str | None:
+    """The warning of ``prog``'s drags of the tip into an instability that no force ends and that its
+    demonstration went on too little past (:func:`dlovr.model.margins.blind_margins` of the
+    ``followed`` track: times s, positions m world); None for none."""
+    from dlovr.model.margins import blind_margins, margin_warning
+
+    return margin_warning(blind_margins(prog, *followed))
+
+
 def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
     """The program of a recording, and why the recording ended early (its end marker says) or None."""
     return _compiled(path, hold)[:2]
@@ -271,9 +287,7 @@ def compile_one(
     detections calibrated in simulation by ``calibrate`` when given (``dlovr compile --calibrate``),
     then set for ``sensor_noise`` N of sensor noise when given (:func:`for_sensor_noise`). Its
     ``warning`` says why the recording ended early, and which macros no force shows whose
-    demonstration went on too little past them (:func:`dlovr.model.margins.blind_margins`)."""
-    from dlovr.model.margins import blind_margins, margin_warning
-
+    demonstration went on too little past them (:func:`margin_note`)."""
     p = Path(path)
     if p.exists() and not p.is_file():  # a device (/dev/zero) or a pipe: hashing it would never end
         why = "not a regular file (a device or a pipe), not a recording"
@@ -314,7 +328,7 @@ def compile_one(
     except OutputError as e:
         return CompileResult(str(p), None, error=str(e))
     notes = [f"the recording ends early ({ended}): its program is partial"] if ended else []
-    margins = margin_warning(blind_margins(prog, *followed))  # as it runs: calibrated, for the sensor
+    margins = margin_note(prog, followed)  # of the program as it runs: calibrated, for the sensor
     notes += [margins] if margins else []
     warning = f"{p}: {'; '.join(notes)}" if notes else None
     return CompileResult(str(p), str(jpath), prog.summary["macros"], prog.summary["risky"], warning=warning)

@@ -446,6 +446,27 @@ def test_recording_shows_a_red_dot_and_time_and_reset_asks_first(demo: DemoServe
     assert page.locator(".dlovr-status [data-recording]").count() == 0
 
 
+def test_a_demonstration_whose_drag_stops_at_its_instability_is_told_so_on_the_page(
+    demo: DemoServer, page, monkeypatch
+):
+    """The recording's compile warns, on the page, of a drag of the tip into an instability that no
+    force ends and that the demonstration went on too little past (dlovr.model.margins): what the
+    demonstrator can do better. The table scene has no such drag: the margins are made to report
+    one."""
+    from dlovr.model import margins
+
+    monkeypatch.setattr(margins, "blind_margins", lambda *a, **k: [(1, 0.0012)])
+    fresh(demo, "table")
+    page.get_by_role("button", name="Start recording").click()
+    page.locator(".dlovr-status [data-recording]").wait_for(timeout=5_000)
+    wait_for(lambda: demo.status()["t"] > 0.5, what="some recorded time")
+    page.get_by_role("button", name="Stop recording").click()
+    note = page.get_by_text("macro 1 (1.2 mm)")
+    note.wait_for(timeout=30_000)
+    assert "drag on a few millimetres past such a transition" in note.inner_text()
+    assert "Warning:" in page.locator("body").inner_text()
+
+
 def test_a_program_run_says_manual_control_is_locked(demo: DemoServer, page):
     fresh(demo, "table")
     demo.run_panel.run(TABLE_PROGRAM, detect="oracle")

@@ -13,7 +13,7 @@ from typing import Any
 import viser
 
 from dlovr.outputs import OutputError, write_output
-from dlovr.recording import compile_recording
+from dlovr.recording import compile_noted
 from dlovr.ui.app import App
 from dlovr.ui.program_view import program_html
 
@@ -138,7 +138,7 @@ class RecordingPanel:
         app = self.app
         view = ""
         try:
-            prog = compile_recording(path)
+            prog, note = compile_noted(path)
             text = prog.listing()
             files: list[tuple[str, Path]] = [("recording", path)]
             try:
@@ -151,6 +151,8 @@ class RecordingPanel:
             except (OSError, OutputError) as e:
                 why = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
                 md = f"Saved `{path}`; cannot write its program: {why}"
+            if note:  # what the demonstrator can do better next time
+                md += f"\n\n**Warning:** {note}."
             view = program_html(prog, files)
             # set last: the run panel offers the program once last_program changes, from its file
             app.program_text, app.last_program = text, prog
