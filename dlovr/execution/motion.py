@@ -39,7 +39,7 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.model.discrete import parse_discrete_contact
-from dlovr.model.margins import DRAG_MIN_M, WINDOW_S, went_on
+from dlovr.model.margins import DRAG_MIN_M, WINDOW_S, tip_drag, went_on
 from dlovr.transforms import (
     norm,
     quat_mul,
@@ -389,6 +389,13 @@ def given_way(path: Any, m: Any, distance: float) -> Any:
 #: corner in peg-in-hole, 6 mm for a tip 18 mm further), and a hand that stopped its drag as the tip
 #: reached the corner left no margin for it (docs/people.md, "A longer cable drags on").
 DRAG_PER_EXCESS = 0.4
+#: How far (m) past its demonstrated transition a hand's drag of the cable's tip into an instability
+#: that no force shows (:func:`dlovr.model.margins.tip_drag`: peg-in-hole's tip dragged into the
+#: groove's corner) goes at least, counting what the hand itself went on (:func:`dragged_on`).
+#: Nothing ends such a drag where the transition comes later in a run than demonstrated (the objects
+#: further along, a cable that trails more); the peg-in-hole script, computed with margins, drags
+#: 10.2 mm past it (docs/people.md, "A hand's drag goes on 10 mm past the corner").
+DRAG_PAST_M = 0.01
 #: How long after an ``I`` transition (s) the hand's drag on is looked for (:func:`drag_left`).
 DRAG_WINDOW_S = WINDOW_S
 
@@ -400,42 +407,55 @@ def drag_left(times: np.ndarray, pos: np.ndarray, t: float, u: Vec) -> float:
     return went_on(times, pos, t, u, DRAG_WINDOW_S)
 
 
-def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> Any:
-    """``path`` drawn on along its net displacement (unit ``u``) by :data:`DRAG_PER_EXCESS` times the
-    cable's excess, ``-tool[2]`` (m: how much further the tip is than demonstrated, the executor's
-    ``tool``, gripper frame), less the drag the demonstration's ``track`` went on with after ``m.t``
-    (:func:`drag_left`), for an ``I`` macro that drags (net motion at least :data:`DRAG_MIN_M`: a drag
-    that pulls the tip into an instability) where that is positive; ``path`` itself otherwise. Added in
-    proportion to progress (:class:`ShiftedPath`)."""
+def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> tuple[Any, str]:
+    """``path`` drawn on along its net displacement (unit ``u``), for an ``I`` macro that drags (net
+    motion at least :data:`DRAG_MIN_M`: a drag that pulls the tip into an instability), by what it
+    wants less the drag the demonstration's ``track`` went on with after ``m.t`` (:func:`drag_left`),
+    where that is positive; and why (the executor's event). It wants :data:`DRAG_PER_EXCESS` times
+    the cable's excess, ``-tool[2]`` (m: how much further the tip is than demonstrated, the executor's
+    ``tool``, gripper frame), and at least :data:`DRAG_PAST_M` where no force shows the tip's
+    transition (:func:`dlovr.model.margins.tip_drag`). ``path`` itself otherwise. Added in proportion
+    to progress (:class:`ShiftedPath`)."""
+    if tuple(m.classes) != ("I",):
+        return path, ""
     excess = -float(tool[2])
-    if tuple(m.classes) != ("I",) or excess <= 0.0:
-        return path
+    want = DRAG_PER_EXCESS * max(excess, 0.0)
+    past = tip_drag(m)
+    if past:
+        want = max(want, DRAG_PAST_M)
+    if want <= 0.0:
+        return path, ""
     a, b = path.at(0.0)[0], path.at(1.0)[0]
     d = [float(b[i]) - float(a[i]) for i in range(3)]
     n = norm(d)
     if n < DRAG_MIN_M:
-        return path
+        return path, ""
     u = (d[0] / n, d[1] / n, d[2] / n)
-    more = DRAG_PER_EXCESS * excess - drag_left(track.t, track.pos, m.t, u)
+    left = drag_left(track.t, track.pos, m.t, u)
+    more = want - left
     if more <= 0.0:
-        return path
-    return ShiftedPath(path, (more * u[0], more * u[1], more * u[2]))
+        return path, ""
+    if past and want == DRAG_PAST_M:
+        why = (f"no force shows where the tip arrives, and the demonstration went on {left * 1000:.1f} mm "
+               f"past it, not {DRAG_PAST_M * 1000:g}")
+    else:
+        why = f"the cable's tip is {excess * 1000:.1f} mm further than demonstrated"
+    return ShiftedPath(path, (more * u[0], more * u[1], more * u[2])), why
 
 
 def hand_path(path: Any, m: Any, give_way: float | None, track: Any, tool: Vec) -> tuple[Any, str]:
     """Macro ``m``'s ``path`` as the run adapts it: given way from the face it slides along
     (:func:`given_way`, :func:`give_way_m` of the option ``give_way`` and whether ``track`` is a
-    hand's), and on a hand's track an ``I`` drawn on for a longer cable (:func:`dragged_on`); and
+    hand's), and on a hand's track an ``I`` drawn on for a longer cable or past a transition no force
+    shows (:func:`dragged_on`); and
     what the macro's event says of it (empty where ``path`` is unchanged)."""
     by_hand = track is not None and track.by_hand
     away = give_way_m(give_way, by_hand)
     out = given_way(path, m, away)
     said = "" if out is path else f" (giving way {away * 1000:g} mm from the face it slides along)"
-    drawn = dragged_on(out, m, tool, track) if by_hand else out
+    drawn, why = dragged_on(out, m, tool, track) if by_hand else (out, "")
     if drawn is not out:
-        more = norm(drawn.shift)
-        said += (f" (dragging {more * 1000:.1f} mm further: the cable's tip is "
-                 f"{-float(tool[2]) * 1000:.1f} mm further than demonstrated)")
+        said += f" (dragging {norm(drawn.shift) * 1000:.1f} mm further: {why})"
     return drawn, said
 
 

@@ -63,12 +63,21 @@ def blind(m: Any, min_snr: float = MIN_SNR) -> bool:
     )
 
 
+def tip_drag(m: Any, min_snr: float = MIN_SNR) -> bool:
+    """Is ``m`` a drag of the cable's tip into an instability that no force shows: an ``I`` macro that
+    establishes a vertex contact (``V/...``) and ends by its motion (:func:`blind`)? (Its net motion is
+    the caller's to check against :data:`DRAG_MIN_M`.)"""
+    return tuple(m.classes) == ("I",) and any(c.state.startswith("V/") for c in m.established) and blind(
+        m, min_snr
+    )
+
+
 def blind_margins(
     program: Any, times: np.ndarray, pos: np.ndarray, min_snr: float = MIN_SNR, least: float | None = None,
 ) -> list[tuple[int, float]]:
-    """``(index, margin m)`` of each drag of the tip into an instability of ``program`` (an ``I`` macro
-    whose net motion is :data:`DRAG_MIN_M` or more and that establishes a ``V`` contact) that ends by
-    its motion (:func:`blind`) and whose demonstration went on less than ``least`` (default
+    """``(index, margin m)`` of each drag of the tip into an instability of ``program`` that no force
+    shows (:func:`tip_drag`, net motion :data:`DRAG_MIN_M` or more) and whose demonstration went on
+    less than ``least`` (default
     :data:`PLACEMENT_M`) along that motion after its transition (:func:`went_on` of the track the
     program follows: ``times`` s, ``pos`` m world)."""
     least = PLACEMENT_M if least is None else least
@@ -76,8 +85,7 @@ def blind_margins(
     for m in program.macros:
         d = m.motion.world
         n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        tip = any(c.state.startswith("V/") for c in m.established)
-        if tuple(m.classes) != ("I",) or not tip or n < DRAG_MIN_M or not blind(m, min_snr):
+        if n < DRAG_MIN_M or not tip_drag(m, min_snr):
             continue
         margin = went_on(times, pos, m.t, (d[0] / n, d[1] / n, d[2] / n))
         if margin < least:

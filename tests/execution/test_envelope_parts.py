@@ -112,31 +112,32 @@ def test_a_hand_s_track_gives_way_by_default_a_script_s_does_not(monkeypatch):
 
 def test_a_hand_s_drag_into_an_instability_goes_on_for_a_longer_cable():
     """``dragged_on``: an ``I`` macro that drags (peg-in-hole's drag along the groove into its corner)
-    goes on along its net displacement by DRAG_PER_EXCESS times how much further the tip was felt than
-    demonstrated, less what the hand dragged on after the transition; nothing for a shorter or the
-    demonstrated cable, a margin the hand left, a motion under DRAG_MIN_M or another class;
-    ``hand_path`` only on a hand's track, and the executor's event says so."""
+    and whose transition a force shows goes on along its net displacement by DRAG_PER_EXCESS times
+    how much further the tip was felt than demonstrated, less what the hand dragged on after the
+    transition; nothing for a shorter or the demonstrated cable, a margin the hand left, a motion
+    under DRAG_MIN_M or another class; ``hand_path`` only on a hand's track, and the executor's event
+    says so."""
     import dlovr.execution.executor as ex
     from dlovr.execution.motion import DRAG_MIN_M, DRAG_PER_EXCESS, drag_left, dragged_on, hand_path
     from dlovr.execution.run import load_track
+    from dlovr.model.margins import tip_drag
     from dlovr.sim import Simulator
 
     assert DRAG_PER_EXCESS == 0.4 and DRAG_MIN_M == 0.02
-    drag = replace(PEG.classed[5], t=1.0)  # I: V/E^LS[block.F3,holeblock.F2] -> V/VI[...], the corner
-    assert drag.classes == ("I",)
-    q = np.tile([1.0, 0.0, 0.0, 0.0], (4, 1))
-    ys = [0.0, -0.06, -0.061, -0.061]  # the hand drags 1 mm on after the transition at 1 s
-    hand = DemoTrack(np.array([0.0, 1.0, 1.5, 3.0]), np.array([[0.0, y, 0.5] for y in ys]), q, by_hand=True)
+    drag = _felt(replace(PEG.classed[5], t=1.0))  # I: V/E^LS[...] -> V/VI[...], the corner, felt
+    assert drag.classes == ("I",) and not tip_drag(drag)
+    hand = _hand_drag(0.001)
     assert drag_left(hand.t, hand.pos, 1.0, (0.0, -1.0, 0.0)) == pytest.approx(0.001)
     base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.06, 0.0))
-    on = dragged_on(base, drag, (0.0, 0.0, -0.01), hand)  # the tip 10 mm further: 4 mm less the 1 mm
+    on, why = dragged_on(base, drag, (0.0, 0.0, -0.01), hand)  # the tip 10 mm further: 4 mm less the 1 mm
     assert on.at(0.0)[0].tolist() == pytest.approx([0.0, 0.0, 0.5])
     assert on.at(1.0)[0].tolist() == pytest.approx([0.0, -0.063, 0.5])
+    assert why == "the cable's tip is 10.0 mm further than demonstrated"
     short = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.01, 0.0))
     for path, tool, m in ((base, (0.0, 0.0, 0.01), drag), (base, (0.0, 0.0, 0.0), drag),
                           (base, (0.0, 0.0, -0.002), drag), (short, (0.0, 0.0, -0.01), drag),
                           (base, (0.0, 0.0, -0.01), replace(PEG.classed[4], t=1.0))):
-        assert dragged_on(path, m, tool, hand) is path
+        assert dragged_on(path, m, tool, hand) == (path, "")
     assert hand_path(base, drag, None, replace(hand, by_hand=False), (0.0, 0.0, -0.01)) == (base, "")
     moved, said = hand_path(base, drag, None, hand, (0.0, 0.0, -0.01))
     assert moved.at(1.0)[0][1] == pytest.approx(-0.063)
@@ -146,6 +147,43 @@ def test_a_hand_s_drag_into_an_instability_goes_on_for_a_longer_cable():
     ses.tool = (0.0, 0.0, -0.04)
     next(ex.run_macro(PEG.classed[5], ses, replace(track, by_hand=True)))
     assert "mm further: the cable's tip is 40.0 mm further than demonstrated)" in ses.events[-1].text
+
+
+def test_a_hand_s_drag_of_the_tip_that_no_force_ends_goes_on_10_mm_past_its_transition():
+    """Where no force shows the tip's transition (``tip_drag``: the scripted peg-in-hole's drag into
+    the groove's corner, no signal), a hand's drag goes on DRAG_PAST_M past it at least, counting what
+    the hand went on itself, whatever the cable's length; more for a cable longer by more than
+    DRAG_PAST_M / DRAG_PER_EXCESS; nothing where the hand went on that far."""
+    from dlovr.execution.motion import DRAG_PAST_M, dragged_on, hand_path
+    from dlovr.model.margins import tip_drag
+
+    assert DRAG_PAST_M == 0.01
+    drag = replace(PEG.classed[5], t=1.0)
+    assert tip_drag(drag)
+    base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.06, 0.0))
+    for tool, y in (((0.0, 0.0, 0.01), -0.069), ((0.0, 0.0, 0.0), -0.069), ((0.0, 0.0, -0.01), -0.069),
+                    ((0.0, 0.0, -0.04), -0.075)):  # 10 mm less the hand's 1; 0.4 x 40 mm less 1
+        on, _ = dragged_on(base, drag, tool, _hand_drag(0.001))
+        assert on.at(1.0)[0][1] == pytest.approx(y), tool
+    assert dragged_on(base, drag, (0.0, 0.0, 0.0), _hand_drag(0.011)) == (base, "")
+    moved, said = hand_path(base, drag, None, _hand_drag(0.0023), (0.0, 0.0, 0.0))
+    assert moved.at(1.0)[0][1] == pytest.approx(-0.0677)
+    assert said == (" (dragging 7.7 mm further: no force shows where the tip arrives, and the "
+                    "demonstration went on 2.3 mm past it, not 10)")
+    assert hand_path(base, drag, None, replace(_hand_drag(0.0), by_hand=False), (0.0, 0.0, 0.0)) == (base, "")
+
+
+def _felt(m):
+    """``m`` with a force signal for its transition (a step well above its threshold and noise)."""
+    d = m.detection[0]
+    return replace(m, detection=(replace(d, params={**d.params, "step_n": 0.2, "noise_n": 0.001}),))
+
+
+def _hand_drag(on: float) -> DemoTrack:
+    """A hand's track dragging 60 mm along -y to its transition at 1 s, then ``on`` m further."""
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (4, 1))
+    ys = [0.0, -0.06, -0.06 - on, -0.06 - on]
+    return DemoTrack(np.array([0.0, 1.0, 1.5, 3.0]), np.array([[0.0, y, 0.5] for y in ys]), q, by_hand=True)
 
 
 def test_object_shifts_are_the_trials_true_object_positions():

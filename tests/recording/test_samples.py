@@ -27,7 +27,7 @@ def test_compile_warns_of_a_drag_that_stops_where_its_instability_comes(tmp_path
     """dlovr compile (its compile_one) warns where no force shows the end of a drag of the tip into
     an instability and the demonstration went on less than the objects' placement tolerance past it
     (dlovr.model.margins): the peg-in-hole script drags 10.2 mm on past the groove's corner (macro 6),
-    enough for 5 mm, not for 2 cm."""
+    enough for 5 mm, not for 2 cm. Not for a trembling hand's program, whose run drags on."""
     from dlovr.model import margins
     from dlovr.recording.compile import compile_one
 
@@ -35,6 +35,17 @@ def test_compile_warns_of_a_drag_that_stops_where_its_instability_comes(tmp_path
     monkeypatch.setattr(margins, "PLACEMENT_M", 0.02)
     got = compile_one(str(ROOT / "peg_in_hole.mcap"), str(tmp_path), force=True).warning
     assert got is not None and "macro 6 (10.2 mm)" in got and "drag on" in got, got
+    # a trembling hand's program is run with its drag going on 10 mm past: nothing to warn of
+    from dataclasses import replace
+
+    from dlovr.recording.compile import margin_note
+
+    rec = Recording(ROOT / "peg_in_hole.mcap")
+    steps, pos, _ = rec.commands()
+    followed = (steps * rec.dt, pos)
+    prog = compile_recording(ROOT / "peg_in_hole.mcap")
+    assert margin_note(prog, followed) is not None
+    assert margin_note(replace(prog, smoothing_s=0.1), followed) is None
 
 
 @pytest.mark.slow
