@@ -39,7 +39,7 @@ from typing import Any, cast
 import numpy as np
 
 from dlovr.model.discrete import parse_discrete_contact
-from dlovr.model.margins import DRAG_MIN_M, WINDOW_S, tip_drag, went_on
+from dlovr.model.margins import DRAG_MIN_M, tip_drag, went_on
 from dlovr.transforms import (
     norm,
     quat_mul,
@@ -396,26 +396,18 @@ DRAG_PER_EXCESS = 0.4
 #: further along, a cable that trails more); the peg-in-hole script, computed with margins, drags
 #: 10.2 mm past it (docs/people.md, "A hand's drag goes on 10 mm past the corner").
 DRAG_PAST_M = 0.01
-#: How long after an ``I`` transition (s) the hand's drag on is looked for (:func:`drag_left`).
-DRAG_WINDOW_S = WINDOW_S
-
-
-def drag_left(times: np.ndarray, pos: np.ndarray, t: float, u: Vec) -> float:
-    """How far (m) the recorded gripper (times s, positions m world) went on along the unit direction
-    ``u`` after time ``t``, at most, within :data:`DRAG_WINDOW_S`: the margin a hand's drag left
-    (:func:`dlovr.model.margins.went_on`)."""
-    return went_on(times, pos, t, u, DRAG_WINDOW_S)
 
 
 def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> tuple[Any, str]:
     """``path`` drawn on along its net displacement (unit ``u``), for an ``I`` macro that drags (net
     motion at least :data:`DRAG_MIN_M`: a drag that pulls the tip into an instability), by what it
-    wants less the drag the demonstration's ``track`` went on with after ``m.t`` (:func:`drag_left`),
-    where that is positive; and why (the executor's event). It wants :data:`DRAG_PER_EXCESS` times
-    the cable's excess, ``-tool[2]`` (m: how much further the tip is than demonstrated, the executor's
-    ``tool``, gripper frame), and at least :data:`DRAG_PAST_M` where no force shows the tip's
-    transition (:func:`dlovr.model.margins.tip_drag`). ``path`` itself otherwise. Added in proportion
-    to progress (:class:`ShiftedPath`)."""
+    wants less the drag the demonstration's ``track`` went on with after ``m.t`` within 1 s
+    (:func:`dlovr.model.margins.went_on`), where that is positive; and why (the executor's event).
+    It wants :data:`DRAG_PER_EXCESS` times the cable's excess, ``-tool[2]`` (m: how much further the
+    tip is than demonstrated, the executor's ``tool``, gripper frame), and at least
+    :data:`DRAG_PAST_M` where no force shows the tip's transition
+    (:func:`dlovr.model.margins.tip_drag`). ``path`` itself otherwise. Added in proportion to progress
+    (:class:`ShiftedPath`)."""
     if tuple(m.classes) != ("I",):
         return path, ""
     excess = -float(tool[2])
@@ -431,7 +423,7 @@ def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> tuple[Any, str]:
     if n < DRAG_MIN_M:
         return path, ""
     u = (d[0] / n, d[1] / n, d[2] / n)
-    left = drag_left(track.t, track.pos, m.t, u)
+    left = went_on(track.t, track.pos, m.t, u)
     more = want - left
     if more <= 0.0:
         return path, ""

@@ -25,13 +25,13 @@ mm in the three that reached it in 45-75 %, and more in the seven with 75-100 % 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from dlovr.model.detection import MIN_SNR, no_force_signal
+from dlovr.transforms import norm
 
 #: How long after a transition (s) the demonstration's motion on is looked for.
 WINDOW_S = 1.0
@@ -84,7 +84,7 @@ def blind_margins(
     out = []
     for m in program.macros:
         d = m.motion.world
-        n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        n = norm(d)
         if n < DRAG_MIN_M or not tip_drag(m, min_snr):
             continue
         margin = went_on(times, pos, m.t, (d[0] / n, d[1] / n, d[2] / n))

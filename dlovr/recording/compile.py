@@ -21,7 +21,7 @@ from dlovr.recording.reader import Recording, kept_states
 def compile_recording(path: str | Path, hold: float | None = None) -> Any:
     """Compile a recording into a program (docs/model.md, section 6); reads only the contact-state and
     wrench channels (detection parameters derived from the wrench; defaults, marked, without it)."""
-    return _compile(path, hold)[0]
+    return _compiled(path, hold)[0]
 
 
 def compile_noted(path: str | Path) -> tuple[Any, str | None]:
@@ -44,31 +44,22 @@ def margin_note(prog: Any, followed: tuple[Any, Any]) -> str | None:
     return margin_warning(blind_margins(prog, *followed))
 
 
-def _compile(path: str | Path, hold: float | None = None) -> tuple[Any, str | None]:
-    """The program of a recording, and why the recording ended early (its end marker says) or None."""
-    return _compiled(path, hold)[:2]
-
-
 def _compiled(path: str | Path, hold: float | None = None) -> tuple[Any, str | None, tuple[Any, Any]]:
-    """:func:`_compile`, and the track the program follows (times s, positions m world: the commanded
-    one, smoothed as the program is) for :func:`dlovr.model.margins.blind_margins`."""
+    """The program of a recording, why the recording ended early (its end marker says) or None, and
+    the track the program follows (times s, positions m world: the commanded one, smoothed as the
+    program is) for :func:`dlovr.model.margins.blind_margins`."""
     from dlovr.model.program import compile_program
 
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
-    track, wrench, smoothing = compile_inputs(rec)
+    track, wrench, smoothing, followed = _inputs(rec)
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     if smoothing:
         prog = _smoothed_program(prog, smoothing)
     prog = _with_goal_tolerance(prog, wrench)
     ended = payloads[-1].get("end_reason") if payloads and payloads[-1].get("end") else None
-    if smoothing:  # the track the program follows: the smoothed one, else the commanded one
-        times, pos = track.t, track.pos
-    else:
-        steps, pos, _ = rec.commands()
-        times = np.asarray(steps, dtype=float) * rec.dt
-    return prog, ended, (times, pos)
+    return prog, ended, followed
 
 
 def _with_goal_tolerance(prog: Any, wrench: Any) -> Any:
@@ -107,6 +98,11 @@ def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:
     """What a recording's program is compiled from besides its kept situations: the gripper's pose
     track (a ``PoseTrack``), the wrench (a ``WrenchSeries`` or None) and why they were smoothed ("":
     as recorded; see :func:`_intended`)."""
+    return _inputs(rec)[:3]
+
+
+def _inputs(rec: Recording) -> tuple[Any, Any, str, tuple[Any, Any]]:
+    """:func:`compile_inputs`, and the track the program follows (:func:`_intended`)."""
     from dlovr.model.program import PoseTrack
 
     payloads = rec.states()
@@ -121,11 +117,13 @@ def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:
     return _intended(rec, track, rec.wrench())
 
 
-def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
-    """The track and wrench to compile from, and why they were smoothed ("" when not): a
-    demonstration whose commanded track trembles (:func:`dlovr.model.smoothing.tremor_of`) is
-    compiled from its commanded track and wrench smoothed (the motion meant, the force a detector
-    will see following it); any other from its contact-state poses and its wrench as recorded."""
+def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str, tuple[Any, Any]]:
+    """The track and wrench to compile from, why they were smoothed ("" when not), and the track
+    the program follows (times s, positions m world): a demonstration whose commanded track trembles
+    (:func:`dlovr.model.smoothing.tremor_of`) is compiled from its commanded track and wrench
+    smoothed (the motion meant, the force a detector will see following it), and follows that
+    smoothed track; any other is compiled from its contact-state poses and its wrench as recorded,
+    and follows its commanded track."""
     from dlovr.model import smoothing as sm
     from dlovr.model.derivation import WrenchSeries
     from dlovr.model.program import PoseTrack
@@ -134,7 +132,7 @@ def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
     t = np.asarray(steps, dtype=float) * rec.dt
     tremor = sm.tremor_of(t, pos)
     if tremor <= sm.TREMOR_ACCEL:
-        return track, wrench, ""
+        return track, wrench, "", (t, pos)
     spos, squat = sm.smooth_poses(t, pos, quat)
     why = (
         f"the commanded track trembles (median acceleration {tremor:.2f} m/s^2, above "
@@ -148,7 +146,7 @@ def _intended(rec: Recording, track: Any, wrench: Any) -> tuple[Any, Any, str]:
         force, torque = sm.moving_average(wrench.force, n), sm.moving_average(wrench.torque, n)
         wrench = WrenchSeries(wrench.t, force, torque)
         why += ", detection parameters derived from the wrench averaged the same way"
-    return PoseTrack(t, spos, squat), wrench, why
+    return PoseTrack(t, spos, squat), wrench, why, (t, spos)
 
 
 # --------------------------------------------------------------------------------------------------

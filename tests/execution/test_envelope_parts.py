@@ -118,16 +118,16 @@ def test_a_hand_s_drag_into_an_instability_goes_on_for_a_longer_cable():
     under DRAG_MIN_M or another class; ``hand_path`` only on a hand's track, and the executor's event
     says so."""
     import dlovr.execution.executor as ex
-    from dlovr.execution.motion import DRAG_MIN_M, DRAG_PER_EXCESS, drag_left, dragged_on, hand_path
+    from dlovr.execution.motion import DRAG_MIN_M, DRAG_PER_EXCESS, dragged_on, hand_path
     from dlovr.execution.run import load_track
-    from dlovr.model.margins import tip_drag
+    from dlovr.model.margins import tip_drag, went_on
     from dlovr.sim import Simulator
 
     assert DRAG_PER_EXCESS == 0.4 and DRAG_MIN_M == 0.02
     drag = _felt(replace(PEG.classed[5], t=1.0))  # I: V/E^LS[...] -> V/VI[...], the corner, felt
     assert drag.classes == ("I",) and not tip_drag(drag)
     hand = _hand_drag(0.001)
-    assert drag_left(hand.t, hand.pos, 1.0, (0.0, -1.0, 0.0)) == pytest.approx(0.001)
+    assert went_on(hand.t, hand.pos, 1.0, (0.0, -1.0, 0.0)) == pytest.approx(0.001)
     base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.06, 0.0))
     on, why = dragged_on(base, drag, (0.0, 0.0, -0.01), hand)  # the tip 10 mm further: 4 mm less the 1 mm
     assert on.at(0.0)[0].tolist() == pytest.approx([0.0, 0.0, 0.5])
