@@ -32,6 +32,7 @@ import numpy as np
 
 from dlovr.execution.demo_track import DemoTrack
 from dlovr.execution.motion import (
+    HAND_EASE_S,
     Quat,
     ScrewPath,
     ShiftedPath,
@@ -731,8 +732,9 @@ def _path(
         # stretch moved on the whole)
         beyond = None if track.by_hand else local_twist(track.t, track.pos, track.quat, t0, m.t, span)
         beyond = beyond or (mo.rotation, mo.relative)
+        ease = HAND_EASE_S / span if track.by_hand else 0.0  # the hand's pace into the net motion's
         return TrackPath(
-            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool,
+            track.t, track.pos, track.quat, t0, m.t, *here, frame, beyond, tool, ease,
         )
     return ScrewPath(*here, mo.rotation, mo.relative, mo.start_quat, frame, tool)
 

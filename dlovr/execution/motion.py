@@ -216,6 +216,17 @@ def _between(t: float, times: list[float], pos: list[list[float]], quat: list[li
     return out, slerp(qa, qb, w)
 
 
+#: Over how much demonstration time (s) before its end :class:`TrackPath` takes a stretch's last
+#: velocity (where it eases into the motion beyond it).
+END_VELOCITY_S = 0.02
+#: How long (s) a hand's macro takes beyond its stretch to go from the stretch's last velocity to its
+#: net motion's (:class:`TrackPath` ``ease``; the executor's ``_path``). A hand slows as it feels the
+#: touch, and its net motion is faster: taken at once, the commanded velocity of one person-like
+#: peg-in-hole approach jumped from 8 to 21 mm/s within a step, and the wrench's jolt was taken for the
+#: tip's first touch in 13 of 20 trials (docs/people.md, "Easing into the motion beyond").
+HAND_EASE_S = 0.2
+
+
 @dataclass(frozen=True)
 class TrackPath:
     """Gripper poses along the demonstration's own recorded trajectory between two of its times, from
@@ -229,6 +240,11 @@ class TrackPath:
     approaching, a turn keeps turning. ``frame`` as :class:`ScrewPath`:
     ``world`` repeats the recorded displacement and rotation in the world frame, ``relative`` in the
     gripper frame at the start.
+
+    ``ease`` (units of ``s``): beyond ``s = 1`` the velocity goes over from the stretch's last one
+    (over its last :data:`END_VELOCITY_S` s) to the screw's along a linear ramp this long, instead of
+    at once; 0: at once. A hand's stretch ends at its own pace and its net motion has another, and a
+    jump of the commanded velocity shakes the wrench as a touch does (docs/programs.md).
     """
 
     times: np.ndarray
@@ -241,11 +257,13 @@ class TrackPath:
     frame: str = "world"
     beyond: tuple[Vec, Vec] | None = None  # (rotation vector rad, displacement m), gripper frame
     tool: Vec = (0.0, 0.0, 0.0)  # the tip's offset from the demonstrated one (m, gripper frame)
+    ease: float = 0.0
     # set once by __post_init__ (per path, not per step), and _end on the first step beyond s = 1
     _p0: list[float] = field(init=False, repr=False, compare=False)
     _inv0: list[float] = field(init=False, repr=False, compare=False)  # Python floats, as the steps use them
     _cur_q: list[float] = field(init=False, repr=False, compare=False)
     _end: ScrewPath | None = field(init=False, repr=False, compare=False)
+    _v_end: list[float] = field(init=False, repr=False, compare=False)  # m per unit of s, with _end
     # the samples around the stretch t0-t1 as Python floats: times, positions, quaternions
     _window: tuple[list[float], list[list[float]], list[list[float]]] = field(
         init=False, repr=False, compare=False)
@@ -295,6 +313,19 @@ class TrackPath:
         ts, ps, qs = (np.asarray(x[two], dtype=float).tolist() for x in (times, self.pos, self.quat))
         return _between(t, ts, ps, qs, 1)
 
+    def _beyond(self, on: ScrewPath, u: float) -> tuple[np.ndarray, np.ndarray]:
+        """The pose ``u`` past ``s = 1``: the screw ``on`` at ``u``, or eased in (``ease``): the screw
+        at ``w(u)``, which starts still and reaches its own pace at ``u = ease`` (``w' = u / ease``), plus
+        the stretch's last velocity times ``u - w(u)`` (its share fading out), so that the velocity is
+        continuous at ``s = 1``. The orientation is the screw's at ``w(u)``."""
+        e = self.ease
+        if e <= 0.0:
+            return on.at(u)
+        w = u * u / (2.0 * e) if u < e else u - 0.5 * e
+        pos, quat = on.at(w)
+        v = self._v_end
+        return np.array([float(pos[i]) + v[i] * (u - w) for i in range(3)]), quat
+
     def at(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose (world m, wxyz) at path parameter ``s`` (0 at ``t0``, 1 at ``t1``)."""
         if s > 1.0 and self.beyond is not None:
@@ -305,7 +336,11 @@ class TrackPath:
                 start = cast(Vec, tuple(float(x) for x in pos))
                 on = ScrewPath(start, here, *self.beyond, here, "relative", self.tool)
                 object.__setattr__(self, "_end", on)
-            return on.at(s - 1.0)
+                if self.ease > 0.0:
+                    h = END_VELOCITY_S / max(self.t1 - self.t0, 1e-9)
+                    before = self.at(1.0 - h)[0]
+                    object.__setattr__(self, "_v_end", [(start[i] - float(before[i])) / h for i in range(3)])
+            return self._beyond(on, s - 1.0)
         p0, inv0, cur_q = self._p0, self._inv0, self._cur_q
         p, q = self._sample(self.t0 + s * (self.t1 - self.t0))
         d = [p[i] - p0[i] for i in range(3)]  # Python floats throughout: numpy's roundings

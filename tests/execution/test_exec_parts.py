@@ -236,6 +236,46 @@ def test_a_hands_macro_goes_on_beyond_its_stretch_with_its_net_motion():
     assert abs(float(np.dot(script.at(1.0)[1], script.at(1.5)[1]))) < math.cos(1.0 / 2)  # 1.5 rad
 
 
+def test_a_hands_macro_eases_into_its_net_motion_beyond_its_stretch():
+    """docs/programs.md (the allowance): a hand slows as it feels the touch, 6 cm down in 3 s ending at
+    8 mm/s where its net motion is 20 mm/s. Beyond the stretch its program's gripper goes on at the
+    stretch's last velocity and reaches the net motion's over HAND_EASE_S, not within a step (a jolt
+    the force detectors take for a touch); a script's goes on at once, as before."""
+    from types import SimpleNamespace
+
+    from dlovr.execution.executor import DemoTrack, ExecOptions, _path
+    from dlovr.execution.motion import HAND_EASE_S
+    from dlovr.model.discrete import parse_discrete_situation
+    from dlovr.model.program import PoseTrack, TimedSituation, compile_program
+
+    t = np.arange(0.0, 3.0001, 0.002)
+    speed = np.interp(t, [0.0, 2.0, 3.0], [0.024, 0.024, 0.008])  # m/s, slowing toward the touch
+    z = 0.44 - np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))])
+    pos = np.stack([np.zeros_like(t), np.zeros_like(t), z], axis=1)
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
+    states = [TimedSituation(0.0, 3.0, parse_discrete_situation("V/G & E/N & V/N")),
+              TimedSituation(3.0, 1.0, parse_discrete_situation("V/G & E/N & V/F[table.F1]"))]
+    m = compile_program(states, PoseTrack(t, pos, quat)).classed[0]
+    start = (tuple(pos[0]), tuple(quat[0]))
+    sim = SimpleNamespace(built=SimpleNamespace(mocap_id=0), target_pos=start[0], target_quat=start[1],
+                          data=SimpleNamespace(mocap_pos=[start[0]], mocap_quat=[start[1]]))
+    net = (z[-1] - z[0]) / 3.0  # m/s, -0.02
+
+    def vz(path, s, ds=1e-4):  # the commanded velocity (m/s) at s: 3 s of demonstration per unit
+        return (path.at(s + ds)[0][2] - path.at(s - ds)[0][2]) / (2 * ds) / 3.0
+
+    hand = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat, by_hand=True))
+    assert hand.ease == pytest.approx(HAND_EASE_S / 3.0)
+    assert vz(hand, 1.0 - 1e-3) == pytest.approx(-0.008, abs=5e-4)
+    assert vz(hand, 1.0 + 1e-3) == pytest.approx(-0.008, abs=5e-4)  # no jump at s = 1
+    assert vz(hand, 1.0 + 0.5 * hand.ease) == pytest.approx(0.5 * (net - 0.008), abs=5e-4)  # half way
+    assert vz(hand, 1.0 + hand.ease + 1e-3) == pytest.approx(net, abs=5e-4)  # the net motion's from then
+    at_once = TrackPath(t, pos, quat, 0.0, 3.0, *start, "world", (hand.beyond or ((0, 0, 0), (0, 0, 0))))
+    assert vz(at_once, 1.0 + 1e-3) == pytest.approx(net, abs=5e-4)  # without easing: the jump
+    script = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat))
+    assert script.ease == 0.0
+
+
 def test_last_start_is_where_the_last_motion_phase_began():
     t = np.arange(0.0, 3.0001, 0.002)
     x = np.interp(t, [0.0, 1.0, 1.5, 2.5, 3.0], [0.0, 0.1, 0.1, 0.2, 0.2])  # move, hold, move, hold
