@@ -470,7 +470,7 @@ def test_a_demonstration_whose_drag_stops_at_its_instability_is_told_so_on_the_p
 def test_a_program_run_says_manual_control_is_locked(demo: DemoServer, page):
     fresh(demo, "table")
     demo.run_panel.run(TABLE_PROGRAM, detect="oracle")
-    page.locator(".dlovr-status [data-running]").wait_for(timeout=5_000)
+    page.locator(".dlovr-status [data-running]").wait_for(timeout=15_000)  # a loaded machine is slow to start
     assert "manual control locked" in page.locator(".dlovr-status").inner_text()
     demo.run_panel.cancel()
     wait_for(lambda: page.locator(".dlovr-status [data-running]").count() == 0, timeout=5, what="unlocked")
