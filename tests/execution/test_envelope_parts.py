@@ -171,6 +171,14 @@ def test_a_hand_s_drag_of_the_tip_that_no_force_ends_goes_on_10_mm_past_its_tran
     assert said == (" (dragging 7.7 mm further: no force shows where the tip arrives, and the "
                     "demonstration went on 2.3 mm past it, not 10)")
     assert hand_path(base, drag, None, replace(_hand_drag(0.0), by_hand=False), (0.0, 0.0, 0.0)) == (base, "")
+    # a drag shorter than DRAG_MIN_M but not than DRAG_PAST_M: drawn on where no force shows it, not
+    # where one does; one shorter than DRAG_PAST_M is not
+    short = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.0125, 0.0))
+    on, _ = dragged_on(short, drag, (0.0, 0.0, 0.0), _hand_drag(0.001))
+    assert on.at(1.0)[0][1] == pytest.approx(-0.0215)
+    assert dragged_on(short, _felt(drag), (0.0, 0.0, -0.04), _hand_drag(0.001)) == (short, "")
+    shorter = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.009, 0.0))
+    assert dragged_on(shorter, drag, (0.0, 0.0, 0.0), _hand_drag(0.001)) == (shorter, "")
 
 
 def _felt(m):
