@@ -211,22 +211,13 @@ def test_a_hands_macro_goes_on_beyond_its_stretch_with_its_net_motion():
     (its drift: 0.1 rad in its last 0.1 s). Beyond the stretch a hand's program goes on with the
     stretch's net motion (down), not with its last 0.1 s carried over 3 s (3 rad of turning); a
     script's (not by hand) keeps the recorded motion at the end of the stretch."""
-    from types import SimpleNamespace
-
     from dlovr.execution.executor import DemoTrack, ExecOptions, _path
-    from dlovr.model.discrete import parse_discrete_situation
-    from dlovr.model.program import PoseTrack, TimedSituation, compile_program
 
     t = np.arange(0.0, 3.0001, 0.01)
     pos = np.stack([np.zeros_like(t), np.zeros_like(t), 0.44 - 0.02 * t], axis=1)
     a = np.clip(t - 2.9, 0.0, None)  # rad, about x: the drift of the last 0.1 s
     quat = np.stack([np.cos(a / 2), np.sin(a / 2), np.zeros_like(t), np.zeros_like(t)], axis=1)
-    states = [TimedSituation(0.0, 3.0, parse_discrete_situation("V/G & E/N & V/N")),
-              TimedSituation(3.0, 1.0, parse_discrete_situation("V/G & E/N & V/F[table.F1]"))]
-    m = compile_program(states, PoseTrack(t, pos, quat)).classed[0]
-    start = (tuple(pos[0]), tuple(quat[0]))
-    sim = SimpleNamespace(built=SimpleNamespace(mocap_id=0), target_pos=start[0], target_quat=start[1],
-                          data=SimpleNamespace(mocap_pos=[start[0]], mocap_quat=[start[1]]))
+    m, sim = _approach(t, pos, quat)
     hand = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat, by_hand=True))
     (p1, q1), (p2, q2) = hand.at(1.0), hand.at(1.5)
     # 3 cm more down (in the gripper frame at the end, turned 0.1 rad)
@@ -241,24 +232,15 @@ def test_a_hands_macro_eases_into_its_net_motion_beyond_its_stretch():
     8 mm/s where its net motion is 20 mm/s. Beyond the stretch its program's gripper goes on at the
     stretch's last velocity and reaches the net motion's over HAND_EASE_S, not within a step (a jolt
     the force detectors take for a touch); a script's goes on at once, as before."""
-    from types import SimpleNamespace
-
     from dlovr.execution.executor import DemoTrack, ExecOptions, _path
     from dlovr.execution.motion import HAND_EASE_S
-    from dlovr.model.discrete import parse_discrete_situation
-    from dlovr.model.program import PoseTrack, TimedSituation, compile_program
 
     t = np.arange(0.0, 3.0001, 0.002)
     speed = np.interp(t, [0.0, 2.0, 3.0], [0.024, 0.024, 0.008])  # m/s, slowing toward the touch
     z = 0.44 - np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))])
     pos = np.stack([np.zeros_like(t), np.zeros_like(t), z], axis=1)
     quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
-    states = [TimedSituation(0.0, 3.0, parse_discrete_situation("V/G & E/N & V/N")),
-              TimedSituation(3.0, 1.0, parse_discrete_situation("V/G & E/N & V/F[table.F1]"))]
-    m = compile_program(states, PoseTrack(t, pos, quat)).classed[0]
-    start = (tuple(pos[0]), tuple(quat[0]))
-    sim = SimpleNamespace(built=SimpleNamespace(mocap_id=0), target_pos=start[0], target_quat=start[1],
-                          data=SimpleNamespace(mocap_pos=[start[0]], mocap_quat=[start[1]]))
+    m, sim = _approach(t, pos, quat)
     net = (z[-1] - z[0]) / 3.0  # m/s, -0.02
 
     def vz(path, s, ds=1e-4):  # the commanded velocity (m/s) at s: 3 s of demonstration per unit
@@ -270,10 +252,28 @@ def test_a_hands_macro_eases_into_its_net_motion_beyond_its_stretch():
     assert vz(hand, 1.0 + 1e-3) == pytest.approx(-0.008, abs=5e-4)  # no jump at s = 1
     assert vz(hand, 1.0 + 0.5 * hand.ease) == pytest.approx(0.5 * (net - 0.008), abs=5e-4)  # half way
     assert vz(hand, 1.0 + hand.ease + 1e-3) == pytest.approx(net, abs=5e-4)  # the net motion's from then
-    at_once = TrackPath(t, pos, quat, 0.0, 3.0, *start, "world", (hand.beyond or ((0, 0, 0), (0, 0, 0))))
+    at_once = TrackPath(t, pos, quat, 0.0, 3.0, tuple(pos[0]), tuple(quat[0]), "world", hand.beyond)
     assert vz(at_once, 1.0 + 1e-3) == pytest.approx(net, abs=5e-4)  # without easing: the jump
     script = _path(m, sim, ExecOptions(), DemoTrack(t, pos, quat))
     assert script.ease == 0.0
+
+
+def _approach(t: np.ndarray, pos: np.ndarray, quat: np.ndarray):
+    """The first macro of a program whose demonstration (gripper ``pos``, ``quat`` at times ``t``)
+    approaches the table until 3 s, when the tip touches it; and a stand-in simulator with the gripper
+    at the demonstration's start (what ``_path`` reads)."""
+    from types import SimpleNamespace
+
+    from dlovr.model.discrete import parse_discrete_situation
+    from dlovr.model.program import PoseTrack, TimedSituation, compile_program
+
+    states = [TimedSituation(0.0, 3.0, parse_discrete_situation("V/G & E/N & V/N")),
+              TimedSituation(3.0, 1.0, parse_discrete_situation("V/G & E/N & V/F[table.F1]"))]
+    m = compile_program(states, PoseTrack(t, pos, quat)).classed[0]
+    start = (tuple(pos[0]), tuple(quat[0]))
+    sim = SimpleNamespace(built=SimpleNamespace(mocap_id=0), target_pos=start[0], target_quat=start[1],
+                          data=SimpleNamespace(mocap_pos=[start[0]], mocap_quat=[start[1]]))
+    return m, sim
 
 
 def test_last_start_is_where_the_last_motion_phase_began():
