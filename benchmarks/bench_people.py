@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dlovr.execution.calibration import calibrate_recording, needs_calibration
+from dlovr.execution.calibration import calibrate_recording
 from dlovr.execution.demo_sets import DemoSetup, demo_path, record_demos
 from dlovr.execution.demo_track import load_track
 from dlovr.execution.executor import ExecOptions
@@ -41,6 +41,7 @@ from dlovr.execution.run import resolve_scene
 from dlovr.execution.trials import TrialSetup, run_trials
 from dlovr.execution.variation import parse_varies
 from dlovr.geometry import scene_pieces
+from dlovr.model.margins import blind
 from dlovr.model.program import Program
 from dlovr.model.smoothing import TREMOR_ACCEL, smooth_poses, tremor_of
 from dlovr.recording.bundle import SceneBundle
@@ -114,7 +115,7 @@ def _compiled(rec: Path, calibrate: bool) -> tuple[Program, str]:
     prog = compile_recording(rec)
     if not calibrate:
         return prog, "-"
-    weak = sum(needs_calibration(m, ExecOptions().min_snr) for m in prog.classed)
+    weak = sum(blind(m, ExecOptions().min_snr) for m in prog.classed)
     prog = calibrate_recording(prog, rec)
     done = sum(any(d.derivation.get("step_n", "").startswith("calibrated") for d in m.detection)
                for m in prog.classed)

@@ -77,12 +77,6 @@ MAX_EARLY_S = 0.01
 AFTER_S = 0.3
 
 
-def needs_calibration(m: Macro, min_snr: float) -> bool:
-    """Whether ``m`` ends by its motion for want of a force signal (:func:`dlovr.model.margins.blind`:
-    every detection of it no signal or weak signal)."""
-    return blind(m, min_snr)
-
-
 @dataclass(frozen=True)
 class Seen:
     """One calibration run's sight of one macro's transition: when the macro started (``t0`` s, run
@@ -340,7 +334,7 @@ def calibrate(
     program: Program, scene: Any, track: DemoTrack | None, pieces: Any = None,
     opts: ExecOptions | None = None, variants: Sequence[tuple[str, float]] = VARIANTS,
 ) -> Program:
-    """``program`` with the detectors of its macros without force signal (:func:`needs_calibration`)
+    """``program`` with the detectors of its macros without force signal (:func:`dlovr.model.margins.blind`)
     calibrated in simulation (the module's docstring): per such macro, in order, one run in
     ``scene`` (the demonstration's) and one per cable of ``variants``, the prefix run with the
     macros calibrated so far. ``calibration`` says what was run and, per macro, what came of it."""
@@ -350,7 +344,7 @@ def calibrate(
         (f"cable {key} x{f:g}", variant_scene(scene, key, f)) for key, f in variants
     ]
     desc = "the cable as demonstrated, " + ", ".join(label.removeprefix("cable ") for label, _ in runs[1:])
-    targets = [m.index for m in program.classed if needs_calibration(m, opts.min_snr)]
+    targets = [m.index for m in program.classed if blind(m, opts.min_snr)]
     notes = []
     for k in targets:
         m = next(x for x in program.macros if x.index == k)

@@ -53,7 +53,7 @@ def _compiled(path: str | Path, hold: float | None = None) -> tuple[Any, str | N
     rec = Recording(path)
     states = kept_states(rec, hold)
     payloads = rec.states()
-    track, wrench, smoothing, followed = _inputs(rec)
+    track, wrench, smoothing, followed = compile_inputs(rec)
     prog = compile_program(states, track, name=Path(path).stem, source=Path(path).name, wrench=wrench)
     if smoothing:
         prog = _smoothed_program(prog, smoothing)
@@ -94,15 +94,11 @@ def _smoothed_program(prog: Any, why: str) -> Any:
     return replace(prog, macros=macros, smoothing_s=WINDOW_S, smoothing=why)
 
 
-def compile_inputs(rec: Recording) -> tuple[Any, Any, str]:
+def compile_inputs(rec: Recording) -> tuple[Any, Any, str, tuple[Any, Any]]:
     """What a recording's program is compiled from besides its kept situations: the gripper's pose
     track (a ``PoseTrack``), the wrench (a ``WrenchSeries`` or None) and why they were smoothed ("":
-    as recorded; see :func:`_intended`)."""
-    return _inputs(rec)[:3]
-
-
-def _inputs(rec: Recording) -> tuple[Any, Any, str, tuple[Any, Any]]:
-    """:func:`compile_inputs`, and the track the program follows (:func:`_intended`)."""
+    as recorded); and the track the program follows (times s, positions m world; see
+    :func:`_intended`)."""
     from dlovr.model.program import PoseTrack
 
     payloads = rec.states()

@@ -16,9 +16,9 @@ from dlovr.execution.calibration import (
     calibrate,
     calibrated_macro,
     fires_at,
-    needs_calibration,
 )
 from dlovr.execution.executor import ExecOptions
+from dlovr.model.margins import blind
 from dlovr.model.program import Program
 
 
@@ -47,9 +47,9 @@ def _log(label: str, t_step: float, size: float, noise: float = 0.0, seen: bool 
 def test_a_macro_needs_calibration_only_without_force_signal(touch):
     program = touch[0]
     m = program.classed[0]
-    assert not needs_calibration(m, ExecOptions().min_snr)
-    assert needs_calibration(_weak(program).classed[0], ExecOptions().min_snr)
-    assert not needs_calibration(program.macros[-1], ExecOptions().min_snr)  # the final motion
+    assert not blind(m, ExecOptions().min_snr)
+    assert blind(_weak(program).classed[0], ExecOptions().min_snr)
+    assert not blind(program.macros[-1], ExecOptions().min_snr)  # the final motion
 
 
 def test_calibration_combines_the_runs_and_says_so_per_parameter(touch):
@@ -133,7 +133,7 @@ def test_a_macro_without_force_signal_is_calibrated_in_its_demonstrations_scene(
     d = out.classed[0].detection[0]
     assert d.params["step_n"] > d.params["force_threshold_n"] > 0
     assert d.derivation["force_threshold_n"].startswith("calibrated: 3 runs")
-    assert not needs_calibration(out.classed[0], ExecOptions().min_snr)
+    assert not blind(out.classed[0], ExecOptions().min_snr)
 
 
 def test_compile_calibrate_calibrates_each_program_before_it_is_written(tmp_path, monkeypatch):
