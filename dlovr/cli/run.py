@@ -521,6 +521,8 @@ def _print_summary(summary: dict[str, Any], trials: int, out: str) -> None:
     if fr is not None:
         line += f"; false detections {summary['false_detections']} of {summary['macros_run']} macros"
         line += f" ({fr:.1%})"
+    if summary.get("went_on"):
+        line += f"; {summary['went_on']} macros not felt went on (a hand's program)"
     click.echo(line)
     rp = summary.get("replans") or {}
     if rp.get("replanned"):

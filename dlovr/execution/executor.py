@@ -43,6 +43,8 @@ from dlovr.execution.motion import (
     hand_path,
     last_start,
     local_twist,
+    tip_offset,
+    touches_tip,
 )
 from dlovr.model.derivation import (
     FREE_WINDOW_S,
@@ -73,8 +75,9 @@ Steps = Generator[None, None, T]
 DETECT_MODES = ("force", "oracle")
 #: How a macro may end and the program go on: its transition detected, or -- a macro whose
 #: demonstration shows no force signal for its transition (threshold not below the demonstrated
-#: step, see :mod:`dlovr.model.derivation`) -- its demonstrated motion completed.
-ENDED_OK = ("detected", "motion")
+#: step, see :mod:`dlovr.model.derivation`) -- its demonstrated motion completed; or, following a
+#: hand's track, its transition not felt within the allowance (``"went on"``, :func:`run_macro`).
+ENDED_OK = ("detected", "motion", "went on")
 
 #: Time (s) the gripper holds its last pose after a program (or a replay) before the goal is judged: a
 #: soft, high-friction cable still creeps into place after the motion stops (a tip sliding into a
@@ -194,8 +197,9 @@ class ExecOptions:
 
 @dataclass(frozen=True)
 class Event:
-    """An executor event: ``kind`` one of ``start``, ``macro``, ``detected``, ``failed``, ``final``,
-    ``end``; ``t`` simulated time (s); ``macro`` its index (0 for none); ``text`` what happened."""
+    """An executor event: ``kind`` one of ``start``, ``macro``, ``detected``, ``went_on`` (a hand's
+    macro not felt within its allowance, :func:`run_macro`), ``failed``, ``final``, ``end``; ``t``
+    simulated time (s); ``macro`` its index (0 for none); ``text`` what happened."""
 
     t: float
     step: int
@@ -682,30 +686,6 @@ def _classed_steps(
     return True
 
 
-def touches_tip(m: Macro) -> bool:
-    """Whether ``m`` is the cable's tip touching from free space, approached along the cable: an
-    ``E`` that releases nothing and establishes only tip (``V/``) contacts, its demonstrated motion
-    within 25 degrees of the gripper's -z axis (the cable leaves the gripper along -z)."""
-    mo = m.motion
-    d = norm(mo.relative)
-    return (
-        m.classes == ("E",) and not m.released and bool(m.established)
-        and all(c.state.startswith("V/") for c in m.established)
-        and d > 1e-6 and -float(mo.relative[2]) >= math.cos(math.radians(25.0)) * d
-    )
-
-
-def tip_offset(path: Any, s: float) -> tuple[float, float, float]:
-    """The tip's offset from the demonstrated one (m, gripper frame) when its first touch, which the
-    demonstration felt at ``s = 1`` of ``path``, is felt at ``s``: the motion left (or overshot)
-    along the cable's axis. A longer cable touches sooner, and its tip is that much further."""
-    p1, _ = path.at(1.0)
-    ps, qs = path.at(s)
-    down = quat_rotate(np.asarray(qs, dtype=float), np.array([0.0, 0.0, -1.0]))
-    along = dot([float(p1[i]) - float(ps[i]) for i in range(3)], down)
-    return (0.0, 0.0, -along)
-
-
 def _path(
     m: Macro, sim: Any, opts: ExecOptions, track: DemoTrack | None, t_from: float | None = None,
     tool: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -784,6 +764,13 @@ def run_macro(
     """One guarded motion: until the detector fires, or the allowance and then ``settle`` pass;
     ``by_motion`` (or a macro without force signal): until its demonstrated motion is done.
 
+    Where the allowance passes with nothing felt, a script's or a network's macro fails and ends the
+    run. A hand's macro (``track.by_hand``) goes on (``"went on"``): the next macro takes up the
+    demonstrated motion from where the gripper is, as the demonstration's replay would. A hand's
+    transitions come where its drift and its detours happened to bring the cable (an end edge the
+    cable slipped off, a tip that grazed a corner); under variation such a transition may come
+    unfelt, later, or not at all, and the task need not depend on it.
+
     Following the recorded track, a macro whose transition came before its demonstrated motion was
     done leaves the rest of that motion to the next one: ``t_from`` (demonstration time, s) is where
     the previous macro's motion stopped, and this one's stretch of the track begins there."""
@@ -842,6 +829,10 @@ def run_macro(
                 return ended("detected", t, t, resume=at)
             if t - t0 >= limit - 1e-12:
                 why = _allowance_text(m, opts, allowed)
+                if track is not None and track.by_hand:
+                    ses.emit("went_on", m.index, f"macro {m.index} {m.label}: {why}; going on with the "
+                             "demonstrated motion (a hand's program)")
+                    return ended("went on", t, None, why)
                 ses.emit("failed", m.index, f"macro {m.index} {m.label}: {why}")
                 return ended("allowance", t, None, why)
     except SimulationDiverged as e:

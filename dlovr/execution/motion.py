@@ -41,6 +41,7 @@ import numpy as np
 from dlovr.model.discrete import parse_discrete_contact
 from dlovr.model.margins import DRAG_MIN_M, tip_drag, went_on
 from dlovr.transforms import (
+    dot,
     norm,
     quat_mul,
     quat_normalize,
@@ -519,3 +520,27 @@ def eased(a: Vec, b: Vec, s: float) -> Vec:
     (``(1 - cos(pi s)) / 2``)."""
     k = 0.5 * (1.0 - math.cos(math.pi * min(max(s, 0.0), 1.0)))
     return (a[0] + k * (b[0] - a[0]), a[1] + k * (b[1] - a[1]), a[2] + k * (b[2] - a[2]))
+
+
+def touches_tip(m: Any) -> bool:
+    """Whether macro ``m`` is the cable's tip touching from free space, approached along the cable:
+    an ``E`` that releases nothing and establishes only tip (``V/``) contacts, its demonstrated motion
+    within 25 degrees of the gripper's -z axis (the cable leaves the gripper along -z)."""
+    mo = m.motion
+    d = norm(mo.relative)
+    return (
+        m.classes == ("E",) and not m.released and bool(m.established)
+        and all(c.state.startswith("V/") for c in m.established)
+        and d > 1e-6 and -float(mo.relative[2]) >= math.cos(math.radians(25.0)) * d
+    )
+
+
+def tip_offset(path: Any, s: float) -> Vec:
+    """The tip's offset from the demonstrated one (m, gripper frame) when its first touch, which the
+    demonstration felt at ``s = 1`` of ``path``, is felt at ``s``: the motion left (or overshot)
+    along the cable's axis. A longer cable touches sooner, and its tip is that much further."""
+    p1, _ = path.at(1.0)
+    ps, qs = path.at(s)
+    down = quat_rotate(np.asarray(qs, dtype=float), np.array([0.0, 0.0, -1.0]))
+    along = dot([float(p1[i]) - float(ps[i]) for i in range(3)], down)
+    return (0.0, 0.0, -along)

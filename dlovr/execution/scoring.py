@@ -9,8 +9,9 @@ The tracker's debounced situations are not used to steer a force-detected run, o
   a **false** detection otherwise; a macro that ended at its allowance **missed** the transition
   when it happened anyway, else saw **no transition**; a macro the executor ended by its motion (no
   force signal in the demonstration, or a bounce) is **ok** when its transition happened, else
-  **by motion** (no detection, so never a false one); **latency** is detection minus true
-  transition (s), for detected macros only;
+  **by motion** (no detection, so never a false one); a hand's macro that nothing was felt for
+  within its allowance **went on** with the demonstrated motion (no failure: the goal judges the
+  run); **latency** is detection minus true transition (s), for detected macros only;
 - the **first deviation** is the first macro whose outcome differed from the plan (any outcome but
   *ok*: a false detection, a transition that did not come, ...): where a failed run went wrong, even
   when every macro "succeeded" as far as the executor could tell;
@@ -33,13 +34,13 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from dlovr.execution.executor import Execution, MacroRun, Replan, principal_states, transition_seen
+from dlovr.execution.executor import ENDED_OK, Execution, MacroRun, Replan, principal_states, transition_seen
 
 #: How long after a detection the tracker may take to see the transition it detected (s): force
 #: detection may lead the geometric contact label by a fraction of a millimetre of motion.
 TRUTH_TOL = 0.05
 
-OUTCOMES = ("ok", "false", "by motion", "missed", "no transition", "diverged", "not run")
+OUTCOMES = ("ok", "false", "by motion", "went on", "missed", "no transition", "diverged", "not run")
 
 
 @dataclass(frozen=True)
@@ -59,13 +60,16 @@ class MacroScore:
     allowed: float
     reason: str = ""
     #: How the macro's run ended: ``"detected"`` (by its detector), ``"motion"`` (its demonstrated
-    #: motion done, no detection asked or possible), or the failure (``"missed"``, ``"diverged"``...).
+    #: motion done, no detection asked or possible), ``"went on"`` (a hand's macro not felt within
+    #: its allowance: the run went on, :func:`dlovr.execution.executor.run_macro`), or the failure
+    #: (``"missed"``, ``"diverged"``...).
     ended: str = ""
 
 
 @dataclass(frozen=True)
 class RunResult:
-    """A judged run: ``success`` when every macro ended by a detection and the goal was reached."""
+    """A judged run: ``success`` when no macro failed (each ended as
+    :data:`~dlovr.execution.executor.ENDED_OK` allows) and the goal was reached."""
 
     program: str
     scene: str
@@ -129,6 +133,8 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
         outcome = "ok" if true_at is not None else "false"
         if true_at is not None and run.detected_at is not None:
             latency = run.detected_at - true_at
+    elif run.ended == "went on":
+        outcome = "went on"
     elif run.ended == "diverged":
         outcome = "diverged"
     else:
@@ -142,13 +148,13 @@ def score_macro(run: MacroRun, kept: list[Any]) -> MacroScore:
 def score(ex: Execution, scene_name: str = "") -> RunResult:
     """Judge an :class:`Execution` (see the module docstring)."""
     macros = [score_macro(r, ex.kept) for r in ex.runs]
-    failed = next((r for r in ex.runs if r.ended not in ("detected", "motion")), None)
+    failed = next((r for r in ex.runs if r.ended not in ENDED_OK), None)
     reason = ""
     failed_index = None
     if ex.diverged is not None:
         failed_index = ex.runs[-1].macro.index if ex.runs else 0
         reason = f"simulation diverged: {ex.diverged}"
-        if ex.runs and ex.runs[-1].ended in ("detected", "motion") and ex.final_done:
+        if ex.runs and ex.runs[-1].ended in ENDED_OK and ex.final_done:
             failed_index = None  # diverged after the last macro (final motion or settling)
     elif failed is not None:
         failed_index = failed.macro.index
@@ -238,6 +244,9 @@ def format_result(res: RunResult) -> str:
         )
     if any(m.ended == "motion" for m in res.macros):
         lines.append("(by motion): the macro ended when its demonstrated motion was done, not by a detection")
+    if any(m.ended == "went on" for m in res.macros):
+        lines.append("went on: nothing was felt within the macro's allowance; a hand's program goes on with "
+                     "the demonstrated motion")
     goal = " & ".join(res.goal) or "N"
     if res.goal_sensed is not None and res.goal_angle is not None:
         word = "confirms" if res.goal_sensed else "does NOT confirm"

@@ -127,7 +127,18 @@ _WRAP = "padding:1px 4px;overflow-wrap:anywhere;word-break:break-all"
 """The change column breaks anywhere: a long face list (``V/VI[block.F3,block.F5,...]``) must not widen
 the table past the panel, which cannot scroll sideways (the risk column would be cut off)."""
 
-OUTCOME_MARKS = {"ok": ("&#10003;", "#2e9e44"), "failed": ("&#10007;", "#d62728")}
+OUTCOME_MARKS = {
+    "ok": ("&#10003;", "#2e9e44"),
+    "went on": ("&#8631;", "#e08a00"),
+    "failed": ("&#10007;", "#d62728"),
+}
+"""The marks of the macros a run ended: detected (or its motion done), not felt and gone on with the
+demonstrated motion (a hand's program), failed; explained under the table (:data:`OUTCOME_KEY`)."""
+OUTCOME_KEY = {
+    "ok": "transition detected (or the motion done)",
+    "went on": "nothing felt: went on with the demonstrated motion",
+    "failed": "failed",
+}
 CURRENT_BACKGROUND = "#ffe58a"
 
 
@@ -142,8 +153,8 @@ def program_html(
     risky macros, why; ``data-risk`` on each row names its risk for tests and styling.
 
     While the program runs: the row of macro ``current`` (its index) is highlighted
-    (``data-current="1"``), and ``outcomes`` (macro index -> ``ok`` or ``failed``) marks the macros
-    that ended (``data-outcome``)."""
+    (``data-current="1"``), and ``outcomes`` (macro index -> ``ok``, ``went on`` or ``failed``) marks
+    the macros that ended (``data-outcome``), the marks explained under the table."""
     macros = list(getattr(program, "macros", ()) or ())
     outcomes = outcomes or {}
     rows = []
@@ -182,6 +193,11 @@ def program_html(
         f"<th>risk</th></tr>{''.join(rows)}</table>"
     )
     why = risk_reasons(program)
+    key = ""
+    if outcomes:
+        key = '<div class="dlovr-outcome-key" style="margin-top:3px">' + ", ".join(
+            f'<span style="color:{OUTCOME_MARKS[k][1]}">{OUTCOME_MARKS[k][0]}</span> {OUTCOME_KEY[k]}'
+            for k in OUTCOME_MARKS) + "</div>"
     risky = ""
     if why:
         items = "".join(f"<li>{html.escape(w)}</li>" for w in why)
@@ -192,4 +208,5 @@ def program_html(
     paths = "".join(
         f"<div>{html.escape(label)}: <code>{html.escape(str(p))}</code></div>" for label, p in files
     )
-    return f'<div style="font-size:11px">{head}{table}{risky}<div style="margin-top:3px">{paths}</div></div>'
+    body = f'{head}{table}{key}{risky}<div style="margin-top:3px">{paths}</div>'
+    return f'<div style="font-size:11px">{body}</div>'

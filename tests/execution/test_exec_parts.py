@@ -156,7 +156,7 @@ def test_a_turn_about_the_tip_is_repeated_about_the_tip_felt_further_away():
 def test_the_tips_first_touch_gives_its_offset():
     """An approach along the cable felt 2 cm early: the tip is 2 cm further from the gripper; felt at
     1.25 of a 4 cm approach: 1 cm nearer. Only a tip touching from free space along the cable counts."""
-    from dlovr.execution.executor import tip_offset, touches_tip
+    from dlovr.execution.motion import tip_offset, touches_tip
 
     path = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, -0.04))
     np.testing.assert_allclose(tip_offset(path, 0.5), (0.0, 0.0, -0.02), atol=1e-12)

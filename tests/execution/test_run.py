@@ -78,6 +78,20 @@ def test_a_transition_that_never_comes_fails_with_its_allowance(touch):
     assert not ol.goal_reached
 
 
+def test_a_hands_macro_not_felt_within_its_allowance_goes_on(touch):
+    """The same lowered table, the track a hand's: the macro goes on with the demonstrated motion
+    (its outcome says so), and the goal judges the run."""
+    program, scene, track, pieces = touch
+    down = tuple(replace(o, pos=(o.pos[0], o.pos[1], o.pos[2] - 0.2)) for o in scene.objects)
+    hand = replace(track, by_hand=True)
+    res = run_program(program, replace(scene, objects=down), ExecOptions(), track=hand, pieces=pieces)
+    (m,) = res.macros
+    assert m.outcome == "went on" and m.ended == "went on" and m.detected_at is None
+    assert res.failed_macro is None and not res.goal_reached and not res.success
+    assert "is not the goal" in res.reason
+    assert "went on: nothing was felt" in format_result(res)
+
+
 def test_a_diverged_simulation_is_a_failed_result(touch, monkeypatch):
     from dlovr.sim import SimulationDiverged, Simulator
 

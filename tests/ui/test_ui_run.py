@@ -72,6 +72,7 @@ def test_run_program_highlights_the_macro_and_shows_the_result(server: DemoServe
     row.wait_for(timeout=10_000)
     assert page.locator('tr[data-current="1"]').count() == 1
     assert page.locator('tr[data-outcome="ok"][data-macro="1"]').count() == 1  # macro 1 was detected
+    assert page.locator(".dlovr-outcome-key").first.is_visible()  # the marks explained
     wait_for(lambda: "detector of macro" in page.content(), timeout=10, what="the detector caption")
     shot(page, "run-program-running")
     server.pause(False)

@@ -438,3 +438,17 @@ def test_a_risky_program_says_which_macro_and_class():
     assert "final" in out and "/x/demo.program.json" in out
     safe = program_html(NS(name="ok", macros=macros[:2]))
     assert "Risky program" not in safe
+
+
+def test_a_runs_marks_are_explained_under_the_program():
+    from types import SimpleNamespace as NS
+
+    from dlovr.ui.program_view import program_html
+
+    macros = tuple(NS(index=k, classes=("C",), t=float(k), risk="none", change_from="a", change_to="b")
+                   for k in (1, 2, 3))
+    out = program_html(NS(name="p", macros=macros), outcomes={1: "ok", 2: "went on", 3: "failed"})
+    for k in ("ok", "went on", "failed"):
+        assert f'data-outcome="{k}"' in out
+    assert "dlovr-outcome-key" in out and "went on with the demonstrated motion" in out
+    assert "dlovr-outcome-key" not in program_html(NS(name="p", macros=macros))  # no run: no key

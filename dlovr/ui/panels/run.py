@@ -198,6 +198,8 @@ class RunPanel:
         """An executor event."""
         if ev.kind == "detected":
             self.outcomes[ev.macro] = "ok"
+        elif ev.kind == "went_on":
+            self.outcomes[ev.macro] = "went on"
         elif ev.kind == "failed" and ev.macro:
             self.outcomes[ev.macro] = "failed"
 
