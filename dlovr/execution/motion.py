@@ -440,14 +440,13 @@ DRAG_PAST_M = 0.01
 def dragged_on(path: Any, m: Any, tool: Vec, track: Any) -> tuple[Any, str]:
     """``path`` drawn on along its net displacement (unit ``u``), for an ``I`` macro that drags (net
     motion at least :data:`DRAG_MIN_M`, or :data:`DRAG_PAST_M` for a drag of the tip that no force
-    shows: a drag that pulls the tip into an instability), by what it
-    wants less the drag the demonstration's ``track`` went on with after ``m.t`` within 1 s
-    (:func:`dlovr.model.margins.went_on`), where that is positive; and why (the executor's event).
-    It wants :data:`DRAG_PER_EXCESS` times the cable's excess, ``-tool[2]`` (m: how much further the
-    tip is than demonstrated, the executor's ``tool``, gripper frame), and at least
-    :data:`DRAG_PAST_M` where no force shows the tip's transition
-    (:func:`dlovr.model.margins.tip_drag`). ``path`` itself otherwise. Added in proportion to progress
-    (:class:`ShiftedPath`)."""
+    shows: a drag that pulls the tip into an instability), by what it wants less the drag the
+    demonstration's ``track`` went on with after ``m.t`` (within :data:`dlovr.model.margins.WINDOW_S`,
+    :func:`dlovr.model.margins.went_on`), where that is positive; and why (the executor's event). It
+    wants :data:`DRAG_PER_EXCESS` times the cable's excess, ``-tool[2]`` (m: how much further the tip
+    is than demonstrated, the executor's ``tool``, gripper frame), and at least :data:`DRAG_PAST_M`
+    where no force shows the tip's transition (:func:`dlovr.model.margins.tip_drag`). ``path`` itself
+    otherwise. Added in proportion to progress (:class:`ShiftedPath`)."""
     if tuple(m.classes) != ("I",):
         return path, ""
     excess = -float(tool[2])

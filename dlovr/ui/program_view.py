@@ -128,17 +128,13 @@ _WRAP = "padding:1px 4px;overflow-wrap:anywhere;word-break:break-all"
 the table past the panel, which cannot scroll sideways (the risk column would be cut off)."""
 
 OUTCOME_MARKS = {
-    "ok": ("&#10003;", "#2e9e44"),
-    "went on": ("&#8631;", "#e08a00"),
-    "failed": ("&#10007;", "#d62728"),
+    "ok": ("&#10003;", "#2e9e44", "transition detected (or the motion done)"),
+    "went on": ("&#8631;", "#e08a00", "nothing felt: went on with the demonstrated motion"),
+    "failed": ("&#10007;", "#d62728", "failed"),
 }
-"""The marks of the macros a run ended: detected (or its motion done), not felt and gone on with the
-demonstrated motion (a hand's program), failed; explained under the table (:data:`OUTCOME_KEY`)."""
-OUTCOME_KEY = {
-    "ok": "transition detected (or the motion done)",
-    "went on": "nothing felt: went on with the demonstrated motion",
-    "failed": "failed",
-}
+"""The marks of the macros a run ended (symbol, colour, what it means, as the key under the table says
+it): detected (or its motion done), not felt and gone on with the demonstrated motion (a hand's
+program), failed."""
 CURRENT_BACKGROUND = "#ffe58a"
 
 
@@ -169,7 +165,7 @@ def program_html(
             attrs += f' data-current="1" style="background:{CURRENT_BACKGROUND}"'
         mark = ""
         if idx in outcomes:
-            sym, color = OUTCOME_MARKS.get(outcomes[idx], ("?", "#888"))
+            sym, color, _ = OUTCOME_MARKS.get(outcomes[idx], ("?", "#888", ""))
             attrs += f' data-outcome="{html.escape(outcomes[idx])}"'
             mark = f' <span style="color:{color}">{sym}</span>'
         rows.append(
@@ -196,8 +192,8 @@ def program_html(
     key = ""
     if outcomes:
         key = '<div class="dlovr-outcome-key" style="margin-top:3px">' + ", ".join(
-            f'<span style="color:{OUTCOME_MARKS[k][1]}">{OUTCOME_MARKS[k][0]}</span> {OUTCOME_KEY[k]}'
-            for k in OUTCOME_MARKS) + "</div>"
+            f'<span style="color:{color}">{sym}</span> {meaning}'
+            for sym, color, meaning in OUTCOME_MARKS.values()) + "</div>"
     risky = ""
     if why:
         items = "".join(f"<li>{html.escape(w)}</li>" for w in why)
