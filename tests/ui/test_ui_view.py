@@ -152,7 +152,7 @@ def framed(srv: DemoServer) -> bool:
 def test_the_scene_is_framed_on_load_on_the_button_and_on_a_scene_switch(server: DemoServer, browser):
     page = open_page(browser, server.url)
     wait_for(lambda: the_client(server).client_id in server.viewport.camera_ready, what="the camera")
-    wait_for(lambda: framed(server), timeout=10, what=f"the framing on load, covers {view_fraction(server)}")
+    wait_for(lambda: framed(server), timeout=30, what=f"the framing on load, covers {view_fraction(server)}")
     cam = the_client(server).camera
     canvas = page.locator("canvas").first.bounding_box()
     assert canvas is not None and abs(cam.image_width - canvas["width"]) <= 2  # the real view, panel beside
@@ -162,13 +162,13 @@ def test_the_scene_is_framed_on_load_on_the_button_and_on_a_scene_switch(server:
     with the_client(server).atomic():
         cam.position = (6.0, 6.0, 4.0)
         cam.look_at = (3.0, 3.0, 0.0)
-    wait_for(lambda: view_fraction(server)[1] < 0.3, timeout=10, what="the camera to look away")
+    wait_for(lambda: view_fraction(server)[1] < 0.3, timeout=30, what="the camera to look away")
     page.get_by_role("button", name="Frame scene").click()
-    wait_for(lambda: framed(server), timeout=10, what=f"the framing by the button, {view_fraction(server)}")
+    wait_for(lambda: framed(server), timeout=30, what=f"the framing by the button, {view_fraction(server)}")
 
     # another scene: re-framed for its workspace
     server.load("l_block")
-    wait_for(lambda: framed(server), timeout=10, what=f"the framing of l_block, {view_fraction(server)}")
+    wait_for(lambda: framed(server), timeout=30, what=f"the framing of l_block, {view_fraction(server)}")
     time.sleep(0.5)
     shot(page, "framing-l-block")
     page.close()
@@ -198,15 +198,18 @@ def test_the_force_plot_follows_a_drag_and_marks_the_transitions(server: DemoSer
     assert 0.4 < hanging < 0.8  # the weight of the hanging 60 g cable, about 0.59 N
     p0 = server.status()["gripper_pos"]
     drag(page, line_down(p0, 0.33, n=14))  # the cable comes down onto the table
-    marked = []  # the mark stays on the plot for its 5 s only: remember having seen it
+    # the mark stays on the plot for its 5 s only: remember having seen it; the state is named on failure
+    seen = {"moved on": False, "marked": False, "named": False}
 
     def updated() -> bool:  # moved on, a transition marked, and named under the plot
         d = plot_data(page)
-        marked.append(bool((d[5] == MARK_HIGH).any()))
-        named = page.get_by_text("transitions (dashed):").count() > 0
-        return d[0][-1] > before[0][-1] + 1.0 and any(marked) and named
+        seen["moved on"] = bool(d[0][-1] > before[0][-1] + 1.0)
+        seen["marked"] |= bool((d[5] == MARK_HIGH).any())
+        seen["named"] = page.get_by_text("transitions (dashed):").count() > 0
+        return all(seen.values())
 
-    wait_for(updated, timeout=30, what="the plot to move on and mark the table contact")
+    # a bound, not a wait: a loaded 2-core machine (the suite's other worker busy) can hold the page back
+    wait_for(updated, timeout=60, what=lambda: f"the plot to move on and mark the table contact {seen}")
     page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
     # part of the cable comes to lie on the table: the gripper carries less than the whole weight
     wait_for(lambda: plot_data(page)[4][-1] < hanging - 0.15, timeout=15, what="the lighter load")
@@ -262,14 +265,14 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     from dlovr.model.discrete import Stability
 
     page = open_page(browser, server.url)
-    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=30_000)
     assert server.viewport.faces.shown == {}
     assert green_fraction(page) < 0.01
     p0 = server.status()["gripper_pos"]
     drag(page, line_down(p0, 0.48, n=6))  # the cable's tip comes down onto the table
     page.get_by_text("/F[table.F1]").first.wait_for(timeout=20_000)
     wait_for(lambda: server.viewport.faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
-    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the table top drawn green")
+    wait_for(lambda: green_fraction(page) > 0.05, timeout=30, what="the table top drawn green")
 
     page.get_by_label("Face labels").check()
     wait_for(lambda: "table.F1" in server.viewport.faces.labels, what="the face labels")
@@ -291,15 +294,15 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     # the live timeline is drawn again every second (its end time): the element under the mouse is
     # replaced and never sees the mouse leave; leaving must still give the live faces back
     html = server.timeline_panel.timeline_html.content
-    wait_for(lambda: server.timeline_panel.timeline_html.content != html, timeout=10, what="a redraw")
+    wait_for(lambda: server.timeline_panel.timeline_html.content != html, timeout=30, what="a redraw")
     time.sleep(0.3)
     page.mouse.move(5, 300)  # leave it: the live faces again
-    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the live faces back")
+    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=30, what="the live faces back")
 
     # the cable lifted off again: nothing live; hovering the situation on the table shows its face
     drag(page, line_down(np.array([p0[0], p0[1], 0.48]), 0.72, n=6))
     wait_for(lambda: "table" not in server.status()["discrete"], timeout=20, what="the cable to lift off")
-    wait_for(lambda: faces.shown == {} and green_fraction(page) < 0.01, timeout=10, what="no live faces")
+    wait_for(lambda: faces.shown == {} and green_fraction(page) < 0.01, timeout=30, what="no live faces")
     bands = server.session.timeline.bands
     lit = [i for i, b in enumerate(bands) if b.faces == {"table.F1": Stability.STABLE}]
     k = max(lit, key=lambda i: bands[i].end - bands[i].start)  # the longest: the easiest to hover
@@ -313,16 +316,18 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     )
     shot(page, "faces-hovering-the-table-situation")
     page.mouse.move(5, 300)
-    wait_for(lambda: faces.shown == {}, timeout=10, what="the live faces (none) back")
+    wait_for(lambda: faces.shown == {}, timeout=30, what="the live faces (none) back")
 
     # clicking it scrubs the cable to that situation, its face highlighted
-    hover_until(page, on_table, lambda: server.view.timeline is not None, "the click to scrub", click=True)
-    page.get_by_role("button", name="Back to live").wait_for(timeout=10_000)
+    hover_until(
+        page, on_table, lambda: server.view.timeline is not None, "the click to scrub", timeout=30, click=True
+    )
+    page.get_by_role("button", name="Back to live").wait_for(timeout=30_000)
     band = server.view.timeline.bands[k]
     assert band.start - 0.01 <= server.timeline_panel.slider.value <= band.end + 0.01
     page.mouse.move(5, 300)
-    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=10, what="the clicked faces")
-    wait_for(lambda: green_fraction(page) > 0.05, timeout=10, what="the clicked face drawn green")
+    wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=30, what="the clicked faces")
+    wait_for(lambda: green_fraction(page) > 0.05, timeout=30, what="the clicked face drawn green")
     page.close()
 
 
@@ -333,7 +338,7 @@ def test_a_band_entered_again_is_reported_again_so_a_hover_the_server_lost_comes
     moment off it (shorter than the leave delay) is reported again, so a hover the server lost (a
     report sent while the page was reconnecting, a pin cleared) comes back at the next entry."""
     page = open_page(browser, server.url)
-    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=30_000)
     first = page.locator('.dlovr-timeline > div[data-situation="0"]')
     faces = server.viewport.faces
     hover_until(page, first, lambda: faces.pinned == {}, "the hovered free situation pinned")
@@ -349,7 +354,7 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     from dlovr.ui.program_view import macro_risk
 
     page = open_page(browser, server.url)
-    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=10_000)
+    page.get_by_text("V/G & E/N & V/N").first.wait_for(timeout=30_000)
     page.get_by_role("button", name="Start recording").click()
     wait_for(lambda: server.status()["recording"] is not None, what="the recording to start")
     p0 = server.status()["gripper_pos"]
@@ -384,13 +389,13 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     moment = f"up to {t:.2f} s"
     plot = server.force_panel.plot
     caption = server.force_panel.caption  # the moment is said under the plot (a new title redraws it)
-    wait_for(lambda: moment in caption.content, timeout=10, what="the plot at the moment")
+    wait_for(lambda: moment in caption.content, timeout=30, what="the plot at the moment")
 
     def at_moment() -> bool:  # the browser's data: samples where the contact state changed, up to t
         x = plot_data(page)[0]
         return len(x) >= 2 and x[0] >= t - 5.5 and x[-1] <= t + 1e-6
 
-    wait_for(at_moment, timeout=10, what="the browser's plot data at the moment")
+    wait_for(at_moment, timeout=30, what="the browser's plot data at the moment")
     # then the force at every step, re-simulated from the recording in the background
     wait_for(lambda: "re-simulated" in (plot.title or ""), timeout=60, what="the re-simulation")
 
@@ -398,7 +403,7 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
         x = plot_data(page)[0]
         return len(x) > 20 and float(np.median(np.diff(x))) <= 0.021
 
-    wait_for(dense, timeout=10, what="the dense plot in the browser")
+    wait_for(dense, timeout=30, what="the dense plot in the browser")
     x, mag = plot_data(page)[0], plot_data(page)[4]
     # the last sample: the step (2 ms) that holds t (simulated times carry rounding: 14.928000000001655
     # against t + 0.002 = 14.928000000001526 in one run)
