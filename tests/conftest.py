@@ -52,6 +52,26 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items[:] = ui_items + other
 
 
+#: How much a worker running the other tests yields the CPU (``os.nice``) to the browser UI's tests.
+OTHERS_NICE = 10
+_niced = False  # this worker yielded already
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Under ``pytest -n``, a worker about to run a test outside :data:`UI_GROUP` lowers its priority
+    (once, for good: its subprocesses and Ray workers inherit it). The browser UI's tests wait on real
+    time (a server simulating at real time, headless chromium drawing in software) while the other
+    worker's simulations, recordings and batch runs only take longer: on CI's 2-core machine, browser
+    waits of 10 s were missed while the other worker kept both cores busy."""
+    global _niced
+    if _niced or not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    group = item.get_closest_marker("xdist_group")
+    if group is not None and group.args and group.args[0] != UI_GROUP:
+        os.nice(OTHERS_NICE)
+        _niced = True
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_node_collection_finished(node: object, ids: list[str]) -> None:
     """Under ``--dist loadgroup``, stop at once if a worker's tests carry no ``@group``: every test
