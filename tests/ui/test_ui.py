@@ -4,9 +4,9 @@ The browser tests need chromium at /usr/bin/chromium (``apt-get install -y chrom
 skip, except under CI (env var CI set) where they fail. The gizmo is moved through its own message
 path (``window.__viserMutable.sendMessage``), the way a drag in the browser reaches the server.
 
-Waits on the page are bounds, not pauses: 30 s where a healthy machine takes well under a second. The
-browser tests run on one worker while the suite's other worker keeps the second core busy (CI's 2-core
-machine), and software WebGL shares it: 10 s bounds were missed there, three in one run.
+Waits on the page are bounds, not pauses: mostly 20-30 s where a healthy machine takes well under a
+second. The browser tests run on one worker while the suite's other worker keeps the second core busy
+(CI's 2-core machine), and software WebGL shares it: 10 s bounds were missed there, three in one run.
 """
 
 from __future__ import annotations
