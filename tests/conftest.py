@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Iterator
+import subprocess
+import time
+from collections.abc import Generator, Iterator
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -119,7 +122,98 @@ def browser() -> Iterator[object]:
 
     with sync_playwright() as pw:
         b = pw.chromium.launch(executable_path=exe, args=HEADLESS_CHROMIUM_ARGS)
+        watch_pages(b)
         try:
             yield b
         finally:
             b.close()
+
+
+# -- What a failed browser test reports besides its assertion ------------------------------------
+
+#: A page's console lines kept for the report: uncaught errors, console errors and warnings, and
+#: viser's connection lines (a dropped websocket reads "Disconnected! ... code=...").
+PAGE_LOG_KEPT = 30
+_CONNECTION_LINES = ("Connected!", "Disconnected!", "Order lock")
+
+
+def watch_pages(browser: Any) -> None:
+    """Every page ``browser.new_page`` opens logs what it prints of trouble (its ``dlovr_log``)."""
+    new_page = browser.new_page
+
+    def watched(*args: Any, **kwargs: Any) -> Any:
+        page = new_page(*args, **kwargs)
+        log: list[str] = []
+        setattr(page, "dlovr_log", log)  # noqa: B010
+        page.on("pageerror", lambda e: log.append(f"uncaught: {e}"))
+
+        def console(m: Any) -> None:
+            if m.type in ("error", "warning") or m.text.startswith(_CONNECTION_LINES):
+                log.append(f"console.{m.type}: {m.text}")
+
+        page.on("console", console)
+        return page
+
+    setattr(browser, "new_page", watched)  # noqa: B010
+
+
+def page_state(page: Any) -> str:
+    """What the page is doing: viser's queue of received messages not yet applied (they are applied
+    at a drawn frame), the animation frames it gets a second, whether it is hidden. Bounded waits
+    (a page that stopped answering is said so, never waited on)."""
+    try:
+        state = page.wait_for_function(
+            "() => { const m = window.__viserMutable; return JSON.stringify({queued: m ? "
+            "m.messageQueue.length : null, render_request: m ? m.getRenderRequestState : null, "
+            "hidden: document.hidden}); }",
+            timeout=5_000,
+        ).json_value()
+    except Exception as e:  # a report: whatever went wrong is the finding
+        return f"no answer in 5 s ({type(e).__name__})"
+    t0 = time.monotonic()
+    try:
+        page.wait_for_function("() => (window.__dlovrFrames = (window.__dlovrFrames || 0) + 1) > 20",
+                               polling="raf", timeout=5_000)
+        fps = f"{20 / (time.monotonic() - t0):.1f}"
+    except Exception:
+        fps = "under 4"
+    return f"{state}, animation frames/s {fps}"
+
+
+def failure_report(item: pytest.Item) -> str:
+    """The machine's load and busiest processes, each open page's state and log, and the state of the
+    test's UI server (``server`` or ``demo``): the real-time factor, its clients, its problem lines."""
+    out = [f"load average (1, 5, 15 min): {os.getloadavg()}"]
+    try:
+        ps = subprocess.run(["ps", "-eo", "pcpu,ni,rss,args", "--sort=-pcpu"], capture_output=True,
+                            text=True, timeout=5).stdout.splitlines()
+        out += [line[:160] for line in ps[:8]]
+    except (OSError, subprocess.SubprocessError) as e:
+        out.append(f"ps: {e}")
+    funcargs = getattr(item, "funcargs", {})
+    for ctx in funcargs["browser"].contexts:
+        for page in ctx.pages:
+            out.append(f"page {page.url}: {page_state(page)}")
+            out += [f"  {line}" for line in getattr(page, "dlovr_log", [])[-PAGE_LOG_KEPT:]]
+    for name in ("server", "demo"):
+        srv = funcargs.get(name)
+        if srv is not None and getattr(srv, "server", None) is not None:
+            out.append(f"{name}: real-time factor {srv.loop.rtf:.2f}, "
+                       f"{len(srv.server.get_clients())} client(s), problems {srv.reporter.lines[-10:]}")
+    return "\n".join(out)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Generator[None, Any, Any]:
+    """A failed test that used the browser carries :func:`failure_report` (CI prints it): a wait
+    that ran out says what the page and the machine were doing. Every test's item says whether its
+    call failed (``call_failed``: a module's shared page is loaded again after one)."""
+    rep = yield
+    if rep.when == "call":
+        setattr(item, "call_failed", rep.failed)  # noqa: B010
+    if rep.failed and "browser" in getattr(item, "funcargs", {}):
+        try:
+            rep.sections.append(("browser and machine at the failure", failure_report(item)))
+        except Exception as e:  # never hide the test's own failure
+            rep.sections.append(("browser and machine at the failure", f"no report: {e!r}"))
+    return rep

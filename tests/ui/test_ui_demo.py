@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ui import drag, line_down, send, wait_for
+from test_ui import PAGE_QUERY, drag, line_down, send, wait_for
 from test_ui_view import plot_data, the_client
 
 from dlovr.ui import DemoServer
@@ -32,13 +32,28 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoServer]:
 @pytest.fixture(scope="module")
 def page(demo: DemoServer, browser) -> Iterator[object]:
     page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
-    page.goto(demo.url)
-    page.get_by_role("button", name="Start recording").wait_for(timeout=30_000)
-    page.wait_for_function("() => window.__viserSceneTree !== undefined", timeout=30_000)
+    page.goto(demo.url + PAGE_QUERY)
+    loaded(page)
     try:
         yield page
     finally:
         page.close()
+
+
+def loaded(page) -> None:
+    page.get_by_role("button", name="Start recording").wait_for(timeout=30_000)
+    page.wait_for_function("() => window.__viserSceneTree !== undefined", timeout=30_000)
+
+
+@pytest.fixture(autouse=True)
+def _the_page_afresh_after_a_failure(request: pytest.FixtureRequest) -> Iterator[None]:
+    """After a test that failed on the shared page, the page is loaded again: the next test starts
+    from the server's state (which viser sends a new page whole), not from what the failure left."""
+    yield
+    page = request.node.funcargs.get("page")
+    if page is not None and getattr(request.node, "call_failed", False):  # tests/conftest.py sets it
+        page.reload()
+        loaded(page)
 
 
 def scene_nodes(page) -> dict[str, bool]:
@@ -316,7 +331,10 @@ def test_the_essentials_are_on_the_first_screen_and_the_legend_explains(demo: De
         page.get_by_text("Discrete:").first,
     ]
     for loc in essentials:
-        loc.wait_for(state="visible", timeout=30_000)  # the panel is built again after the scene load
+        # the panel is built again after the scene load: an element found may be replaced before it is
+        # measured (its box then None), so it is measured until it is on the page
+        wait_for(lambda loc=loc: loc.is_visible() and loc.bounding_box() is not None, timeout=30,
+                 what=f"{loc} on the page")
         box = loc.bounding_box()
         assert box is not None and box["y"] + box["height"] <= HEIGHT, (loc, box)
     page.get_by_text("Legend", exact=True).click()

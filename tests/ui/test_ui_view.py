@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ui import drag, line_down, open_page, wait_for
+from test_ui import PAGE_DPR, drag, line_down, open_page, wait_for
 
 from dlovr.recording import Recording
 from dlovr.ui import DemoServer
@@ -155,7 +155,8 @@ def test_the_scene_is_framed_on_load_on_the_button_and_on_a_scene_switch(server:
     wait_for(lambda: framed(server), timeout=30, what=f"the framing on load, covers {view_fraction(server)}")
     cam = the_client(server).camera
     canvas = page.locator("canvas").first.bounding_box()
-    assert canvas is not None and abs(cam.image_width - canvas["width"]) <= 2  # the real view, panel beside
+    # the real view, the panel beside it (in the canvas's pixels: the tests' pages draw at PAGE_DPR)
+    assert canvas is not None and abs(cam.image_width - PAGE_DPR * canvas["width"]) <= 2
     shot(page, "framing-on-load")
 
     # look away, then "Frame scene"
@@ -318,13 +319,15 @@ def test_faces_in_contact_are_highlighted_labelled_and_shown_for_a_hovered_situa
     page.mouse.move(5, 300)
     wait_for(lambda: faces.shown == {}, timeout=30, what="the live faces (none) back")
 
-    # clicking it scrubs the cable to that situation, its face highlighted
-    hover_until(
-        page, on_table, lambda: server.view.timeline is not None, "the click to scrub", timeout=30, click=True
-    )
+    # clicking it scrubs the cable to that situation, its face highlighted (the live bar may be drawn
+    # again between the band's place read and the click, which then lands on another band: a person
+    # would click it again, on the recorded timeline that holds still)
+    def scrubbed_into_it() -> bool:
+        tl, t = server.view.timeline, server.timeline_panel.slider.value
+        return tl is not None and tl.bands[k].start - 0.01 <= t <= tl.bands[k].end + 0.01
+
+    hover_until(page, on_table, scrubbed_into_it, "the click to scrub into the band", timeout=30, click=True)
     page.get_by_role("button", name="Back to live").wait_for(timeout=30_000)
-    band = server.view.timeline.bands[k]
-    assert band.start - 0.01 <= server.timeline_panel.slider.value <= band.end + 0.01
     page.mouse.move(5, 300)
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, timeout=30, what="the clicked faces")
     wait_for(lambda: green_fraction(page) > 0.05, timeout=30, what="the clicked face drawn green")
