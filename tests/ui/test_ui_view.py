@@ -232,7 +232,7 @@ def green_fraction(page) -> float:
     return float(((g > r + 40) & (g > b + 40)).mean())
 
 
-def hover_until(page, locator, pred, what: str, timeout: float = 10.0, *, click: bool = False) -> None:
+def hover_until(page, locator, pred, what: str, timeout: float = 30.0, *, click: bool = False) -> None:
     """Put the mouse on ``locator``'s element (and ``click`` it) until ``pred`` holds. The live timeline
     is drawn again whenever a situation is added, so an element may be replaced before the mouse
     reaches it (and a hover or click that waits for a stable element can wait forever): each try
