@@ -79,7 +79,7 @@ def fresh(demo: DemoServer, scene: str = "table") -> None:
 def test_the_macro_list_of_a_long_program_fits_the_panel_with_its_risk_column(demo: DemoServer, page):
     fresh(demo, "peg_in_hole")
     # the long face lists that used to widen the table: wait for peg-in-hole's program (not the last's)
-    page.locator("table.dlovr-program", has_text="V/VI[").first.wait_for(timeout=20_000)
+    page.locator("table.dlovr-program", has_text="V/VI[").first.wait_for(timeout=30_000)
     name = page.locator("table.dlovr-program", has_text="V/VI[").first.get_attribute("data-program")
     sel = f'table.dlovr-program[data-program="{name}"]'
     table = page.locator(sel).first
@@ -220,7 +220,7 @@ def test_hovering_a_band_of_the_live_timeline_keeps_its_situation(demo: DemoServ
     fresh(demo, "table")
     p0 = demo.status()["gripper_pos"]
     drag(page, line_down(p0, 0.48, n=6))  # the tip onto the table: a second situation
-    wait_for(lambda: len(demo.session.timeline.bands) >= 2, timeout=20, what="a second situation")
+    wait_for(lambda: len(demo.session.timeline.bands) >= 2, timeout=30, what="a second situation")
     faces = demo.viewport.faces
     wait_for(lambda: faces.shown == {"table.F1": Stability.STABLE}, what="the table top lit")
     # the cable on the table: the contact normal force is not 0.00 N (the issue's reading)
@@ -425,7 +425,7 @@ def test_keys_jog_a_step_a_tap_and_move_smoothly_while_held(demo: DemoServer, pa
     p, q = demo.target()
     g0 = float(demo.status()["gripper_pos"][0])
     demo.set_target(p + np.array([0.05, 0.0, 0.0]), q)
-    wait_for(lambda: demo.status()["gripper_pos"][0] > g0 + 0.04, timeout=20, what="the gripper to move")
+    wait_for(lambda: demo.status()["gripper_pos"][0] > g0 + 0.04, timeout=30, what="the gripper to move")
     cid = the_client(demo).client_id
     # the camera moved by the gripper's motion (what the server sent; a busy page reports it back late)
     wait_for(lambda: demo.viewport.following[cid][0] > look0[0] + 0.035, timeout=30,
@@ -493,7 +493,7 @@ def test_a_demonstration_whose_drag_stops_at_its_instability_is_told_so_on_the_p
 def test_a_program_run_says_manual_control_is_locked(demo: DemoServer, page):
     fresh(demo, "table")
     demo.run_panel.run(TABLE_PROGRAM, detect="oracle")
-    page.locator(".dlovr-status [data-running]").wait_for(timeout=15_000)  # a loaded machine is slow to start
+    page.locator(".dlovr-status [data-running]").wait_for(timeout=30_000)  # a loaded machine is slow to start
     assert "manual control locked" in page.locator(".dlovr-status").inner_text()
     demo.run_panel.cancel()
     wait_for(lambda: page.locator(".dlovr-status [data-running]").count() == 0, timeout=30, what="unlocked")
