@@ -11,6 +11,7 @@ import os
 import shutil
 import subprocess
 import time
+from collections import deque
 from collections.abc import Generator, Iterator
 from typing import Any
 
@@ -143,7 +144,7 @@ def watch_pages(browser: Any) -> None:
 
     def watched(*args: Any, **kwargs: Any) -> Any:
         page = new_page(*args, **kwargs)
-        log: list[str] = []
+        log: deque[str] = deque(maxlen=PAGE_LOG_KEPT)
         setattr(page, "dlovr_log", log)  # noqa: B010
         page.on("pageerror", lambda e: log.append(f"uncaught: {e}"))
 
@@ -163,8 +164,9 @@ def page_state(page: Any) -> str:
     (a page that stopped answering is said so, never waited on)."""
     try:
         state = page.wait_for_function(
-            "() => { const m = window.__viserMutable; return JSON.stringify({queued: m ? "
-            "m.messageQueue.length : null, render_request: m ? m.getRenderRequestState : null, "
+            "() => { window.__dlovrFrames = 0; const m = window.__viserMutable; "
+            "return JSON.stringify({queued: m ? m.messageQueue.length : null, "
+            "render_request: m ? m.getRenderRequestState : null, "
             "hidden: document.hidden}); }",
             timeout=5_000,
         ).json_value()
@@ -194,7 +196,7 @@ def failure_report(item: pytest.Item) -> str:
     for ctx in funcargs["browser"].contexts:
         for page in ctx.pages:
             out.append(f"page {page.url}: {page_state(page)}")
-            out += [f"  {line}" for line in getattr(page, "dlovr_log", [])[-PAGE_LOG_KEPT:]]
+            out += [f"  {line}" for line in getattr(page, "dlovr_log", ())]
     for name in ("server", "demo"):
         srv = funcargs.get(name)
         if srv is not None and getattr(srv, "server", None) is not None:
