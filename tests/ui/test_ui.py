@@ -239,12 +239,21 @@ PAGE_DPR = 0.5
 PAGE_QUERY = f"?fixedDpr={PAGE_DPR}"
 
 
-def open_page(browser, url: str):
-    page = browser.new_page(viewport={"width": 960, "height": 600})
+def open_page(browser, url: str, width: int = 960, height: int = 600):
+    """A new page of the UI at ``url`` (at :data:`PAGE_QUERY`), once it is :func:`page_loaded`."""
+    page = browser.new_page(viewport={"width": width, "height": height})
     page.goto(url + PAGE_QUERY)
-    page.get_by_role("button", name="Start recording").wait_for(timeout=30_000)
-    page.wait_for_function("() => window.__viserMutable !== undefined", timeout=30_000)
+    page_loaded(page)
     return page
+
+
+def page_loaded(page) -> None:
+    """Wait for the panel's first button and viser's test hooks (``window.__viserMutable`` for the
+    gizmo's messages, ``window.__viserSceneTree`` for the 3D scene's nodes)."""
+    page.get_by_role("button", name="Start recording").wait_for(timeout=30_000)
+    page.wait_for_function(
+        "() => window.__viserMutable !== undefined && window.__viserSceneTree !== undefined", timeout=30_000
+    )
 
 
 def send(page, kind: str, **fields) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_ui import PAGE_QUERY, drag, line_down, send, wait_for
+from test_ui import drag, line_down, open_page, page_loaded, send, wait_for
 from test_ui_view import plot_data, the_client
 
 from dlovr.ui import DemoServer
@@ -31,18 +31,11 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoServer]:
 
 @pytest.fixture(scope="module")
 def page(demo: DemoServer, browser) -> Iterator[object]:
-    page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
-    page.goto(demo.url + PAGE_QUERY)
-    loaded(page)
+    page = open_page(browser, demo.url, WIDTH, HEIGHT)
     try:
         yield page
     finally:
         page.close()
-
-
-def loaded(page) -> None:
-    page.get_by_role("button", name="Start recording").wait_for(timeout=30_000)
-    page.wait_for_function("() => window.__viserSceneTree !== undefined", timeout=30_000)
 
 
 @pytest.fixture(autouse=True)
@@ -53,7 +46,7 @@ def _the_page_afresh_after_a_failure(request: pytest.FixtureRequest) -> Iterator
     page = request.node.funcargs.get("page")
     if page is not None and getattr(request.node, "call_failed", False):  # tests/conftest.py sets it
         page.reload()
-        loaded(page)
+        page_loaded(page)
 
 
 def scene_nodes(page) -> dict[str, bool]:
