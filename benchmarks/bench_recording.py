@@ -124,6 +124,7 @@ def main() -> None:
         plain, recorded = [], []
         for _ in range(args.repeat):  # interleaved, best of each: the machine is shared and noisy
             plain.append(simulate(args.scene, script, None))
+            out.unlink(missing_ok=True)  # the recorder never overwrites a recording: the last round's goes
             recorded.append(simulate(args.scene, script, out))
         plain, recorded = min(plain), min(recorded)
         size = out.stat().st_size / 1e6
