@@ -202,7 +202,21 @@ def failure_report(item: pytest.Item) -> str:
         if srv is not None and getattr(srv, "server", None) is not None:
             out.append(f"{name}: real-time factor {srv.loop.rtf:.2f}, "
                        f"{len(srv.server.get_clients())} client(s), problems {srv.reporter.lines[-10:]}")
+            out.append(f"  {_server_recording(srv)}")
     return "\n".join(out)
+
+
+def _server_recording(srv: Any) -> str:
+    """What the server's recording panel shows and does: a recording in progress, its message, its
+    compile thread (a program after a recording comes from that thread)."""
+    try:
+        panel = srv.recording_panel
+        thread = panel.compile_thread
+        compiling = "none" if thread is None else ("running" if thread.is_alive() else "done")
+        return (f"recording {srv.status()['recording']}, compile thread {compiling}, message "
+                f"{panel.rec_md.content[:300]!r}, last program {getattr(srv.last_program, 'name', None)}")
+    except Exception as e:  # the report must not fail: say what could not be read
+        return f"recording state: {type(e).__name__}: {e}"
 
 
 @pytest.hookimpl(wrapper=True)

@@ -369,6 +369,10 @@ def test_the_program_after_a_recording_is_a_list_with_risk_colours_and_its_files
     time.sleep(0.3)
     path = server.status()["recording"]
     page.get_by_role("button", name="Stop recording").click()
+    wait_for(lambda: server.status()["recording"] is None, timeout=30, what="the click to stop the recording")
+    compiled = server.recording_panel.compile_thread  # its thread: the program comes from it
+    wait_for(lambda: compiled is not None and not compiled.is_alive(), timeout=30,
+             what="the recording compiled")
     table = page.locator(f'.dlovr-program[data-program="{path.stem}"]')  # not the run panel's program
     table.wait_for(timeout=30_000)
     prog = server.last_program
