@@ -149,33 +149,34 @@ def test_a_hand_s_drag_into_an_instability_goes_on_for_a_longer_cable():
     assert "mm further: the cable's tip is 40.0 mm further than demonstrated)" in ses.events[-1].text
 
 
-def test_a_hand_s_drag_of_the_tip_that_no_force_ends_goes_on_10_mm_past_its_transition():
+def test_a_hand_s_drag_of_the_tip_that_no_force_ends_goes_on_15_mm_past_its_transition():
     """Where no force shows the tip's transition (``tip_drag``: the scripted peg-in-hole's drag into
     the groove's corner, no signal), a hand's drag goes on DRAG_PAST_M past it at least, counting what
     the hand went on itself, whatever the cable's length; more for a cable longer by more than
-    DRAG_PAST_M / DRAG_PER_EXCESS; nothing where the hand went on that far."""
-    from dlovr.execution.motion import DRAG_PAST_M, dragged_on, hand_path
+    DRAG_PAST_M / DRAG_PER_EXCESS; nothing where the hand went on that far; a drag of the tip from
+    DRAG_TIP_MIN_M on."""
+    from dlovr.execution.motion import DRAG_PAST_M, DRAG_TIP_MIN_M, dragged_on, hand_path
     from dlovr.model.margins import tip_drag
 
-    assert DRAG_PAST_M == 0.01
+    assert (DRAG_PAST_M, DRAG_TIP_MIN_M) == (0.015, 0.01)
     drag = replace(PEG.classed[5], t=1.0)
     assert tip_drag(drag)
     base = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.06, 0.0))
-    for tool, y in (((0.0, 0.0, 0.01), -0.069), ((0.0, 0.0, 0.0), -0.069), ((0.0, 0.0, -0.01), -0.069),
-                    ((0.0, 0.0, -0.04), -0.075)):  # 10 mm less the hand's 1; 0.4 x 40 mm less 1
+    for tool, y in (((0.0, 0.0, 0.01), -0.074), ((0.0, 0.0, 0.0), -0.074), ((0.0, 0.0, -0.01), -0.074),
+                    ((0.0, 0.0, -0.05), -0.079)):  # 15 mm less the hand's 1; 0.4 x 50 mm less 1
         on, _ = dragged_on(base, drag, tool, _hand_drag(0.001))
         assert on.at(1.0)[0][1] == pytest.approx(y), tool
-    assert dragged_on(base, drag, (0.0, 0.0, 0.0), _hand_drag(0.011)) == (base, "")
+    assert dragged_on(base, drag, (0.0, 0.0, 0.0), _hand_drag(0.016)) == (base, "")
     moved, said = hand_path(base, drag, None, _hand_drag(0.0023), (0.0, 0.0, 0.0))
-    assert moved.at(1.0)[0][1] == pytest.approx(-0.0677)
-    assert said == (" (dragging 7.7 mm further: no force shows where the tip arrives, and the "
-                    "demonstration went on 2.3 mm past it, not 10)")
+    assert moved.at(1.0)[0][1] == pytest.approx(-0.0727)
+    assert said == (" (dragging 12.7 mm further: no force shows where the tip arrives, and the "
+                    "demonstration went on 2.3 mm past it, not 15)")
     assert hand_path(base, drag, None, replace(_hand_drag(0.0), by_hand=False), (0.0, 0.0, 0.0)) == (base, "")
-    # a drag shorter than DRAG_MIN_M but not than DRAG_PAST_M: drawn on where no force shows it, not
-    # where one does; one shorter than DRAG_PAST_M is not
+    # a drag shorter than DRAG_MIN_M and than DRAG_PAST_M but not than DRAG_TIP_MIN_M: drawn on where no
+    # force shows it, not where one does; one shorter than DRAG_TIP_MIN_M is not
     short = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.0125, 0.0))
     on, _ = dragged_on(short, drag, (0.0, 0.0, 0.0), _hand_drag(0.001))
-    assert on.at(1.0)[0][1] == pytest.approx(-0.0215)
+    assert on.at(1.0)[0][1] == pytest.approx(-0.0265)
     assert dragged_on(short, _felt(drag), (0.0, 0.0, -0.04), _hand_drag(0.001)) == (short, "")
     shorter = ScrewPath((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, -0.009, 0.0))
     assert dragged_on(shorter, drag, (0.0, 0.0, 0.0), _hand_drag(0.001)) == (shorter, "")
