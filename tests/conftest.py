@@ -203,6 +203,7 @@ def failure_report(item: pytest.Item) -> str:
             out.append(f"{name}: real-time factor {srv.loop.rtf:.2f}, "
                        f"{len(srv.server.get_clients())} client(s), problems {srv.reporter.lines[-10:]}")
             out.append(f"  {_server_recording(srv)}")
+            out.append(f"  {_server_timeline(srv)}")
     return "\n".join(out)
 
 
@@ -217,6 +218,20 @@ def _server_recording(srv: Any) -> str:
                 f"{panel.rec_md.content[:300]!r}, last program {getattr(srv.last_program, 'name', None)}")
     except Exception as e:  # the report must not fail: say what could not be read
         return f"recording state: {type(e).__name__}: {e}"
+
+
+def _server_timeline(srv: Any) -> str:
+    """What the server's timeline panel shows: the live timeline or another (scrubbed or opened), the
+    slider's value and range, and whether *Back to live* is shown (a scrub shows it)."""
+    try:
+        panel, tl = srv.timeline_panel, srv.view.timeline
+        scrubbed = tl is not None and tl is srv.session.timeline
+        viewed = "live" if tl is None else ("the live one, scrubbed" if scrubbed else tl.source)
+        s = panel.slider
+        return (f"timeline viewed: {viewed}, slider {s.value} in [{s.min}, {s.max}], "
+                f"'Back to live' visible {panel.live_btn.visible}")
+    except Exception as e:  # the report must not fail: say what could not be read
+        return f"timeline state: {type(e).__name__}: {e}"
 
 
 @pytest.hookimpl(wrapper=True)
