@@ -35,8 +35,8 @@ def margin_note(prog: Any, followed: tuple[Any, Any]) -> str | None:
     """The warning of ``prog``'s drags of the tip into an instability that no force ends and that its
     demonstration went on too little past (:func:`dlovr.model.margins.blind_margins` of the
     ``followed`` track: times s, positions m world); None for none, and for a program compiled from
-    a trembling hand's track (``smoothing_s``): run along it, such a drag goes on 15 mm past its
-    transition (``dlovr.execution.motion.DRAG_PAST_M``)."""
+    a trembling hand's track (``smoothing_s``): run along it, such a drag goes on past its
+    transition by at least ``dlovr.execution.motion.DRAG_PAST_M``."""
     from dlovr.model.margins import blind_margins, margin_warning
 
     if prog.smoothing_s:

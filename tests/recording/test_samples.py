@@ -35,7 +35,7 @@ def test_compile_warns_of_a_drag_that_stops_where_its_instability_comes(tmp_path
     monkeypatch.setattr(margins, "PLACEMENT_M", 0.02)
     got = compile_one(str(ROOT / "peg_in_hole.mcap"), str(tmp_path), force=True).warning
     assert got is not None and "macro 6 (10.2 mm)" in got and "drag on" in got, got
-    # a trembling hand's program is run with its drag going on 15 mm past: nothing to warn of
+    # a trembling hand's program is run with its drag going on DRAG_PAST_M past: nothing to warn of
     from dataclasses import replace
 
     from dlovr.recording.compile import margin_note
