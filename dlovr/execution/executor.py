@@ -619,9 +619,12 @@ def to_start(
 
 
 def final_hold(ses: Session, out: Execution, track: DemoTrack | None) -> Steps[None]:
-    """Hold the last pose ``final_settle`` s; the force sensed over its last :data:`GOAL_SENSE_S`
-    (mean) checks the goal against the demonstration's end force (:func:`goal_check`), in ``out``."""
-    pos, quat = ses.mocap_pose()
+    """Hold the last commanded pose ``final_settle`` s; the force sensed over its last
+    :data:`GOAL_SENSE_S` (mean) checks the goal against the demonstration's end force
+    (:func:`goal_check`), in ``out``. The gripper lags its target at speed (``max_speed``), so where
+    the last motion is still under way it catches up first, as the open-loop replay's does (holding
+    where the gripper is would drop the end of that motion: a hand's last lift, cut short)."""
+    pos, quat = ses.sim.target_pos.copy(), ses.sim.target_quat.copy()
     n_all = round(ses.opts.final_settle / ses.dt)
     n_sense = min(n_all, round(GOAL_SENSE_S / ses.dt))
     total, total_tq = np.zeros(3), np.zeros(3)

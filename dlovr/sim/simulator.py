@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import dot, quat_rotate
+from dlovr.transforms import dot, quat_normalize, quat_rotate
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -468,7 +468,10 @@ class Simulator:
         """Play ``script`` from the current gripper pose; yield one record per step.
 
         The script's first waypoint is reached from the gripper's pose at the call over its
-        ``duration``. ``settle`` extra seconds are simulated at the last waypoint at the end.
+        ``duration``. ``settle`` extra seconds are simulated at the last waypoint at the end. The
+        gripper lags its target where the script moves faster than ``max_speed`` or
+        ``max_angular_speed``: the run then goes on at the last target until the gripper is there,
+        so that a demonstration ends where it put the gripper (none more where it is there already).
         """
         mid = self.built.mocap_id
         plan = script.plan(self.data.mocap_pos[mid], self.data.mocap_quat[mid])
@@ -478,6 +481,21 @@ class Simulator:
             pos, quat = plan.at(k * dt)
             self.set_target(pos, quat)
             yield self.step()
+        for _ in range(self.steps_to_target()):
+            yield self.step()
+
+    def steps_to_target(self) -> int:
+        """The steps the gripper takes to reach its target from where it is (0: it is there, exactly;
+        :func:`dlovr.sim.kernels.move_gripper` puts it there once the target lies within a step, until
+        then it moves at ``max_speed`` and ``max_angular_speed``)."""
+        mid, dt = self.built.mocap_id, self._dt
+        pos, quat = self.data.mocap_pos[mid], self.data.mocap_quat[mid]
+        if np.array_equal(pos, self.target_pos) and np.array_equal(quat, self.target_quat):
+            return 0
+        dist = float(np.linalg.norm(self.target_pos - pos))
+        angle = 2.0 * math.acos(min(1.0, abs(dot(quat_normalize(quat), quat_normalize(self.target_quat)))))
+        steps = max(dist / (self.max_speed * dt), angle / (self.max_angular_speed * dt))
+        return max(math.ceil(steps), 1)
 
     # -- state --------------------------------------------------------------------------------------
 

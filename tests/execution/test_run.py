@@ -92,6 +92,23 @@ def test_a_hands_macro_not_felt_within_its_allowance_goes_on(touch):
     assert "went on: nothing was felt" in format_result(res)
 
 
+def test_the_final_hold_lets_the_gripper_reach_the_last_commanded_pose(touch):
+    """A track whose last 20 ms raise the gripper 4 cm (a hand's jerk as the recording stops): the
+    gripper, which lags its target at 0.25 m/s, is still on its way when the final motion ends; the
+    final hold lets it arrive, as the open-loop replay's does, instead of stopping it where it is."""
+    program, scene, track, pieces = touch
+    pos = np.array(track.pos, dtype=float)
+    pos[track.t > track.t[-1] - 0.02, 2] += 0.04
+    jerk = replace(track, pos=pos)
+    seen = []
+    res = run_program(program, scene, ExecOptions(), track=jerk, pieces=pieces, on_step=seen.append)
+    assert res.macros[0].outcome == "ok"
+    after = [r for r in seen if r.time > res.macros[0].detected_at]
+    last = max(after, key=lambda r: r.target_pos[2])  # the final motion's top
+    assert last.target_pos[2] - last.gripper_pos[2] > 0.03  # the gripper lagging it by 3 cm or more
+    assert np.array_equal(seen[-1].gripper_pos, last.target_pos)  # and there at the end
+
+
 def test_a_diverged_simulation_is_a_failed_result(touch, monkeypatch):
     from dlovr.sim import SimulationDiverged, Simulator
 

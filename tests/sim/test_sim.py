@@ -136,6 +136,21 @@ def test_run_script_is_deterministic_and_replayable() -> None:
         assert np.array_equal(sim.step().points, b[k - 1])
 
 
+def test_a_script_faster_than_the_gripper_runs_on_until_the_gripper_is_at_its_last_pose() -> None:
+    """The gripper lags its target at speed; a script that ends while it still lags runs on at the
+    last waypoint until it arrives (so that a demonstration ends where it put the gripper); one within
+    the speed limits runs exactly its duration."""
+    fast = Script(waypoints=(Waypoint(pos=(-0.15, 0.1, TABLE_TOP + 0.1), quat=Q_X, duration=0.2),), scene=None)
+    sim = on_table(max_speed=0.25)
+    recs = list(sim.run(fast))
+    dist = math.dist((-0.15, 0.0, TABLE_TOP + 0.0055), (-0.15, 0.1, TABLE_TOP + 0.1))  # 0.138 m: 0.55 s at 0.25
+    assert len(recs) == math.ceil(dist / (0.25 * 0.002)) > 100
+    assert np.array_equal(recs[-1].gripper_pos, [-0.15, 0.1, TABLE_TOP + 0.1])
+    assert not np.array_equal(recs[-2].gripper_pos, recs[-1].gripper_pos)
+    assert sim.steps_to_target() == 0
+    assert len(list(on_table().run(SCRIPT))) == 250  # within the limits: its 0.5 s, no step more
+
+
 def test_gripper_motion_rounds_the_same_on_every_processor(monkeypatch) -> None:
     """What moves the gripper feeds MuJoCo, so it must not go through BLAS (np.dot, np.linalg.norm):
     BLAS picks its kernel, and so its rounding, by processor, and a recording made on one machine
