@@ -465,37 +465,18 @@ class Simulator:
         return rec.gripper_force, rec.gripper_torque
 
     def run(self, script: Script, *, settle: float = 0.0) -> Iterator[StepRecord]:
-        """Play ``script`` from the current gripper pose; yield one record per step.
-
-        The script's first waypoint is reached from the gripper's pose at the call over its
-        ``duration``. ``settle`` extra seconds are simulated at the last waypoint at the end. The
-        gripper lags its target where the script moves faster than ``max_speed`` or
-        ``max_angular_speed``: the run then goes on at the last target until the gripper is there,
-        so that a demonstration ends where it put the gripper (none more where it is there already).
-        """
-        mid = self.built.mocap_id
+        """Play ``script`` from the current gripper pose; yield one record per step. Its first waypoint
+        is reached from the gripper's pose at the call over its ``duration``; ``settle`` s more at the
+        last, then on until the gripper is there (:func:`steps_to_target`): a demonstration ends there."""
+        mid, dt = self.built.mocap_id, self._dt
         plan = script.plan(self.data.mocap_pos[mid], self.data.mocap_quat[mid])
-        dt = self.model.opt.timestep
         nsteps = round((script.total_duration + settle) / dt)
         for k in range(1, nsteps + 1):
             pos, quat = plan.at(k * dt)
             self.set_target(pos, quat)
             yield self.step()
-        for _ in range(self.steps_to_target()):
+        for _ in range(steps_to_target(self)):
             yield self.step()
-
-    def steps_to_target(self) -> int:
-        """The steps the gripper takes to reach its target from where it is (0: it is there, exactly;
-        :func:`dlovr.sim.kernels.move_gripper` puts it there once the target lies within a step, until
-        then it moves at ``max_speed`` and ``max_angular_speed``)."""
-        mid, dt = self.built.mocap_id, self._dt
-        pos, quat = self.data.mocap_pos[mid], self.data.mocap_quat[mid]
-        if np.array_equal(pos, self.target_pos) and np.array_equal(quat, self.target_quat):
-            return 0
-        dist = float(np.linalg.norm(self.target_pos - pos))
-        angle = 2.0 * math.acos(min(1.0, abs(dot(quat_normalize(quat), quat_normalize(self.target_quat)))))
-        steps = max(dist / (self.max_speed * dt), angle / (self.max_angular_speed * dt))
-        return max(math.ceil(steps), 1)
 
     # -- state --------------------------------------------------------------------------------------
 
@@ -516,3 +497,17 @@ class Simulator:
         self.step_index = state.step
         self.target_pos = _frozen(state.target_pos.copy())
         self.target_quat = _frozen(state.target_quat.copy())
+
+
+def steps_to_target(sim: Simulator) -> int:
+    """The steps ``sim``'s gripper takes to reach its target from where it is: 0 where it is there,
+    exactly. It lags its target where that moves faster than ``max_speed`` (m/s) or
+    ``max_angular_speed`` (rad/s), and :func:`dlovr.sim.kernels.move_gripper` puts it on the target
+    once that lies within one step."""
+    mid, dt = sim.built.mocap_id, float(sim.model.opt.timestep)
+    pos, quat = sim.data.mocap_pos[mid], sim.data.mocap_quat[mid]
+    if np.array_equal(pos, sim.target_pos) and np.array_equal(quat, sim.target_quat):
+        return 0
+    dist = float(np.linalg.norm(sim.target_pos - pos))
+    angle = 2.0 * math.acos(min(1.0, abs(dot(quat_normalize(quat), quat_normalize(sim.target_quat)))))
+    return max(math.ceil(max(dist / (sim.max_speed * dt), angle / (sim.max_angular_speed * dt))), 1)

@@ -414,7 +414,8 @@ def test_record_force_overwrites(tmp_path):
     script = tmp_path / "s.script.toml"
     script.write_text(SHORT_SCRIPT)
     r = cli("record", "--script", script, "-o", out, "--force")
-    assert r.exit_code == 0 and Recording(out).commands()[0][-1] == 600
+    # the script's 600 steps, and 68 more at its last pose while the gripper (0.25 m/s) arrives there
+    assert r.exit_code == 0 and Recording(out).commands()[0][-1] == 668
 
 
 def test_compile_refuses_two_recordings_into_one_program(short, tmp_path):

@@ -11,6 +11,7 @@ import pytest
 
 from dlovr.script import Script, Waypoint
 from dlovr.sim import DloParams, GripperPose, Obstacle, SimulationDiverged, Simulator, export_xml
+from dlovr.sim.simulator import steps_to_target
 
 # the cable leaves the gripper along -G_z: G_z = -x lays it along +x
 Q_X = (math.cos(math.pi / 4), 0.0, -math.sin(math.pi / 4), 0.0)
@@ -140,14 +141,15 @@ def test_a_script_faster_than_the_gripper_runs_on_until_the_gripper_is_at_its_la
     """The gripper lags its target at speed; a script that ends while it still lags runs on at the
     last waypoint until it arrives (so that a demonstration ends where it put the gripper); one within
     the speed limits runs exactly its duration."""
-    fast = Script(waypoints=(Waypoint(pos=(-0.15, 0.1, TABLE_TOP + 0.1), quat=Q_X, duration=0.2),), scene=None)
+    end = (-0.15, 0.1, TABLE_TOP + 0.1)
+    fast = Script(waypoints=(Waypoint(pos=end, quat=Q_X, duration=0.2),), scene=None)
     sim = on_table(max_speed=0.25)
     recs = list(sim.run(fast))
-    dist = math.dist((-0.15, 0.0, TABLE_TOP + 0.0055), (-0.15, 0.1, TABLE_TOP + 0.1))  # 0.138 m: 0.55 s at 0.25
+    dist = math.dist((-0.15, 0.0, TABLE_TOP + 0.0055), end)  # 0.138 m: 0.55 s at 0.25 m/s
     assert len(recs) == math.ceil(dist / (0.25 * 0.002)) > 100
-    assert np.array_equal(recs[-1].gripper_pos, [-0.15, 0.1, TABLE_TOP + 0.1])
+    assert np.array_equal(recs[-1].gripper_pos, end)
     assert not np.array_equal(recs[-2].gripper_pos, recs[-1].gripper_pos)
-    assert sim.steps_to_target() == 0
+    assert steps_to_target(sim) == 0
     assert len(list(on_table().run(SCRIPT))) == 250  # within the limits: its 0.5 s, no step more
 
 
