@@ -28,7 +28,7 @@ from dlovr.script import Script
 from dlovr.sim import kernels
 from dlovr.sim.build import _WARNINGS_FATAL, TIMESTEP, BuiltModel, Obstacle, SimulationDiverged, build_model
 from dlovr.sim.contacts import ContactArrays, MjViews, RodContact
-from dlovr.transforms import dot, quat_normalize, quat_rotate
+from dlovr.transforms import dot, norm, quat_normalize, quat_rotate
 
 # --------------------------------------------------------------------------------------------------
 # Per-step records
@@ -508,6 +508,6 @@ def steps_to_target(sim: Simulator) -> int:
     pos, quat = sim.data.mocap_pos[mid], sim.data.mocap_quat[mid]
     if np.array_equal(pos, sim.target_pos) and np.array_equal(quat, sim.target_quat):
         return 0
-    dist = float(np.linalg.norm(sim.target_pos - pos))
+    dist = norm(sim.target_pos - pos)  # how long a recording runs: the same on every machine (no BLAS)
     angle = 2.0 * math.acos(min(1.0, abs(dot(quat_normalize(quat), quat_normalize(sim.target_quat)))))
     return max(math.ceil(max(dist / (sim.max_speed * dt), angle / (sim.max_angular_speed * dt))), 1)

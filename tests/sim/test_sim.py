@@ -175,6 +175,7 @@ def test_gripper_motion_rounds_the_same_on_every_processor(monkeypatch) -> None:
     pos, quat = SCRIPT.target_at(0.05, (-0.15, 0.0, TABLE_TOP + 0.0055), Q_X)
     sim.set_target(pos, quat)
     sim.step()
+    assert steps_to_target(sim) > 0  # how many steps a recording runs on at its end, too
     monkeypatch.undo()
     # the helpers it uses add left to right in Python floats
     a, b = [0.1, 0.7, -0.3, 1e-17], [0.3, -0.2, 0.9, 1.0]
